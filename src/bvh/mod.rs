@@ -1,0 +1,1 @@
+//! The refittable bounding-volume hierarchy over rigid bodies.

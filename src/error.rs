@@ -1,0 +1,83 @@
+//! The one error type of the crate: every refusal names what was wrong and the value that was.
+
+use core::fmt;
+use glam::Vec3;
+
+/// Why an operation was refused. When a function returns `Err`, the structure it was called on
+/// is exactly as it was before the call.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum Error {
+    /// A coordinate or a radius was NaN or infinite; `what` names the argument.
+    NonFinite {
+        /// The argument that held the bad value, e.g. `"center"` or `"aabb.min"`.
+        what: &'static str,
+        /// The offending vector (a radius is reported in `x`).
+        value: Vec3,
+    },
+    /// A sphere radius below zero.
+    NegativeRadius(f32),
+    /// An AABB with `min > max` on some axis.
+    InvertedAabb {
+        /// The box's `min` corner as given.
+        min: Vec3,
+        /// The box's `max` corner as given.
+        max: Vec3,
+    },
+    /// The key names no live proxy of this structure: removed, never issued, or from another
+    /// instance whose slot this instance does not hold.
+    UnknownProxy,
+    /// The key names a live proxy of another kind, e.g. `update_sphere` on a body.
+    WrongKind,
+    /// An octree depth outside `0..=MAX_DEPTH`.
+    DepthOutOfRange(u32),
+    /// World bounds that are not finite or have no volume.
+    InvalidBounds {
+        /// The bounds' `min` corner as given.
+        min: Vec3,
+        /// The bounds' `max` corner as given.
+        max: Vec3,
+    },
+    /// A configuration value outside its documented range; `what` names the field.
+    InvalidConfig {
+        /// The field, e.g. `"margin"`.
+        what: &'static str,
+        /// The value given.
+        value: f32,
+    },
+    /// The structure holds `u32::MAX - 1` proxies already.
+    Full,
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Error::NonFinite { what, value } => {
+                write!(f, "{what} is not finite: {value}")
+            }
+            Error::NegativeRadius(r) => write!(f, "radius is negative: {r}"),
+            Error::InvertedAabb { min, max } => {
+                write!(f, "aabb is inverted (min > max): min {min}, max {max}")
+            }
+            Error::UnknownProxy => write!(f, "key names no live proxy of this structure"),
+            Error::WrongKind => write!(f, "key names a proxy of another kind"),
+            Error::DepthOutOfRange(d) => write!(
+                f,
+                "octree depth {d} is out of range 0..={}",
+                crate::octree::MAX_DEPTH
+            ),
+            Error::InvalidBounds { min, max } => {
+                write!(
+                    f,
+                    "bounds must be finite with min < max: min {min}, max {max}"
+                )
+            }
+            Error::InvalidConfig { what, value } => {
+                write!(f, "config field {what} is out of range: {value}")
+            }
+            Error::Full => write!(f, "structure is full (u32 index space exhausted)"),
+        }
+    }
+}
+
+impl std::error::Error for Error {}

@@ -1,0 +1,320 @@
+//! Axis-aligned boxes, the ray–box slab test, ray–sphere, and the input checks every entry
+//! point runs before it touches a structure.
+
+use crate::Error;
+use glam::Vec3;
+
+/// A closed axis-aligned box: a point on a face is inside, and boxes that touch overlap.
+///
+/// The fields are public; a box with `min > max` on some axis is *inverted* and every entry
+/// point of the crate refuses it with [`Error::InvertedAabb`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Aabb {
+    /// The corner with the smallest coordinates.
+    pub min: Vec3,
+    /// The corner with the largest coordinates.
+    pub max: Vec3,
+}
+
+impl Aabb {
+    /// The box spanned by `min` and `max`, unchecked; see [`Aabb::try_new`].
+    #[must_use]
+    pub const fn new(min: Vec3, max: Vec3) -> Self {
+        Self { min, max }
+    }
+
+    /// The box spanned by `min` and `max`, or `Err` if a coordinate is not finite or
+    /// `min > max` on some axis.
+    pub fn try_new(min: Vec3, max: Vec3) -> Result<Self, Error> {
+        let aabb = Self { min, max };
+        check_aabb(&aabb)?;
+        Ok(aabb)
+    }
+
+    /// The box `center ± radius`: the AABB of a sphere. Unchecked; a negative radius gives an
+    /// inverted box.
+    #[must_use]
+    pub fn from_center_radius(center: Vec3, radius: f32) -> Self {
+        Self {
+            min: center - Vec3::splat(radius),
+            max: center + Vec3::splat(radius),
+        }
+    }
+
+    /// The box `center ± half_extents`. Unchecked.
+    #[must_use]
+    pub fn from_center_half_extents(center: Vec3, half_extents: Vec3) -> Self {
+        Self {
+            min: center - half_extents,
+            max: center + half_extents,
+        }
+    }
+
+    /// An inverted box that is the identity of [`Aabb::union`]: `EMPTY.union(b) == b`.
+    pub const EMPTY: Self = Self {
+        min: Vec3::splat(f32::INFINITY),
+        max: Vec3::splat(f32::NEG_INFINITY),
+    };
+
+    /// The midpoint of the box.
+    #[must_use]
+    pub fn center(&self) -> Vec3 {
+        (self.min + self.max) * 0.5
+    }
+
+    /// `max - min`: the box's size along each axis (negative for an inverted box).
+    #[must_use]
+    pub fn extent(&self) -> Vec3 {
+        self.max - self.min
+    }
+
+    /// True if the closed boxes share at least one point; touching boxes overlap.
+    #[must_use]
+    #[inline]
+    pub fn overlaps(&self, other: &Aabb) -> bool {
+        self.min.cmple(other.max).all() && other.min.cmple(self.max).all()
+    }
+
+    /// True if `other` lies inside `self` (faces may coincide).
+    #[must_use]
+    pub fn contains(&self, other: &Aabb) -> bool {
+        self.min.cmple(other.min).all() && other.max.cmple(self.max).all()
+    }
+
+    /// True if the point lies inside the closed box.
+    #[must_use]
+    pub fn contains_point(&self, p: Vec3) -> bool {
+        self.min.cmple(p).all() && p.cmple(self.max).all()
+    }
+
+    /// The smallest box containing both.
+    #[must_use]
+    #[inline]
+    pub fn union(&self, other: &Aabb) -> Aabb {
+        Aabb {
+            min: self.min.min(other.min),
+            max: self.max.max(other.max),
+        }
+    }
+
+    /// The box grown by `margin` on every side (shrunk for a negative margin).
+    #[must_use]
+    pub fn grown(&self, margin: f32) -> Aabb {
+        Aabb {
+            min: self.min - Vec3::splat(margin),
+            max: self.max + Vec3::splat(margin),
+        }
+    }
+
+    /// The surface area `2(xy + yz + zx)`; 0 for a point, and 0 for an inverted box (such as
+    /// [`Aabb::EMPTY`]) so that SAH sums stay finite.
+    #[must_use]
+    #[inline]
+    pub fn surface_area(&self) -> f32 {
+        let d = self.extent().max(Vec3::ZERO);
+        2.0 * (d.x * d.y + d.y * d.z + d.z * d.x)
+    }
+
+    /// True if every coordinate is finite.
+    #[must_use]
+    pub fn is_finite(&self) -> bool {
+        self.min.is_finite() && self.max.is_finite()
+    }
+
+    /// The ray's entry parameter into the closed box, if the segment `origin + t·dir`,
+    /// `t ∈ [0, max_t]` meets it; `0` when the origin is inside. `inv_dir` is `1 / dir`
+    /// component-wise (an infinite component for an axis the ray does not move along).
+    ///
+    /// The slab test: on each axis the ray is inside the slab for `t` between
+    /// `(min − o)/d` and `(max − o)/d`; the segment meets the box iff the latest entry is not
+    /// after the earliest exit. A zero direction component gives `±∞` or NaN (when the origin
+    /// lies exactly on the face); NaN is treated as "inside the slab" by `max`/`min`, which
+    /// ignore it, so a ray sliding along a face hits the closed box.
+    #[must_use]
+    #[inline]
+    pub fn ray_entry(&self, origin: Vec3, inv_dir: Vec3, max_t: f32) -> Option<f32> {
+        let t1 = (self.min - origin) * inv_dir;
+        let t2 = (self.max - origin) * inv_dir;
+        let t_near = t1.min(t2).max_element().max(0.0);
+        let t_far = t1.max(t2).min_element().min(max_t);
+        (t_near <= t_far).then_some(t_near)
+    }
+}
+
+/// The smallest `t ∈ [0, max_t]` with `|origin + t·dir − center| ≤ radius`, or `None`.
+/// `dir` need not be unit length (`t` is in units of `dir`); a zero `dir` hits only when the
+/// origin is inside. An origin inside the sphere gives `t = 0`.
+#[must_use]
+pub fn ray_sphere(origin: Vec3, dir: Vec3, center: Vec3, radius: f32, max_t: f32) -> Option<f32> {
+    let m = origin - center;
+    let c = m.length_squared() - radius * radius;
+    if c <= 0.0 {
+        return Some(0.0);
+    }
+    let a = dir.length_squared();
+    let b = m.dot(dir);
+    if a == 0.0 || b >= 0.0 {
+        return None;
+    }
+    let disc = b * b - a * c;
+    if disc < 0.0 {
+        return None;
+    }
+    let t = (-b - disc.sqrt()) / a;
+    (t <= max_t).then_some(t.max(0.0))
+}
+
+/// `1 / dir` per component, with `±∞` for zero components (sign kept from `-0.0`).
+#[must_use]
+pub fn inverse_dir(dir: Vec3) -> Vec3 {
+    Vec3::ONE / dir
+}
+
+/// Checks a sphere given by the user: finite centre, finite non-negative radius.
+pub(crate) fn check_sphere(center: Vec3, radius: f32) -> Result<(), Error> {
+    if !center.is_finite() {
+        return Err(Error::NonFinite {
+            what: "center",
+            value: center,
+        });
+    }
+    if !radius.is_finite() {
+        return Err(Error::NonFinite {
+            what: "radius",
+            value: Vec3::new(radius, 0.0, 0.0),
+        });
+    }
+    if radius < 0.0 {
+        return Err(Error::NegativeRadius(radius));
+    }
+    Ok(())
+}
+
+/// Checks a box given by the user: finite corners, `min <= max` on every axis.
+pub(crate) fn check_aabb(aabb: &Aabb) -> Result<(), Error> {
+    if !aabb.min.is_finite() {
+        return Err(Error::NonFinite {
+            what: "aabb.min",
+            value: aabb.min,
+        });
+    }
+    if !aabb.max.is_finite() {
+        return Err(Error::NonFinite {
+            what: "aabb.max",
+            value: aabb.max,
+        });
+    }
+    if !aabb.min.cmple(aabb.max).all() {
+        return Err(Error::InvertedAabb {
+            min: aabb.min,
+            max: aabb.max,
+        });
+    }
+    Ok(())
+}
+
+/// Checks world bounds: finite, and `min < max` on every axis (a cell needs volume).
+pub(crate) fn check_bounds(bounds: &Aabb) -> Result<(), Error> {
+    if bounds.is_finite() && bounds.min.cmplt(bounds.max).all() {
+        Ok(())
+    } else {
+        Err(Error::InvalidBounds {
+            min: bounds.min,
+            max: bounds.max,
+        })
+    }
+}
+
+/// Checks a ray given by the user: finite origin and direction, `max_t` not NaN and `>= 0`.
+/// Returns `false` for a ray that can hit nothing (caller answers `None`), never panics.
+pub(crate) fn ray_is_valid(origin: Vec3, dir: Vec3, max_t: f32) -> bool {
+    origin.is_finite() && dir.is_finite() && max_t >= 0.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn touching_boxes_overlap() {
+        let a = Aabb::new(Vec3::ZERO, Vec3::ONE);
+        let b = Aabb::new(Vec3::new(1.0, 0.0, 0.0), Vec3::new(2.0, 1.0, 1.0));
+        let c = Aabb::new(Vec3::new(1.0001, 0.0, 0.0), Vec3::new(2.0, 1.0, 1.0));
+        assert!(a.overlaps(&b) && b.overlaps(&a));
+        assert!(!a.overlaps(&c) && !c.overlaps(&a));
+    }
+
+    #[test]
+    fn union_and_area() {
+        let a = Aabb::new(Vec3::ZERO, Vec3::ONE);
+        let b = Aabb::new(Vec3::splat(2.0), Vec3::splat(3.0));
+        let u = a.union(&b);
+        assert_eq!(u, Aabb::new(Vec3::ZERO, Vec3::splat(3.0)));
+        assert_eq!(Aabb::EMPTY.union(&a), a);
+        assert_eq!(a.surface_area(), 6.0);
+        assert_eq!(Aabb::EMPTY.surface_area(), 0.0);
+    }
+
+    #[test]
+    fn slab_test_hits_misses_and_slides_along_faces() {
+        let b = Aabb::new(Vec3::ZERO, Vec3::ONE);
+        let o = Vec3::new(-1.0, 0.5, 0.5);
+        let d = Vec3::X;
+        assert_eq!(b.ray_entry(o, inverse_dir(d), 10.0), Some(1.0));
+        assert_eq!(b.ray_entry(o, inverse_dir(d), 0.5), None);
+        assert_eq!(b.ray_entry(o, inverse_dir(-d), 10.0), None);
+        // Origin inside.
+        assert_eq!(
+            b.ray_entry(Vec3::splat(0.5), inverse_dir(d), 1.0),
+            Some(0.0)
+        );
+        // Sliding exactly along the face y = 1 (closed box: a hit).
+        let face = Vec3::new(-1.0, 1.0, 0.5);
+        assert_eq!(b.ray_entry(face, inverse_dir(d), 10.0), Some(1.0));
+    }
+
+    #[test]
+    fn ray_sphere_cases() {
+        let c = Vec3::new(5.0, 0.0, 0.0);
+        assert_eq!(ray_sphere(Vec3::ZERO, Vec3::X, c, 1.0, 100.0), Some(4.0));
+        assert_eq!(
+            ray_sphere(Vec3::ZERO, Vec3::X * 2.0, c, 1.0, 100.0),
+            Some(2.0)
+        );
+        assert_eq!(ray_sphere(Vec3::ZERO, Vec3::X, c, 1.0, 3.9), None);
+        assert_eq!(ray_sphere(Vec3::ZERO, -Vec3::X, c, 1.0, 100.0), None);
+        assert_eq!(ray_sphere(c, Vec3::X, c, 1.0, 100.0), Some(0.0));
+        assert_eq!(ray_sphere(Vec3::ZERO, Vec3::ZERO, c, 1.0, 100.0), None);
+        assert_eq!(ray_sphere(Vec3::ZERO, Vec3::Y, c, 1.0, 100.0), None);
+    }
+
+    #[test]
+    fn checks_refuse_bad_values() {
+        assert!(check_sphere(Vec3::ZERO, 0.0).is_ok());
+        assert_eq!(
+            check_sphere(Vec3::ZERO, -1.0),
+            Err(Error::NegativeRadius(-1.0))
+        );
+        assert!(matches!(
+            check_sphere(Vec3::new(f32::NAN, 0.0, 0.0), 1.0),
+            Err(Error::NonFinite { what: "center", .. })
+        ));
+        assert!(matches!(
+            check_sphere(Vec3::ZERO, f32::INFINITY),
+            Err(Error::NonFinite { what: "radius", .. })
+        ));
+        assert!(matches!(
+            Aabb::try_new(Vec3::ONE, Vec3::ZERO),
+            Err(Error::InvertedAabb { .. })
+        ));
+        assert!(matches!(
+            Aabb::try_new(Vec3::ZERO, Vec3::splat(f32::INFINITY)),
+            Err(Error::NonFinite {
+                what: "aabb.max",
+                ..
+            })
+        ));
+        assert!(!ray_is_valid(Vec3::ZERO, Vec3::X, f32::NAN));
+        assert!(!ray_is_valid(Vec3::ZERO, Vec3::X, -1.0));
+    }
+}

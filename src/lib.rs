@@ -1,0 +1,16 @@
+//! broadleaf: a broadphase for physics loops.
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod brute;
+pub mod bvh;
+mod error;
+pub mod geom;
+pub mod octree;
+pub mod pair;
+pub mod scene;
+
+pub use error::Error;
+pub use geom::Aabb;
+pub use glam::Vec3;
+pub use pair::{Pair, ProxyKey};
