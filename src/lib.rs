@@ -2,6 +2,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+mod broadphase;
 pub mod brute;
 pub mod bvh;
 mod error;
@@ -10,6 +11,7 @@ pub mod octree;
 pub mod pair;
 pub mod scene;
 
+pub use broadphase::{BodyKind, BroadPhase, Config, Shape, StepPairs};
 pub use error::Error;
 pub use geom::Aabb;
 pub use glam::Vec3;
