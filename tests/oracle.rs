@@ -1,0 +1,265 @@
+//! `BroadPhase` against the brute-force reference: after every `step()` of a random operation
+//! sequence, `pairs` equals `brute::pairs` over the (margin-grown) boxes, and `added` /
+//! `removed` equal the set differences with the previous step's pairs.
+
+use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Pair, ProxyKey, Shape, Vec3, brute};
+use proptest::prelude::*;
+use std::collections::BTreeSet;
+
+#[derive(Clone, Debug)]
+enum Op {
+    InsertSphere(Vec3, f32),
+    InsertBody(Vec3, Vec3, bool),
+    Move(usize, Vec3),
+    Teleport(usize, Vec3),
+    Resize(usize, f32),
+    Remove(usize),
+    Step,
+}
+
+/// Coordinates on a half-metre lattice inside ±12 m (bounds are ±8 m), so exact touches,
+/// coincident centres and spheres outside the bounds all happen often.
+fn coord() -> impl Strategy<Value = f32> {
+    (-24i32..=24).prop_map(|i| i as f32 * 0.5)
+}
+
+fn point() -> impl Strategy<Value = Vec3> {
+    (coord(), coord(), coord()).prop_map(|(x, y, z)| Vec3::new(x, y, z))
+}
+
+fn size() -> impl Strategy<Value = f32> {
+    prop_oneof![
+        8 => (0i32..=4).prop_map(|i| i as f32 * 0.5),
+        1 => Just(20.0f32),
+        1 => (1i32..=9).prop_map(|i| i as f32 * 0.137),
+    ]
+}
+
+fn op() -> impl Strategy<Value = Op> {
+    prop_oneof![
+        4 => (point(), size()).prop_map(|(c, r)| Op::InsertSphere(c, r)),
+        2 => (point(), (size(), size(), size()), any::<bool>())
+            .prop_map(|(c, (x, y, z), s)| Op::InsertBody(c, Vec3::new(x, y, z), s)),
+        4 => (any::<usize>(), (-2i32..=2, -2i32..=2, -2i32..=2))
+            .prop_map(|(i, (x, y, z))| Op::Move(i, Vec3::new(x as f32, y as f32, z as f32) * 0.25)),
+        1 => (any::<usize>(), point()).prop_map(|(i, p)| Op::Teleport(i, p)),
+        1 => (any::<usize>(), size()).prop_map(|(i, r)| Op::Resize(i, r)),
+        1 => any::<usize>().prop_map(Op::Remove),
+        3 => Just(Op::Step),
+    ]
+}
+
+fn config(depth: u32, margin: f32) -> Config {
+    Config {
+        bounds: Aabb::new(Vec3::splat(-8.0), Vec3::splat(8.0)),
+        octree_depth: depth,
+        margin,
+        ..Config::default()
+    }
+}
+
+/// Checks one step against the model; returns the step's pairs.
+fn check_step(bp: &mut BroadPhase, model: &[(ProxyKey, Shape)], prev: &[Pair]) -> Vec<Pair> {
+    let margin = bp.config().margin;
+    let proxies: Vec<brute::Proxy> = model
+        .iter()
+        .map(|&(key, shape)| brute::Proxy {
+            key,
+            aabb: shape.aabb().grown(margin),
+            is_static: matches!(
+                shape,
+                Shape::Body {
+                    kind: BodyKind::Static,
+                    ..
+                }
+            ),
+        })
+        .collect();
+    let expected = brute::pairs(&proxies);
+    let step = bp.step();
+    assert_eq!(
+        step.pairs,
+        expected.as_slice(),
+        "pairs differ from brute force"
+    );
+    let p: BTreeSet<Pair> = prev.iter().copied().collect();
+    let c: BTreeSet<Pair> = expected.iter().copied().collect();
+    let added: Vec<Pair> = c.difference(&p).copied().collect();
+    let removed: Vec<Pair> = p.difference(&c).copied().collect();
+    assert_eq!(step.added, added.as_slice(), "added is not cur \\ prev");
+    assert_eq!(
+        step.removed,
+        removed.as_slice(),
+        "removed is not prev \\ cur"
+    );
+    expected
+}
+
+fn run(depth: u32, margin: f32, ops: &[Op]) {
+    let mut bp = BroadPhase::try_new(config(depth, margin)).unwrap();
+    let mut model: Vec<(ProxyKey, Shape)> = Vec::new();
+    let mut prev = Vec::new();
+    for op in ops {
+        match *op {
+            Op::InsertSphere(center, radius) => {
+                let key = bp.insert_sphere(center, radius).unwrap();
+                model.push((key, Shape::Sphere { center, radius }));
+            }
+            Op::InsertBody(c, h, is_static) => {
+                let kind = if is_static {
+                    BodyKind::Static
+                } else {
+                    BodyKind::Dynamic
+                };
+                let aabb = Aabb::from_center_half_extents(c, h);
+                let key = bp.insert_body(aabb, kind).unwrap();
+                model.push((key, Shape::Body { aabb, kind }));
+            }
+            Op::Move(i, d) | Op::Teleport(i, d) if !model.is_empty() => {
+                let i = i % model.len();
+                let teleport = matches!(op, Op::Teleport(..));
+                let (key, shape) = &mut model[i];
+                match shape {
+                    Shape::Sphere { center, radius } => {
+                        *center = if teleport { d } else { *center + d };
+                        bp.update_sphere(*key, *center, *radius).unwrap();
+                    }
+                    Shape::Body { aabb, .. } => {
+                        let h = aabb.extent() * 0.5;
+                        let c = if teleport { d } else { aabb.center() + d };
+                        *aabb = Aabb::from_center_half_extents(c, h);
+                        bp.update_body(*key, *aabb).unwrap();
+                    }
+                }
+            }
+            Op::Resize(i, r) if !model.is_empty() => {
+                let i = i % model.len();
+                let (key, shape) = &mut model[i];
+                match shape {
+                    Shape::Sphere { center, radius } => {
+                        *radius = r;
+                        bp.update_sphere(*key, *center, r).unwrap();
+                    }
+                    Shape::Body { aabb, .. } => {
+                        *aabb = Aabb::from_center_half_extents(aabb.center(), Vec3::splat(r));
+                        bp.update_body(*key, *aabb).unwrap();
+                    }
+                }
+            }
+            Op::Remove(i) if !model.is_empty() => {
+                let (key, _) = model.swap_remove(i % model.len());
+                bp.remove(key).unwrap();
+                assert!(bp.aabb(key).is_none());
+            }
+            Op::Step => prev = check_step(&mut bp, &model, &prev),
+            _ => {}
+        }
+        assert_eq!(bp.len(), model.len());
+    }
+    check_step(&mut bp, &model, &prev);
+    for &(key, shape) in &model {
+        assert_eq!(bp.aabb(key), Some(shape.aabb()));
+        assert_eq!(bp.shape(key), Some(shape));
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(192))]
+
+    #[test]
+    fn pairs_and_events_equal_brute_force(
+        depth in 0u32..=5,
+        margin in prop_oneof![3 => Just(0.0f32), 1 => Just(0.25f32)],
+        ops in prop::collection::vec(op(), 0..160),
+    ) {
+        run(depth, margin, &ops);
+    }
+}
+
+#[test]
+fn removed_proxy_pairs_are_reported_removed_next_step() {
+    let mut bp = BroadPhase::new(Config::default());
+    let a = bp.insert_sphere(Vec3::ZERO, 1.0).unwrap();
+    let b = bp.insert_sphere(Vec3::X, 1.0).unwrap();
+    let w = bp
+        .insert_body(
+            Aabb::new(Vec3::splat(-5.0), Vec3::splat(5.0)),
+            BodyKind::Static,
+        )
+        .unwrap();
+    let step = bp.step();
+    assert_eq!(step.pairs.len(), 3);
+    assert_eq!(step.added.len(), 3);
+    bp.remove(a).unwrap();
+    let step = bp.step();
+    assert_eq!(step.pairs, &[Pair::new(b, w)]);
+    assert!(step.added.is_empty());
+    assert_eq!(step.removed, &[Pair::new(a, b), Pair::new(a, w)]);
+    let step = bp.step();
+    assert!(step.added.is_empty() && step.removed.is_empty());
+}
+
+#[test]
+fn static_bodies_never_pair_with_each_other() {
+    let mut bp = BroadPhase::new(Config::default());
+    let big = Aabb::new(Vec3::splat(-1.0), Vec3::splat(1.0));
+    bp.insert_body(big, BodyKind::Static).unwrap();
+    bp.insert_body(big, BodyKind::Static).unwrap();
+    assert!(bp.step().pairs.is_empty());
+    let d = bp.insert_body(big, BodyKind::Dynamic).unwrap();
+    let step = bp.step();
+    assert_eq!(step.pairs.len(), 2);
+    assert!(step.pairs.iter().all(|p| p.a == d || p.b == d));
+}
+
+#[test]
+fn cast_ray_hits_spheres_as_spheres_and_bodies_as_boxes() {
+    let mut bp = BroadPhase::new(Config::default());
+    // A sphere whose box the ray would clip at the corner, but whose ball it misses.
+    let s = bp.insert_sphere(Vec3::new(5.0, 0.9, 0.0), 1.0).unwrap();
+    let b = bp
+        .insert_body(
+            Aabb::new(Vec3::new(10.0, -1.0, -1.0), Vec3::new(11.0, 1.0, 1.0)),
+            BodyKind::Static,
+        )
+        .unwrap();
+    let o = Vec3::new(0.0, 0.0, 0.0);
+    let (key, t) = bp.cast_ray(o, Vec3::X, 100.0).unwrap();
+    assert_eq!(key, s);
+    assert!((t - (5.0 - 0.19f32.sqrt())).abs() < 1e-5, "{t}");
+    bp.update_sphere(s, Vec3::new(5.0, 0.99, 0.99), 1.0)
+        .unwrap();
+    assert_eq!(bp.cast_ray(o, Vec3::X * 2.0, 100.0), Some((b, 5.0)));
+    assert_eq!(bp.cast_ray(o, Vec3::X, 9.0), None);
+    assert_eq!(bp.cast_ray(o, Vec3::X, f32::NAN), None);
+}
+
+#[test]
+fn query_aabb_equals_brute_force() {
+    let mut bp = BroadPhase::new(config(3, 0.0));
+    let mut rng = broadleaf::scene::Rng::new(11);
+    let mut proxies = Vec::new();
+    for i in 0..300 {
+        let c = rng.vec3_in(Vec3::splat(-10.0), Vec3::splat(10.0));
+        let (key, aabb) = if i % 3 == 0 {
+            let aabb = Aabb::from_center_half_extents(c, Vec3::splat(rng.range(0.0, 2.0)));
+            (bp.insert_body(aabb, BodyKind::Dynamic).unwrap(), aabb)
+        } else {
+            let r = rng.range(0.0, 1.0);
+            (
+                bp.insert_sphere(c, r).unwrap(),
+                Aabb::from_center_radius(c, r),
+            )
+        };
+        proxies.push(brute::Proxy::new(key, aabb));
+    }
+    bp.step();
+    for _ in 0..100 {
+        let c = rng.vec3_in(Vec3::splat(-10.0), Vec3::splat(10.0));
+        let q = Aabb::from_center_half_extents(c, Vec3::splat(rng.range(0.0, 4.0)));
+        let mut got = Vec::new();
+        bp.query_aabb(&q, |k| got.push(k));
+        got.sort_unstable();
+        assert_eq!(got, brute::query_aabb(&proxies, &q));
+    }
+}
