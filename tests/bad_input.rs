@@ -1,0 +1,216 @@
+//! Every entry point that takes geometry or a key refuses bad input with a specific `Err` and
+//! leaves the structure exactly as it was: same `len`, same `aabb(key)` for every live key,
+//! same pairs at the next step.
+
+use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Error, Pair, ProxyKey, Vec3};
+
+const NAN: f32 = f32::NAN;
+const INF: f32 = f32::INFINITY;
+
+fn bad_points() -> Vec<Vec3> {
+    vec![
+        Vec3::new(NAN, 0.0, 0.0),
+        Vec3::new(0.0, INF, 0.0),
+        Vec3::new(0.0, 0.0, -INF),
+        Vec3::splat(NAN),
+    ]
+}
+
+fn bad_boxes() -> Vec<(Aabb, &'static str)> {
+    let mut v: Vec<(Aabb, &'static str)> = bad_points()
+        .into_iter()
+        .flat_map(|p| {
+            [
+                (Aabb::new(p, Vec3::ONE), "non-finite min"),
+                (Aabb::new(Vec3::ZERO, p), "non-finite max"),
+            ]
+        })
+        .collect();
+    v.push((Aabb::new(Vec3::ONE, Vec3::ZERO), "inverted"));
+    v.push((
+        Aabb::new(Vec3::new(0.0, 1.0, 0.0), Vec3::new(1.0, 0.5, 1.0)),
+        "inverted y",
+    ));
+    v
+}
+
+/// A small world with one of each kind, stepped once.
+fn world() -> (BroadPhase, Vec<ProxyKey>) {
+    let mut bp = BroadPhase::new(Config {
+        bounds: Aabb::new(Vec3::splat(-4.0), Vec3::splat(4.0)),
+        octree_depth: 3,
+        ..Config::default()
+    });
+    let keys = vec![
+        bp.insert_sphere(Vec3::ZERO, 1.0).unwrap(),
+        bp.insert_sphere(Vec3::new(1.5, 0.0, 0.0), 1.0).unwrap(),
+        bp.insert_sphere(Vec3::splat(100.0), 0.5).unwrap(),
+        bp.insert_body(
+            Aabb::new(Vec3::splat(-0.5), Vec3::splat(0.5)),
+            BodyKind::Dynamic,
+        )
+        .unwrap(),
+        bp.insert_body(
+            Aabb::new(Vec3::splat(-9.0), Vec3::new(9.0, -0.5, 9.0)),
+            BodyKind::Static,
+        )
+        .unwrap(),
+    ];
+    bp.step();
+    (bp, keys)
+}
+
+type Snapshot = (usize, Vec<Option<Aabb>>, Vec<Pair>);
+
+fn snapshot(bp: &mut BroadPhase, keys: &[ProxyKey]) -> Snapshot {
+    let aabbs = keys.iter().map(|&k| bp.aabb(k)).collect();
+    let len = bp.len();
+    // Stepping twice: the second step's events must be empty if nothing changed.
+    let pairs = bp.step().pairs.to_vec();
+    let again = bp.step();
+    assert!(again.added.is_empty() && again.removed.is_empty());
+    (len, aabbs, pairs)
+}
+
+#[test]
+fn bad_geometry_is_refused_and_changes_nothing() {
+    let (mut bp, keys) = world();
+    let before = snapshot(&mut bp, &keys);
+    let (sphere, body) = (keys[0], keys[3]);
+    for p in bad_points() {
+        let e = bp.insert_sphere(p, 1.0).unwrap_err();
+        assert!(matches!(e, Error::NonFinite { what: "center", .. }), "{e}");
+        let e = bp.update_sphere(sphere, p, 1.0).unwrap_err();
+        assert!(matches!(e, Error::NonFinite { what: "center", .. }), "{e}");
+    }
+    for r in [NAN, INF, -INF] {
+        let e = bp.insert_sphere(Vec3::ZERO, r).unwrap_err();
+        assert!(matches!(e, Error::NonFinite { what: "radius", .. }), "{e}");
+        assert!(bp.update_sphere(sphere, Vec3::ZERO, r).is_err());
+    }
+    for r in [-1.0, -f32::MIN_POSITIVE] {
+        assert_eq!(
+            bp.insert_sphere(Vec3::ZERO, r),
+            Err(Error::NegativeRadius(r))
+        );
+        assert_eq!(
+            bp.update_sphere(sphere, Vec3::ZERO, r),
+            Err(Error::NegativeRadius(r))
+        );
+    }
+    for (aabb, what) in bad_boxes() {
+        for kind in [BodyKind::Dynamic, BodyKind::Static] {
+            let e = bp.insert_body(aabb, kind).unwrap_err();
+            assert!(
+                matches!(e, Error::NonFinite { .. } | Error::InvertedAabb { .. }),
+                "{what}: {e}"
+            );
+        }
+        assert!(bp.update_body(body, aabb).is_err(), "{what}");
+    }
+    assert_eq!(snapshot(&mut bp, &keys), before);
+}
+
+#[test]
+fn stale_and_wrong_kind_keys_are_refused_and_change_nothing() {
+    let (mut bp, keys) = world();
+    let doomed = bp.insert_sphere(Vec3::ZERO, 0.25).unwrap();
+    bp.remove(doomed).unwrap();
+    bp.step();
+    let before = snapshot(&mut bp, &keys);
+    let good = Aabb::new(Vec3::ZERO, Vec3::ONE);
+    assert_eq!(bp.remove(doomed), Err(Error::UnknownProxy));
+    assert_eq!(
+        bp.update_sphere(doomed, Vec3::ZERO, 1.0),
+        Err(Error::UnknownProxy)
+    );
+    assert_eq!(bp.update_body(doomed, good), Err(Error::UnknownProxy));
+    assert_eq!(
+        bp.update_body(ProxyKey::default(), good),
+        Err(Error::UnknownProxy)
+    );
+    assert_eq!(bp.aabb(doomed), None);
+    assert_eq!(
+        bp.update_sphere(keys[3], Vec3::ZERO, 1.0),
+        Err(Error::WrongKind)
+    );
+    assert_eq!(bp.update_body(keys[0], good), Err(Error::WrongKind));
+    assert_eq!(snapshot(&mut bp, &keys), before);
+}
+
+#[test]
+fn bad_queries_answer_nothing_and_do_not_panic() {
+    let (bp, _) = world();
+    for p in bad_points() {
+        assert_eq!(bp.cast_ray(p, Vec3::X, 10.0), None);
+        assert_eq!(bp.cast_ray(Vec3::ZERO, p, 10.0), None);
+    }
+    assert_eq!(bp.cast_ray(Vec3::ZERO, Vec3::X, NAN), None);
+    assert_eq!(bp.cast_ray(Vec3::ZERO, Vec3::X, -1.0), None);
+    for (aabb, what) in bad_boxes() {
+        let mut n = 0;
+        bp.query_aabb(&aabb, |_| n += 1);
+        assert_eq!(n, 0, "{what}");
+    }
+}
+
+#[test]
+fn bad_config_is_refused_by_try_new_and_corrected_by_new() {
+    let bad = [
+        Config {
+            octree_depth: 11,
+            ..Config::default()
+        },
+        Config {
+            margin: -1.0,
+            ..Config::default()
+        },
+        Config {
+            margin: NAN,
+            ..Config::default()
+        },
+        Config {
+            rebuild_threshold: 0.5,
+            ..Config::default()
+        },
+        Config {
+            bounds: Aabb::new(Vec3::ONE, Vec3::ZERO),
+            ..Config::default()
+        },
+        Config {
+            bounds: Aabb::new(Vec3::ZERO, Vec3::new(1.0, 0.0, 1.0)),
+            ..Config::default()
+        },
+        Config {
+            bounds: Aabb::new(Vec3::ZERO, Vec3::splat(INF)),
+            ..Config::default()
+        },
+    ];
+    for config in bad {
+        let e = BroadPhase::try_new(config).unwrap_err();
+        assert!(!e.to_string().is_empty());
+        let bp = BroadPhase::new(config);
+        assert!(
+            bp.config().validate().is_ok(),
+            "{config:?} -> {:?}",
+            bp.config()
+        );
+    }
+}
+
+#[test]
+fn errors_name_the_bad_value() {
+    let mut bp = BroadPhase::new(Config::default());
+    let e = bp.insert_sphere(Vec3::new(NAN, 1.0, 2.0), 1.0).unwrap_err();
+    assert!(
+        e.to_string().contains("center") && e.to_string().contains("NaN"),
+        "{e}"
+    );
+    let e = bp.insert_sphere(Vec3::ZERO, -2.5).unwrap_err();
+    assert!(e.to_string().contains("-2.5"), "{e}");
+    let e = bp
+        .insert_body(Aabb::new(Vec3::ONE, Vec3::ZERO), BodyKind::Dynamic)
+        .unwrap_err();
+    assert!(e.to_string().contains("inverted"), "{e}");
+    let _: &dyn std::error::Error = &e;
+}
