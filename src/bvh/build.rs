@@ -186,7 +186,12 @@ fn build_nodes(
 
 /// How to split `refs` (a node's primitives), or `None` for a leaf. Every `Some` has both
 /// halves non-empty, so the build always terminates.
-fn split(config: &BvhConfig, refs: &mut [BuildRef], bounds: &Aabb, centroids: &Aabb) -> Option<Split> {
+fn split(
+    config: &BvhConfig,
+    refs: &mut [BuildRef],
+    bounds: &Aabb,
+    centroids: &Aabb,
+) -> Option<Split> {
     let n = refs.len();
     let small = n <= config.max_leaf_size as usize;
     if n == 1 {
@@ -197,7 +202,11 @@ fn split(config: &BvhConfig, refs: &mut [BuildRef], bounds: &Aabb, centroids: &A
     let nb = config.sah_buckets as usize;
     if !(extent[axis] > 0.0 && (nb as f32 / extent[axis]).is_finite()) {
         // All centroids (practically) coincide: no plane separates them.
-        return if small { None } else { Some(halves(refs, n / 2)) };
+        return if small {
+            None
+        } else {
+            Some(halves(refs, n / 2))
+        };
     }
     match config.split {
         SplitMethod::Sah => sah_split(config, refs, bounds, centroids, axis),
@@ -258,8 +267,8 @@ fn sah_split(
     let mut acc = Bucket::EMPTY;
     for i in 0..nb - 1 {
         acc = acc.merge(&buckets[i]);
-        let cost = acc.count as f32 * acc.bounds.surface_area()
-            + right_count[i] as f32 * right_area[i];
+        let cost =
+            acc.count as f32 * acc.bounds.surface_area() + right_count[i] as f32 * right_area[i];
         if cost < best_cost {
             (best_cost, best_plane) = (cost, i);
         }

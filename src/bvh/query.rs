@@ -121,7 +121,13 @@ impl Bvh {
     /// Calls `f(key, t)` for every live box hit by the segment `origin + t·dir`,
     /// `t ∈ [0, max_t]`, with its entry `t`, each once, in no particular order. Nothing for an
     /// invalid ray (as in [`Bvh::cast_ray`]).
-    pub fn cast_ray_all(&self, origin: Vec3, dir: Vec3, max_t: f32, mut f: impl FnMut(ProxyKey, f32)) {
+    pub fn cast_ray_all(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        max_t: f32,
+        mut f: impl FnMut(ProxyKey, f32),
+    ) {
         if !ray_is_valid(origin, dir, max_t) {
             return;
         }

@@ -14,11 +14,30 @@ impl Bvh {
     /// O(n); for tests and debugging.
     pub fn validate(&self) {
         let n_nodes = self.nodes.len();
-        assert_eq!(self.keys.len(), self.boxes.len(), "keys and boxes differ in length");
-        assert!(self.tree_len <= self.boxes.len(), "tree_len past the primitives");
-        assert_eq!(self.parent.len(), n_nodes, "parent and nodes differ in length");
-        assert_eq!(self.leaf_of.len(), self.tree_len, "leaf_of and tree_len differ");
-        assert_eq!(n_nodes == 0, self.tree_len == 0, "nodes exist iff tree primitives do");
+        assert_eq!(
+            self.keys.len(),
+            self.boxes.len(),
+            "keys and boxes differ in length"
+        );
+        assert!(
+            self.tree_len <= self.boxes.len(),
+            "tree_len past the primitives"
+        );
+        assert_eq!(
+            self.parent.len(),
+            n_nodes,
+            "parent and nodes differ in length"
+        );
+        assert_eq!(
+            self.leaf_of.len(),
+            self.tree_len,
+            "leaf_of and tree_len differ"
+        );
+        assert_eq!(
+            n_nodes == 0,
+            self.tree_len == 0,
+            "nodes exist iff tree primitives do"
+        );
 
         let mut node_seen = vec![false; n_nodes];
         let mut prim_seen = vec![false; self.tree_len];
@@ -35,7 +54,10 @@ impl Bvh {
             let aabb = node.aabb();
             if node.is_leaf() {
                 let range = node.range();
-                assert!(range.end <= self.tree_len, "leaf {n} range {range:?} out of the tree");
+                assert!(
+                    range.end <= self.tree_len,
+                    "leaf {n} range {range:?} out of the tree"
+                );
                 for i in range {
                     assert!(!prim_seen[i], "primitive {i} in two leaves");
                     prim_seen[i] = true;
@@ -80,7 +102,11 @@ impl Bvh {
                 continue;
             }
             live += 1;
-            assert_eq!(self.ids.get(*key), Some(&(i as u32)), "key map disagrees at {i}");
+            assert_eq!(
+                self.ids.get(*key),
+                Some(&(i as u32)),
+                "key map disagrees at {i}"
+            );
             assert!(
                 crate::geom::check_aabb(aabb).is_ok(),
                 "live primitive {i} has a bad box {aabb:?}"
