@@ -127,16 +127,23 @@ impl Aabb {
     ///
     /// The slab test: on each axis the ray is inside the slab for `t` between
     /// `(min − o)/d` and `(max − o)/d`; the segment meets the box iff the latest entry is not
-    /// after the earliest exit. A zero direction component gives `±∞` or NaN (when the origin
-    /// lies exactly on the face); NaN is treated as "inside the slab" by `max`/`min`, which
-    /// ignore it, so a ray sliding along a face hits the closed box.
+    /// after the earliest exit. A zero direction component gives `±∞` (the ray is inside or
+    /// outside that slab for all `t`), or `0 · ∞ = NaN` when the origin lies exactly on a face
+    /// of that slab; such a NaN is replaced by `−∞` for the entry and `+∞` for the exit, so a
+    /// ray sliding along a face hits the closed box. (glam's `min`/`max` are comparisons, so
+    /// an unreplaced NaN would propagate and turn a miss into a hit.) The result is monotone:
+    /// a box containing another is entered no later and left no earlier.
     #[must_use]
     #[inline]
     pub fn ray_entry(&self, origin: Vec3, inv_dir: Vec3, max_t: f32) -> Option<f32> {
         let t1 = (self.min - origin) * inv_dir;
         let t2 = (self.max - origin) * inv_dir;
-        let t_near = t1.min(t2).max_element().max(0.0);
-        let t_far = t1.max(t2).min_element().min(max_t);
+        let (n1, n2) = (t1.is_nan_mask(), t2.is_nan_mask());
+        let near =
+            Vec3::select(n1, Vec3::NEG_INFINITY, t1).min(Vec3::select(n2, Vec3::NEG_INFINITY, t2));
+        let far = Vec3::select(n1, Vec3::INFINITY, t1).max(Vec3::select(n2, Vec3::INFINITY, t2));
+        let t_near = near.max_element().max(0.0);
+        let t_far = far.min_element().min(max_t);
         (t_near <= t_far).then_some(t_near)
     }
 }
@@ -271,6 +278,16 @@ mod tests {
         // Sliding exactly along the face y = 1 (closed box: a hit).
         let face = Vec3::new(-1.0, 1.0, 0.5);
         assert_eq!(b.ray_entry(face, inverse_dir(d), 10.0), Some(1.0));
+        let low_face = Vec3::new(-1.0, 0.0, 0.5);
+        assert_eq!(b.ray_entry(low_face, inverse_dir(-d), 10.0), None);
+        assert_eq!(b.ray_entry(low_face, inverse_dir(d), 10.0), Some(1.0));
+        // On the plane of one face but outside the box on another axis: a miss (a NaN from
+        // 0 · ∞ once leaked through glam's comparison-based min/max and made this a hit).
+        let outside = Aabb::new(Vec3::new(-2.0, -4.0, 1.0), Vec3::new(-1.0, 0.0, 5.0));
+        assert_eq!(
+            outside.ray_entry(Vec3::new(13.0, 3.0, 5.0), inverse_dir(d), 23.0),
+            None
+        );
     }
 
     #[test]

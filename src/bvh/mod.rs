@@ -1,1 +1,345 @@
-//! The refittable bounding-volume hierarchy over rigid bodies.
+//! The refittable bounding-volume hierarchy over rigid bodies, given by their world AABBs.
+//!
+//! A [`Bvh`] is a flat depth-first array of 32-byte nodes (pbrt's `LinearBVHNode`) built with
+//! binned SAH (or [`SplitMethod::Middle`] / [`SplitMethod::EqualCounts`]), refitted bottom-up
+//! in one reverse sweep per step, and rebuilt when its quality degrades.
+//!
+//! # Life cycle and exactness
+//! Queries and pairs are **always exact for the current boxes**, whatever was called since
+//! the last [`Bvh::refit`]:
+//! - [`Bvh::update`] writes the box; if it left its leaf's box, the leaf and its ancestors are
+//!   enlarged (walking up only while an ancestor does not contain it), so the tree stays
+//!   conservative. [`Bvh::refit`] later tightens every node.
+//! - [`Bvh::insert`] appends the box to a *pending* list that queries and pairs test
+//!   linearly (pending × tree by tree queries, pending × pending by sort-and-sweep on x) until
+//!   the next rebuild.
+//! - [`Bvh::remove`] turns a primitive of the tree into a *tombstone* (an empty box that
+//!   overlaps nothing); a pending one is dropped at once. The next rebuild compacts.
+//!
+//! # Rebuild policy
+//! [`Bvh::refit`] rebuilds instead of refitting when the pending inserts plus tombstones exceed
+//! [`BvhConfig::rebuild_after_changes`] × the primitive count at the last build (any change
+//! when that count was 0), and rebuilds after refitting when [`Bvh::sah_cost`] exceeds
+//! [`BvhConfig::rebuild_threshold`] × the cost at the last build.
+//!
+//! # Keys
+//! [`Bvh::insert`] mints keys from a slotmap owned by the tree; `BroadPhase` mints its own keys
+//! and hands them in. Use one way or the other on one tree, never both.
+
+mod build;
+mod node;
+mod pairs;
+mod query;
+mod refit;
+mod validate;
+
+use crate::geom::check_aabb;
+use crate::{Aabb, Error, ProxyKey};
+use node::Node;
+use slotmap::{Key, SecondaryMap, SlotMap};
+
+pub(crate) use build::BuildScratch;
+
+/// "No index" in the `u32` side arrays.
+const NONE: u32 = u32::MAX;
+
+/// How [`Bvh::rebuild`] chooses the split of a node's primitives.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum SplitMethod {
+    /// Binned surface-area heuristic (pbrt): best of `sah_buckets − 1` planes along the
+    /// centroid bounds' longest axis; a node becomes a leaf when no split is cheaper.
+    #[default]
+    Sah,
+    /// Split at the midpoint of the centroid bounds' longest axis (equal counts if one side
+    /// would be empty). Fast to build, poorer trees for clustered input.
+    Middle,
+    /// Split at the median centroid along the longest axis: a balanced tree.
+    EqualCounts,
+}
+
+/// Tunables of a [`Bvh`]; [`Bvh::new`] refuses values outside the documented ranges.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BvhConfig {
+    /// The split method of every (re)build. Default [`SplitMethod::Sah`].
+    pub split: SplitMethod,
+    /// The most primitives a leaf may hold, `1..=255`; default 4. SAH may stop earlier.
+    pub max_leaf_size: u32,
+    /// SAH buckets per node, `2..=64`; default 12 (pbrt).
+    pub sah_buckets: u32,
+    /// [`Bvh::refit`] rebuilds when `sah_cost() / cost at build` exceeds this ratio; finite
+    /// and `>= 1`, default 1.5.
+    pub rebuild_threshold: f32,
+    /// [`Bvh::refit`] rebuilds when pending inserts plus removed primitives since the last
+    /// build exceed this fraction of the primitive count at that build; `>= 0` (0: any change,
+    /// `+∞`: never), default 0.1.
+    pub rebuild_after_changes: f32,
+}
+
+impl Default for BvhConfig {
+    fn default() -> Self {
+        Self {
+            split: SplitMethod::Sah,
+            max_leaf_size: 4,
+            sah_buckets: 12,
+            rebuild_threshold: 1.5,
+            rebuild_after_changes: 0.1,
+        }
+    }
+}
+
+impl BvhConfig {
+    /// `Ok` if every field is in its documented range, else the first offending field.
+    pub fn check(&self) -> Result<(), Error> {
+        let bad = |what, value: f32| Err(Error::InvalidConfig { what, value });
+        if !(1..=255).contains(&self.max_leaf_size) {
+            return bad("max_leaf_size", self.max_leaf_size as f32);
+        }
+        if !(2..=build::MAX_BUCKETS as u32).contains(&self.sah_buckets) {
+            return bad("sah_buckets", self.sah_buckets as f32);
+        }
+        if !(self.rebuild_threshold.is_finite() && self.rebuild_threshold >= 1.0) {
+            return bad("rebuild_threshold", self.rebuild_threshold);
+        }
+        if !(self.rebuild_after_changes >= 0.0) {
+            return bad("rebuild_after_changes", self.rebuild_after_changes);
+        }
+        Ok(())
+    }
+}
+
+/// A snapshot of a tree's shape and history, from [`Bvh::stats`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BvhStats {
+    /// Nodes in the array (interior and leaves).
+    pub nodes: usize,
+    /// Leaf nodes.
+    pub leaves: usize,
+    /// Levels from the root to the deepest leaf (1 for a lone leaf, 0 for no tree).
+    pub depth: usize,
+    /// Live primitives ([`Bvh::len`]).
+    pub primitives: usize,
+    /// Primitives inserted since the last build, tested linearly until the next.
+    pub pending: usize,
+    /// Removed primitives still occupying a leaf slot until the next build.
+    pub tombstones: usize,
+    /// [`Bvh::sah_cost`] now.
+    pub cost: f32,
+    /// [`Bvh::sah_cost`] right after the last build.
+    pub cost_at_build: f32,
+    /// `cost / cost_at_build`, or 1 when the cost at build was 0.
+    pub cost_ratio: f32,
+    /// Full builds so far (explicit and triggered by [`Bvh::refit`]).
+    pub rebuilds: u64,
+    /// Refit sweeps so far (a refit that rebuilds instead does not count).
+    pub refits: u64,
+}
+
+/// A refittable BVH over axis-aligned boxes; see the [module docs](self) for the life cycle.
+#[derive(Clone, Debug)]
+pub struct Bvh {
+    config: BvhConfig,
+    /// Mints keys for [`Bvh::insert`].
+    slots: SlotMap<ProxyKey, ()>,
+    /// Key → primitive index.
+    ids: SecondaryMap<ProxyKey, u32>,
+    /// Primitive index → key; null for a tombstone. Indices `< tree_len` are in tree order
+    /// (a leaf's range indexes them directly), the rest are pending.
+    keys: Vec<ProxyKey>,
+    /// Primitive index → current box; [`Aabb::EMPTY`] for a tombstone.
+    boxes: Vec<Aabb>,
+    /// Primitives covered by the node array (live or tombstones).
+    tree_len: usize,
+    /// Tombstones among the first `tree_len` primitives.
+    tombstones: usize,
+    /// Depth-first node array: node `n`'s first child is `n + 1`.
+    nodes: Vec<Node>,
+    /// Node → parent node (`NONE` for the root).
+    parent: Vec<u32>,
+    /// Primitive index (`< tree_len`) → its leaf node.
+    leaf_of: Vec<u32>,
+    cost_at_build: f32,
+    rebuilds: u64,
+    refits: u64,
+    /// Scratch reused by every build and traversal.
+    scratch: BuildScratch,
+    pair_stack: Vec<(u32, u32)>,
+    sweep_a: Vec<u32>,
+    sweep_b: Vec<u32>,
+}
+
+impl Bvh {
+    /// An empty tree, or `Err(InvalidConfig)` naming the first out-of-range field.
+    pub fn new(config: BvhConfig) -> Result<Bvh, Error> {
+        config.check()?;
+        Ok(Bvh {
+            config,
+            slots: SlotMap::with_key(),
+            ids: SecondaryMap::new(),
+            keys: Vec::new(),
+            boxes: Vec::new(),
+            tree_len: 0,
+            tombstones: 0,
+            nodes: Vec::new(),
+            parent: Vec::new(),
+            leaf_of: Vec::new(),
+            cost_at_build: 0.0,
+            rebuilds: 0,
+            refits: 0,
+            scratch: BuildScratch::default(),
+            pair_stack: Vec::new(),
+            sweep_a: Vec::new(),
+            sweep_b: Vec::new(),
+        })
+    }
+
+    /// A tree built in one pass over `aabbs`, with the key of each box in input order; `Err`
+    /// (nothing built) if any box is not finite or inverted.
+    pub fn from_aabbs(config: BvhConfig, aabbs: &[Aabb]) -> Result<(Bvh, Vec<ProxyKey>), Error> {
+        let mut bvh = Bvh::new(config)?;
+        aabbs.iter().try_for_each(check_aabb)?;
+        let keys = aabbs
+            .iter()
+            .map(|aabb| bvh.insert(*aabb))
+            .collect::<Result<Vec<_>, _>>()?;
+        bvh.rebuild();
+        Ok((bvh, keys))
+    }
+
+    /// The configuration the tree was made with.
+    #[must_use]
+    pub fn config(&self) -> &BvhConfig {
+        &self.config
+    }
+
+    /// Adds a box and returns its new key. It is pending (tested linearly) until the next
+    /// rebuild. `Err` for a non-finite or inverted box, or `Full`; the tree is then unchanged.
+    pub fn insert(&mut self, aabb: Aabb) -> Result<ProxyKey, Error> {
+        check_aabb(&aabb)?;
+        self.check_room()?;
+        let key = self.slots.insert(());
+        self.push_pending(key, aabb);
+        Ok(key)
+    }
+
+    /// [`Bvh::insert`] under a key minted by the caller (`BroadPhase`). A key already live in
+    /// this tree is refused with `UnknownProxy` (it names no new proxy).
+    #[allow(
+        dead_code,
+        reason = "the entry point of BroadPhase, which is written in a parallel branch"
+    )]
+    pub(crate) fn insert_keyed(&mut self, key: ProxyKey, aabb: Aabb) -> Result<(), Error> {
+        check_aabb(&aabb)?;
+        self.check_room()?;
+        if key.is_null() || self.ids.contains_key(key) {
+            return Err(Error::UnknownProxy);
+        }
+        self.push_pending(key, aabb);
+        Ok(())
+    }
+
+    fn check_room(&self) -> Result<(), Error> {
+        if self.boxes.len() >= NONE as usize - 1 {
+            return Err(Error::Full);
+        }
+        Ok(())
+    }
+
+    fn push_pending(&mut self, key: ProxyKey, aabb: Aabb) {
+        self.ids.insert(key, self.boxes.len() as u32);
+        self.keys.push(key);
+        self.boxes.push(aabb);
+    }
+
+    /// Replaces the box of `key`. Queries and pairs see the new box at once; node boxes are
+    /// only enlarged here and tightened by [`Bvh::refit`]. `Err` (tree unchanged) for a bad
+    /// box or a stale key.
+    pub fn update(&mut self, key: ProxyKey, aabb: Aabb) -> Result<(), Error> {
+        check_aabb(&aabb)?;
+        let id = *self.ids.get(key).ok_or(Error::UnknownProxy)? as usize;
+        self.boxes[id] = aabb;
+        if id < self.tree_len {
+            self.enlarge_ancestors(self.leaf_of[id], &aabb);
+        }
+        Ok(())
+    }
+
+    /// Removes `key`'s box; its key is never valid again. `Err(UnknownProxy)` for a stale or
+    /// unknown key.
+    pub fn remove(&mut self, key: ProxyKey) -> Result<(), Error> {
+        let id = self.ids.remove(key).ok_or(Error::UnknownProxy)? as usize;
+        self.slots.remove(key);
+        if id < self.tree_len {
+            self.keys[id] = ProxyKey::null();
+            self.boxes[id] = Aabb::EMPTY;
+            self.tombstones += 1;
+        } else {
+            // Pending: keep the pending region dense by moving the last one into the hole.
+            self.keys.swap_remove(id);
+            self.boxes.swap_remove(id);
+            if let Some(&moved) = self.keys.get(id) {
+                self.ids[moved] = id as u32;
+            }
+        }
+        Ok(())
+    }
+
+    /// Live primitives.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.ids.len()
+    }
+
+    /// True if the tree holds no live primitive.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.ids.is_empty()
+    }
+
+    /// True if `key` names a live primitive of this tree.
+    #[must_use]
+    pub fn contains(&self, key: ProxyKey) -> bool {
+        self.ids.contains_key(key)
+    }
+
+    /// The current box of `key` (as last given), or `None` for a stale or unknown key.
+    #[must_use]
+    pub fn aabb(&self, key: ProxyKey) -> Option<Aabb> {
+        self.ids.get(key).map(|&id| self.boxes[id as usize])
+    }
+
+    /// Primitives inserted since the last build.
+    fn pending(&self) -> usize {
+        self.boxes.len() - self.tree_len
+    }
+
+    /// Shape and history of the tree. O(nodes).
+    #[must_use]
+    pub fn stats(&self) -> BvhStats {
+        let mut depth = vec![0usize; self.nodes.len()];
+        let (mut leaves, mut max_depth) = (0, 0);
+        for (n, node) in self.nodes.iter().enumerate() {
+            let p = self.parent[n];
+            depth[n] = if p == NONE { 1 } else { depth[p as usize] + 1 };
+            max_depth = max_depth.max(depth[n]);
+            leaves += usize::from(node.is_leaf());
+        }
+        let cost = self.sah_cost();
+        BvhStats {
+            nodes: self.nodes.len(),
+            leaves,
+            depth: max_depth,
+            primitives: self.len(),
+            pending: self.pending(),
+            tombstones: self.tombstones,
+            cost,
+            cost_at_build: self.cost_at_build,
+            cost_ratio: if self.cost_at_build > 0.0 {
+                cost / self.cost_at_build
+            } else {
+                1.0
+            },
+            rebuilds: self.rebuilds,
+            refits: self.refits,
+        }
+    }
+}

@@ -1,5 +1,323 @@
 //! The top-down preallocated octree for moving spheres (Ericson, *Real-Time Collision
 //! Detection* 7.3).
+//!
+//! Every sphere lives in the deepest node whose split planes its AABB does not straddle
+//! ([`place`]); the placement is computed in O(1) from integer cell coordinates, and a move that
+//! keeps the node only stores the new sphere. Pairs come from one depth-first walk with a
+//! filtered ancestor stack ([`pairs`]); queries and rays walk only occupied subtrees
+//! ([`query`]); [`Octree::validate`] checks every invariant ([`validate`]).
+//!
+//! Memory: the tree is "preallocated" in the sense of implicit indexing (level `L` starts at
+//! node `(8^L − 1)/7`, a node's index within its level is its Morton code), but the per-node
+//! arrays are paged: a page of 4096 nodes is allocated the first time a sphere is linked into
+//! one of its nodes or below it. A depth-10 tree (1.2 G implicit nodes) therefore costs a
+//! 1.2 MB page table plus the pages its spheres touch, and a scene of 100k spheres at depth 5
+//! costs ten pages.
+
+mod pairs;
+mod place;
+mod query;
+mod validate;
+
+pub use place::depth_for;
+
+use crate::{Aabb, Error, Pair, ProxyKey, Vec3, geom};
+use slotmap::{SecondaryMap, SlotMap};
 
 /// The deepest octree accepted by `Octree::new`: levels `0..=MAX_DEPTH`.
 pub const MAX_DEPTH: u32 = 10;
+
+/// "No object" / "no node" in the flat arrays.
+const NONE: u32 = u32::MAX;
+
+/// Hot per-sphere data, indexed by dense id; the pair walk reads `aabb`, `qmin`/`qmax` and
+/// `next`, so they share one cache line.
+#[derive(Clone, Copy, Debug)]
+struct Obj {
+    /// `center ± radius`, the box every pair test uses. 24 bytes.
+    aabb: Aabb,
+    /// The box's corners as integer cell coordinates at the deepest level, clamped to the
+    /// grid. 12 bytes.
+    qmin: [u16; 3],
+    qmax: [u16; 3],
+    /// The node the sphere is linked in. 4 bytes.
+    node: u32,
+    /// Neighbours in the node's list, `NONE` at the ends. 8 bytes.
+    next: u32,
+    prev: u32,
+}
+const _: () = assert!(core::mem::size_of::<Obj>() == 48);
+
+/// Per-depth occupancy and the cost of the last pair pass, from [`Octree::stats`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct OctreeStats {
+    /// Spheres placed at each level (`per_level[0]` is the root and includes the overflow
+    /// spheres); levels deeper than the tree's depth are 0.
+    pub per_level: [u32; MAX_DEPTH as usize + 1],
+    /// Spheres whose AABB leaves the bounds (kept in the root).
+    pub overflow: u32,
+    /// AABB overlap tests done by the last pair pass (0 before the first).
+    pub aabb_tests: u64,
+    /// Nodes visited by the last pair pass (0 before the first).
+    pub nodes_visited: u32,
+}
+
+/// A top-down octree over spheres with implicit node indexing; see the [module docs](self).
+///
+/// Spheres outside [`Octree::bounds`] are kept in the root and paired correctly. Every `Err`
+/// leaves the tree exactly as it was.
+#[derive(Clone, Debug)]
+pub struct Octree {
+    bounds: Aabb,
+    depth: u32,
+    /// Deepest-level cells per unit length on each axis: `2^depth / extent`.
+    scale: Vec3,
+    /// Hot data by dense id.
+    objs: Vec<Obj>,
+    /// Centre and radius by dense id, exactly as given.
+    spheres: Vec<(Vec3, f32)>,
+    /// Dense id → key.
+    keys: Vec<ProxyKey>,
+    /// Key → dense id.
+    ids: SecondaryMap<ProxyKey, u32>,
+    /// Mints keys for [`Octree::insert`].
+    minted: SlotMap<ProxyKey, ()>,
+    nodes: place::Nodes,
+    per_level: [u32; MAX_DEPTH as usize + 1],
+    overflow: u32,
+    scratch: pairs::Scratch,
+}
+
+impl Octree {
+    /// An empty octree over `bounds` with levels `0..=depth`. `Err(DepthOutOfRange)` if
+    /// `depth > MAX_DEPTH`, `Err(InvalidBounds)` if the bounds are not finite or have no
+    /// volume. Cheap at any depth: node storage is paged in as spheres arrive.
+    pub fn new(bounds: Aabb, depth: u32) -> Result<Octree, Error> {
+        if depth > MAX_DEPTH {
+            return Err(Error::DepthOutOfRange(depth));
+        }
+        geom::check_bounds(&bounds)?;
+        Ok(Octree {
+            bounds,
+            depth,
+            scale: Vec3::splat((1u32 << depth) as f32) / bounds.extent(),
+            objs: Vec::new(),
+            spheres: Vec::new(),
+            keys: Vec::new(),
+            ids: SecondaryMap::new(),
+            minted: SlotMap::with_key(),
+            nodes: place::Nodes::new(place::node_count(depth)),
+            per_level: [0; MAX_DEPTH as usize + 1],
+            overflow: 0,
+            scratch: pairs::Scratch::default(),
+        })
+    }
+
+    /// Inserts a sphere and returns its new key. `Err` on a non-finite centre or radius or a
+    /// negative radius (tree unchanged); a sphere outside the bounds is accepted.
+    pub fn insert(&mut self, center: Vec3, radius: f32) -> Result<ProxyKey, Error> {
+        geom::check_sphere(center, radius)?;
+        if self.objs.len() >= (u32::MAX - 1) as usize {
+            return Err(Error::Full);
+        }
+        let key = self.minted.insert(());
+        self.push(key, center, radius);
+        Ok(key)
+    }
+
+    /// Inserts a sphere under a key minted by the caller (the `BroadPhase` owns the key
+    /// space). Same checks as [`Octree::insert`]; a key that is already live is updated
+    /// instead. A tree fed through this function must not also mint keys with `insert`.
+    #[allow(
+        dead_code,
+        reason = "called by BroadPhase, which lands from a parallel branch"
+    )]
+    pub(crate) fn insert_keyed(
+        &mut self,
+        key: ProxyKey,
+        center: Vec3,
+        radius: f32,
+    ) -> Result<(), Error> {
+        geom::check_sphere(center, radius)?;
+        if self.ids.contains_key(key) {
+            return self.update(key, center, radius);
+        }
+        if self.objs.len() >= (u32::MAX - 1) as usize {
+            return Err(Error::Full);
+        }
+        self.push(key, center, radius);
+        Ok(())
+    }
+
+    /// Moves and/or resizes a sphere. `Err(UnknownProxy)` for a stale or foreign key, `Err`
+    /// on bad geometry; either way the tree is unchanged. A move that stays in the same node
+    /// only stores the new sphere.
+    pub fn update(&mut self, key: ProxyKey, center: Vec3, radius: f32) -> Result<(), Error> {
+        geom::check_sphere(center, radius)?;
+        let id = *self.ids.get(key).ok_or(Error::UnknownProxy)?;
+        let (aabb, qmin, qmax, node, outside) = self.placement(center, radius);
+        let i = id as usize;
+        self.spheres[i] = (center, radius);
+        let old = self.objs[i];
+        let was_outside = !self.bounds.contains(&old.aabb);
+        self.overflow = self.overflow - u32::from(was_outside) + u32::from(outside);
+        let o = &mut self.objs[i];
+        o.aabb = aabb;
+        o.qmin = qmin;
+        o.qmax = qmax;
+        if old.node != node {
+            self.per_level[self.nodes.level_of(old.node) as usize] -= 1;
+            self.per_level[self.nodes.level_of(node) as usize] += 1;
+            self.unlink(id);
+            self.link(id, node);
+        }
+        Ok(())
+    }
+
+    /// Removes a sphere; its key is never valid again. `Err(UnknownProxy)` for a stale or
+    /// foreign key (tree unchanged).
+    pub fn remove(&mut self, key: ProxyKey) -> Result<(), Error> {
+        let id = *self.ids.get(key).ok_or(Error::UnknownProxy)?;
+        self.unlink(id);
+        let i = id as usize;
+        let old = self.objs[i];
+        self.per_level[self.nodes.level_of(old.node) as usize] -= 1;
+        self.overflow -= u32::from(!self.bounds.contains(&old.aabb));
+        self.ids.remove(key);
+        self.minted.remove(key);
+        let last = self.objs.len() - 1;
+        if i != last {
+            self.relocate(last as u32, id);
+        }
+        self.objs.pop();
+        self.spheres.pop();
+        self.keys.pop();
+        Ok(())
+    }
+
+    /// Number of spheres.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.objs.len()
+    }
+
+    /// True if the tree holds no sphere.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.objs.is_empty()
+    }
+
+    /// True if `key` names a live sphere of this tree.
+    #[must_use]
+    pub fn contains(&self, key: ProxyKey) -> bool {
+        self.ids.contains_key(key)
+    }
+
+    /// The sphere's AABB `center ± radius`, or `None` for a stale or foreign key.
+    #[must_use]
+    pub fn aabb(&self, key: ProxyKey) -> Option<Aabb> {
+        self.ids.get(key).map(|&id| self.objs[id as usize].aabb)
+    }
+
+    /// The sphere's centre and radius exactly as last given, or `None` for a stale key.
+    #[must_use]
+    pub fn sphere(&self, key: ProxyKey) -> Option<(Vec3, f32)> {
+        self.ids.get(key).map(|&id| self.spheres[id as usize])
+    }
+
+    /// The level (0 = root) of the node holding the sphere, or `None` for a stale key.
+    /// Spheres outside the bounds are at level 0.
+    #[must_use]
+    pub fn level_of(&self, key: ProxyKey) -> Option<u32> {
+        self.ids
+            .get(key)
+            .map(|&id| self.nodes.level_of(self.objs[id as usize].node))
+    }
+
+    /// The world bounds given to [`Octree::new`].
+    #[must_use]
+    pub fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    /// The deepest level: the tree has levels `0..=depth`.
+    #[must_use]
+    pub fn depth(&self) -> u32 {
+        self.depth
+    }
+
+    /// Calls `f(a, b)` once for every pair of spheres whose AABBs overlap (closed: touching
+    /// boxes overlap), in no particular order and with no particular key order inside a pair.
+    pub fn for_each_pair(&mut self, mut f: impl FnMut(ProxyKey, ProxyKey)) {
+        let mut scratch = core::mem::take(&mut self.scratch);
+        let keys = &self.keys;
+        self.walk_pairs(&mut scratch, &mut |a, b| {
+            f(keys[a as usize], keys[b as usize]);
+        });
+        self.scratch = scratch;
+    }
+
+    /// Appends every overlapping pair, canonical (`a < b`) but **unsorted**, to `out`
+    /// (which is not cleared); sort with [`crate::pair::sort_dedup`] if order matters.
+    pub fn pairs_into(&mut self, out: &mut Vec<Pair>) {
+        let mut scratch = core::mem::take(&mut self.scratch);
+        let keys = &self.keys;
+        self.walk_pairs(&mut scratch, &mut |a, b| {
+            out.push(Pair::new(keys[a as usize], keys[b as usize]));
+        });
+        self.scratch = scratch;
+    }
+
+    /// Occupancy per level, the overflow count, and the cost of the last pair pass.
+    #[must_use]
+    pub fn stats(&self) -> OctreeStats {
+        OctreeStats {
+            per_level: self.per_level,
+            overflow: self.overflow,
+            aabb_tests: self.scratch.tests,
+            nodes_visited: self.scratch.nodes_visited,
+        }
+    }
+
+    /// Appends a sphere that passed the checks under `key`.
+    fn push(&mut self, key: ProxyKey, center: Vec3, radius: f32) {
+        let (aabb, qmin, qmax, node, outside) = self.placement(center, radius);
+        let id = self.objs.len() as u32;
+        self.objs.push(Obj {
+            aabb,
+            qmin,
+            qmax,
+            node: NONE,
+            next: NONE,
+            prev: NONE,
+        });
+        self.spheres.push((center, radius));
+        self.keys.push(key);
+        self.ids.insert(key, id);
+        self.per_level[self.nodes.level_of(node) as usize] += 1;
+        self.overflow += u32::from(outside);
+        self.link(id, node);
+    }
+
+    /// Moves the unlinked-or-linked object `from` into dense slot `to` (whose own object was
+    /// already unlinked), fixing its list neighbours, its node's head and the key map.
+    fn relocate(&mut self, from: u32, to: u32) {
+        let o = self.objs[from as usize];
+        if o.prev == NONE {
+            self.nodes.set_head(o.node, to);
+        } else {
+            self.objs[o.prev as usize].next = to;
+        }
+        if o.next != NONE {
+            self.objs[o.next as usize].prev = to;
+        }
+        self.objs[to as usize] = o;
+        self.spheres[to as usize] = self.spheres[from as usize];
+        let key = self.keys[from as usize];
+        self.keys[to as usize] = key;
+        self.ids.insert(key, to);
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,295 @@
+//! Placement: which node a sphere lives in, computed in O(1), and the paged node arrays with
+//! their per-node list heads and child-occupancy masks.
+
+use super::{MAX_DEPTH, NONE, Obj, Octree};
+use crate::{Aabb, Vec3};
+
+/// First node index of each level: level `L` starts at `(8^L − 1)/7`; entry `MAX_DEPTH + 1` is
+/// the node count of a depth-`MAX_DEPTH` tree (1 227 133 513, fits in `u32`).
+const LEVEL_START: [u32; MAX_DEPTH as usize + 2] = {
+    let mut s = [0u32; MAX_DEPTH as usize + 2];
+    let mut l = 1;
+    while l < s.len() {
+        s[l] = s[l - 1] * 8 + 1;
+        l += 1;
+    }
+    s
+};
+
+/// Number of nodes of a tree with levels `0..=depth`.
+pub(super) fn node_count(depth: u32) -> u32 {
+    LEVEL_START[depth as usize + 1]
+}
+
+/// Index of the node with Morton code `code` at `level`.
+#[inline]
+pub(super) fn node_index(level: u32, code: u32) -> u32 {
+    LEVEL_START[level as usize] + code
+}
+
+/// Spreads the low 10 bits of `v` to every third bit (bit i → bit 3i).
+#[inline]
+fn spread3(v: u32) -> u32 {
+    let mut x = v & 0x3ff;
+    x = (x | (x << 16)) & 0x0300_00ff;
+    x = (x | (x << 8)) & 0x0300_f00f;
+    x = (x | (x << 4)) & 0x030c_30c3;
+    (x | (x << 2)) & 0x0924_9249
+}
+
+/// The Morton code of cell `(x, y, z)`: x in bit 0 of each triple, y in bit 1, z in bit 2, so
+/// child octant `c` of a node with code `m` has code `8m + c` with `c = bx | by<<1 | bz<<2`.
+#[inline]
+pub(super) fn morton(c: [u32; 3]) -> u32 {
+    spread3(c[0]) | (spread3(c[1]) << 1) | (spread3(c[2]) << 2)
+}
+
+/// A sensible depth for a scene: the deepest level whose cells are still at least two sphere
+/// diameters along the bounds' longest axis, clamped to `0..=MAX_DEPTH`. A zero radius gives
+/// `MAX_DEPTH`; a negative or non-finite radius, or invalid bounds, give 0.
+#[must_use]
+pub fn depth_for(bounds: &Aabb, typical_radius: f32) -> u32 {
+    let edge = bounds.extent().max_element();
+    if !(typical_radius >= 0.0 && typical_radius.is_finite() && edge > 0.0 && edge.is_finite()) {
+        return 0;
+    }
+    let cells = edge / (4.0 * typical_radius);
+    if cells < 1.0 {
+        0
+    } else if cells.is_finite() {
+        (cells.log2().floor() as u32).min(MAX_DEPTH)
+    } else {
+        MAX_DEPTH
+    }
+}
+
+/// Nodes per page of the paged node arrays.
+const PAGE_BITS: u32 = 12;
+const PAGE: usize = 1 << PAGE_BITS;
+
+/// Per-node list heads and child-occupancy masks, paged: `table[node >> PAGE_BITS]` is the
+/// page's position in `head`/`mask` plus one, or 0 while no node of the page was ever
+/// occupied (reads then see an empty node). Pages are never freed.
+#[derive(Clone, Debug)]
+pub(super) struct Nodes {
+    table: Vec<u32>,
+    /// First object of each node's list, `NONE` if empty. 4 bytes per node.
+    head: Vec<u32>,
+    /// Bit `c` set iff child octant `c`'s subtree holds a sphere. 1 byte per node.
+    mask: Vec<u8>,
+}
+
+impl Nodes {
+    pub(super) fn new(count: u32) -> Self {
+        Nodes {
+            table: vec![0; (count as usize).div_ceil(PAGE)],
+            head: Vec::new(),
+            mask: Vec::new(),
+        }
+    }
+
+    /// Position of `node` in `head`/`mask`, if its page exists.
+    #[inline]
+    fn slot(&self, node: u32) -> Option<usize> {
+        let p = self.table[(node >> PAGE_BITS) as usize];
+        (p != 0).then(|| (((p - 1) as usize) << PAGE_BITS) | (node as usize & (PAGE - 1)))
+    }
+
+    /// Position of `node`, allocating its page first if needed.
+    fn slot_mut(&mut self, node: u32) -> usize {
+        let t = (node >> PAGE_BITS) as usize;
+        if self.table[t] == 0 {
+            let pages = self.head.len() / PAGE;
+            self.head.resize(self.head.len() + PAGE, NONE);
+            self.mask.resize(self.mask.len() + PAGE, 0);
+            self.table[t] = pages as u32 + 1;
+        }
+        (((self.table[t] - 1) as usize) << PAGE_BITS) | (node as usize & (PAGE - 1))
+    }
+
+    /// Nodes allocated in pages so far.
+    #[cfg(test)]
+    pub(super) fn head_len(&self) -> usize {
+        self.head.len()
+    }
+
+    #[inline]
+    pub(super) fn head(&self, node: u32) -> u32 {
+        self.slot(node).map_or(NONE, |s| self.head[s])
+    }
+
+    #[inline]
+    pub(super) fn mask(&self, node: u32) -> u8 {
+        self.slot(node).map_or(0, |s| self.mask[s])
+    }
+
+    pub(super) fn set_head(&mut self, node: u32, id: u32) {
+        let s = self.slot_mut(node);
+        self.head[s] = id;
+    }
+
+    /// True if neither the node nor any descendant holds a sphere.
+    pub(super) fn is_empty(&self, node: u32) -> bool {
+        self.slot(node)
+            .is_none_or(|s| self.head[s] == NONE && self.mask[s] == 0)
+    }
+
+    /// The level of `node`.
+    pub(super) fn level_of(&self, node: u32) -> u32 {
+        LEVEL_START[1..].iter().take_while(|&&s| s <= node).count() as u32
+    }
+
+    /// Marks the path from `node` to the root as occupied; call after `node` became non-empty.
+    /// Stops at the first ancestor that was already non-empty (its own ancestors are marked).
+    fn mark_occupied(&mut self, node: u32) {
+        let mut level = self.level_of(node);
+        let mut code = node - LEVEL_START[level as usize];
+        while level > 0 {
+            let parent = node_index(level - 1, code >> 3);
+            let was_empty = self.is_empty(parent);
+            let s = self.slot_mut(parent);
+            self.mask[s] |= 1 << (code & 7);
+            if !was_empty {
+                return;
+            }
+            level -= 1;
+            code >>= 3;
+        }
+    }
+
+    /// Clears occupancy bits up from `node`; call after `node` became empty.
+    fn mark_empty(&mut self, node: u32) {
+        let mut level = self.level_of(node);
+        let mut code = node - LEVEL_START[level as usize];
+        while level > 0 {
+            let parent = node_index(level - 1, code >> 3);
+            let s = self.slot_mut(parent);
+            self.mask[s] &= !(1 << (code & 7));
+            if !self.is_empty(parent) {
+                return;
+            }
+            level -= 1;
+            code >>= 3;
+        }
+    }
+}
+
+impl Octree {
+    /// Where a sphere goes: its AABB, the AABB's corners as clamped cell coordinates, its
+    /// node, and whether the AABB leaves the bounds.
+    ///
+    /// Derivation. Map a coordinate to its deepest-level cell `q = floor((x − min)·2^d/extent)`,
+    /// clamped to `0..2^d`. This map is monotone (float subtraction and multiplication by a
+    /// positive constant round monotonically), so boxes that overlap have overlapping integer
+    /// ranges — the property the pair walk relies on. A level-`L` cell is the integer range
+    /// `[k·2^s, (k+1)·2^s − 1]` with `s = d − L`, so the box `[qmin, qmax]` straddles no
+    /// level-`L` plane iff `qmin >> s == qmax >> s` on every axis, i.e. iff all bits of
+    /// `x = (xmin^xmax) | (ymin^ymax) | (zmin^zmax)` are below bit `s`. The deepest such level
+    /// takes the smallest `s`, which is `bit_length(x)`: `L = d − bit_length(x)`, and the node
+    /// within that level is the Morton code of `qmin >> s`. A box leaving the bounds goes to
+    /// the root; its clamped range still covers every cell it overlaps.
+    #[inline]
+    pub(super) fn placement(
+        &self,
+        center: Vec3,
+        radius: f32,
+    ) -> (Aabb, [u16; 3], [u16; 3], u32, bool) {
+        let aabb = Aabb::from_center_radius(center, radius);
+        let qmin = self.quantize(aabb.min);
+        let qmax = self.quantize(aabb.max);
+        let outside = !self.bounds.contains(&aabb);
+        let node = if outside {
+            0
+        } else {
+            let x = (0..3).fold(0u32, |x, a| x | u32::from(qmin[a] ^ qmax[a]));
+            let s = 32 - x.leading_zeros();
+            let level = self.depth - s;
+            let c = qmin.map(|q| u32::from(q) >> s);
+            node_index(level, morton(c))
+        };
+        (aabb, qmin, qmax, node, outside)
+    }
+
+    /// The deepest-level cell of a point, clamped to the grid.
+    #[inline]
+    pub(super) fn quantize(&self, p: Vec3) -> [u16; 3] {
+        let top = ((1u32 << self.depth) - 1) as f32;
+        let q = ((p - self.bounds.min) * self.scale)
+            .floor()
+            .max(Vec3::ZERO)
+            .min(Vec3::splat(top));
+        [q.x as u16, q.y as u16, q.z as u16]
+    }
+
+    /// Pushes object `id` at the front of `node`'s list.
+    pub(super) fn link(&mut self, id: u32, node: u32) {
+        let became_occupied = self.nodes.is_empty(node);
+        let head = self.nodes.head(node);
+        let o = &mut self.objs[id as usize];
+        o.node = node;
+        o.prev = NONE;
+        o.next = head;
+        if head != NONE {
+            self.objs[head as usize].prev = id;
+        }
+        self.nodes.set_head(node, id);
+        if became_occupied {
+            self.nodes.mark_occupied(node);
+        }
+    }
+
+    /// Takes object `id` out of its node's list (its `node` field is left as it was).
+    pub(super) fn unlink(&mut self, id: u32) {
+        let Obj {
+            node, next, prev, ..
+        } = self.objs[id as usize];
+        if prev == NONE {
+            self.nodes.set_head(node, next);
+        } else {
+            self.objs[prev as usize].next = next;
+        }
+        if next != NONE {
+            self.objs[next as usize].prev = prev;
+        }
+        if self.nodes.is_empty(node) {
+            self.nodes.mark_empty(node);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn level_starts_and_levels() {
+        assert_eq!(&LEVEL_START[..4], &[0, 1, 9, 73]);
+        assert_eq!(node_count(10), 1_227_133_513);
+        let n = Nodes::new(node_count(3));
+        assert_eq!(n.level_of(0), 0);
+        assert_eq!(n.level_of(1), 1);
+        assert_eq!(n.level_of(8), 1);
+        assert_eq!(n.level_of(9), 2);
+        assert_eq!(n.level_of(72), 2);
+        assert_eq!(n.level_of(73), 3);
+    }
+
+    #[test]
+    fn morton_interleaves_x_first() {
+        assert_eq!(morton([1, 0, 0]), 1);
+        assert_eq!(morton([0, 1, 0]), 2);
+        assert_eq!(morton([0, 0, 1]), 4);
+        assert_eq!(morton([2, 0, 0]), 8);
+        assert_eq!(morton([1023, 1023, 1023]), (1 << 30) - 1);
+    }
+
+    #[test]
+    fn depth_for_gives_cells_of_two_diameters() {
+        let b = Aabb::new(Vec3::ZERO, Vec3::splat(64.0));
+        assert_eq!(depth_for(&b, 0.5), 5);
+        assert_eq!(depth_for(&b, 100.0), 0);
+        assert_eq!(depth_for(&b, 0.0), MAX_DEPTH);
+        assert_eq!(depth_for(&b, -1.0), 0);
+        assert_eq!(depth_for(&b, f32::NAN), 0);
+    }
+}

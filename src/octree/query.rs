@@ -1,0 +1,212 @@
+//! Box, sphere and ray queries, and the occupied-cell iterator. None of them allocates: they
+//! walk occupied subtrees with a fixed inline stack (depth-first, at most 7 pending siblings
+//! per level plus the current node).
+
+use super::place::node_index;
+use super::{MAX_DEPTH, NONE, Octree};
+use crate::{Aabb, ProxyKey, Vec3, geom};
+
+/// Capacity of the inline traversal stack: one node, then at most 7 pending siblings per level.
+const STACK: usize = 1 + 7 * MAX_DEPTH as usize + 8;
+
+/// A node on the traversal stack.
+#[derive(Clone, Copy, Debug, Default)]
+struct Cell {
+    code: u32,
+    level: u32,
+    xyz: [u32; 3],
+}
+
+impl Cell {
+    fn child(&self, c: u32) -> Cell {
+        Cell {
+            code: self.code * 8 + c,
+            level: self.level + 1,
+            xyz: [0, 1, 2].map(|a| self.xyz[a] * 2 + ((c >> a) & 1)),
+        }
+    }
+}
+
+impl Octree {
+    /// Depth-first over occupied nodes: `enter(cell)` decides whether to visit a node's
+    /// spheres (`visit(id)`) and children; the root is always entered.
+    fn traverse(&self, mut enter: impl FnMut(&Cell) -> bool, mut visit: impl FnMut(u32)) {
+        if self.objs.is_empty() {
+            return;
+        }
+        let mut stack = [Cell::default(); STACK];
+        let mut len = 1;
+        while len > 0 {
+            len -= 1;
+            let cell = stack[len];
+            let node = node_index(cell.level, cell.code);
+            let mut i = self.nodes.head(node);
+            while i != NONE {
+                visit(i);
+                i = self.objs[i as usize].next;
+            }
+            let mask = self.nodes.mask(node);
+            for c in (0..8).rev().filter(|c| mask & (1 << c) != 0) {
+                let child = cell.child(c);
+                if enter(&child) {
+                    stack[len] = child;
+                    len += 1;
+                }
+            }
+        }
+    }
+
+    /// The cell of a node as an integer range at the deepest level.
+    fn cell_range(&self, cell: &Cell) -> ([u32; 3], [u32; 3]) {
+        let shift = self.depth - cell.level;
+        let lo = cell.xyz.map(|c| c << shift);
+        (lo, lo.map(|l| l + (1 << shift) - 1))
+    }
+
+    /// The cell of a node as a box (rounded: a sphere placed in it may poke out by an ulp).
+    fn cell_box(&self, cell: &Cell) -> Aabb {
+        let size = self.bounds.extent() / (1u32 << cell.level) as f32;
+        let min = self.bounds.min
+            + Vec3::new(cell.xyz[0] as f32, cell.xyz[1] as f32, cell.xyz[2] as f32) * size;
+        Aabb::new(min, min + size)
+    }
+
+    /// Visits the ids of every sphere whose integer range overlaps `aabb`'s (a superset of
+    /// the spheres overlapping `aabb`).
+    fn candidates(&self, aabb: &Aabb, visit: impl FnMut(u32)) {
+        let (qlo, qhi) = (self.quantize(aabb.min), self.quantize(aabb.max));
+        self.traverse(
+            |cell| {
+                let (lo, hi) = self.cell_range(cell);
+                (0..3).all(|a| u32::from(qlo[a]) <= hi[a] && u32::from(qhi[a]) >= lo[a])
+            },
+            visit,
+        );
+    }
+
+    /// Calls `f` with the key of every sphere whose AABB overlaps `aabb` (closed), once each,
+    /// in no particular order. A non-finite or inverted `aabb` finds nothing.
+    pub fn query_aabb(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
+        if geom::check_aabb(aabb).is_err() {
+            return;
+        }
+        self.candidates(aabb, |id| {
+            if self.objs[id as usize].aabb.overlaps(aabb) {
+                f(self.keys[id as usize]);
+            }
+        });
+    }
+
+    /// Calls `f` with the key of every sphere that overlaps the query sphere (centre distance
+    /// `<= r1 + r2`, so touching spheres count), once each, in no particular order. A
+    /// non-finite centre or radius, or a negative radius, finds nothing.
+    pub fn query_sphere(&self, center: Vec3, radius: f32, mut f: impl FnMut(ProxyKey)) {
+        if geom::check_sphere(center, radius).is_err() {
+            return;
+        }
+        self.candidates(&Aabb::from_center_radius(center, radius), |id| {
+            let (c, r) = self.spheres[id as usize];
+            if (c - center).length_squared() <= (r + radius) * (r + radius) {
+                f(self.keys[id as usize]);
+            }
+        });
+    }
+
+    /// The closest sphere hit by the segment `origin + t·dir`, `t ∈ [0, max_t]` (`t` in units
+    /// of `dir`; an origin inside a sphere hits at 0), per [`geom::ray_sphere`]; ties go to
+    /// the smaller key. A non-finite origin or direction, or a NaN or negative `max_t`, hits
+    /// nothing.
+    #[must_use]
+    pub fn cast_ray(&self, origin: Vec3, dir: Vec3, max_t: f32) -> Option<(ProxyKey, f32)> {
+        if !geom::ray_is_valid(origin, dir, max_t) {
+            return None;
+        }
+        let inv = geom::inverse_dir(dir);
+        let slack = self.cell_slack();
+        let best = core::cell::Cell::new(None::<(ProxyKey, f32)>);
+        let limit = || best.get().map_or(max_t, |(_, t)| t);
+        self.traverse(
+            |cell| {
+                self.cell_box(cell)
+                    .grown(slack)
+                    .ray_entry(origin, inv, limit())
+                    .is_some()
+            },
+            |id| {
+                let (c, r) = self.spheres[id as usize];
+                if let Some(t) = geom::ray_sphere(origin, dir, c, r, limit()) {
+                    let key = self.keys[id as usize];
+                    let better = best
+                        .get()
+                        .is_none_or(|(bk, bt)| t < bt || (t == bt && key < bk));
+                    if better {
+                        best.set(Some((key, t)));
+                    }
+                }
+            },
+        );
+        best.get()
+    }
+
+    /// Calls `f(key, t)` for every sphere hit by the segment (same rules as
+    /// [`Octree::cast_ray`]), once each, in no particular order.
+    pub fn cast_ray_all(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        max_t: f32,
+        mut f: impl FnMut(ProxyKey, f32),
+    ) {
+        if !geom::ray_is_valid(origin, dir, max_t) {
+            return;
+        }
+        let inv = geom::inverse_dir(dir);
+        let slack = self.cell_slack();
+        self.traverse(
+            |cell| {
+                self.cell_box(cell)
+                    .grown(slack)
+                    .ray_entry(origin, inv, max_t)
+                    .is_some()
+            },
+            |id| {
+                let (c, r) = self.spheres[id as usize];
+                if let Some(t) = geom::ray_sphere(origin, dir, c, r, max_t) {
+                    f(self.keys[id as usize], t);
+                }
+            },
+        );
+    }
+
+    /// Calls `f(level, cell)` for every node that holds at least one sphere, parents before
+    /// their children. Overflow spheres live in the root, whose cell is the bounds.
+    pub fn for_each_occupied_cell(&self, mut f: impl FnMut(u32, Aabb)) {
+        let mut stack = [Cell::default(); STACK];
+        let mut len = usize::from(!self.objs.is_empty());
+        while len > 0 {
+            len -= 1;
+            let cell = stack[len];
+            let node = node_index(cell.level, cell.code);
+            if self.nodes.head(node) != NONE {
+                f(cell.level, self.cell_box(&cell));
+            }
+            let mask = self.nodes.mask(node);
+            for c in (0..8).rev().filter(|c| mask & (1 << c) != 0) {
+                stack[len] = cell.child(c);
+                len += 1;
+            }
+        }
+    }
+
+    /// How far a sphere placed in a cell may poke out of the cell's float box: the cell map
+    /// and the box corners each round by a few ulps of the coordinates involved.
+    fn cell_slack(&self) -> f32 {
+        let mag = self
+            .bounds
+            .min
+            .abs()
+            .max(self.bounds.max.abs())
+            .max_element();
+        mag * 1e-5 + self.bounds.extent().max_element() * 1e-6
+    }
+}

@@ -1,0 +1,199 @@
+//! Unit tests of placement, bookkeeping and the pair walk's cost; the randomized oracle tests
+//! live in `tests/octree.rs`.
+
+use super::*;
+use crate::brute::{self, Proxy};
+use crate::scene::Gas;
+
+fn unit() -> Aabb {
+    Aabb::new(Vec3::splat(-1.0), Vec3::ONE)
+}
+
+fn sorted_pairs(t: &mut Octree) -> Vec<Pair> {
+    let mut out = Vec::new();
+    t.pairs_into(&mut out);
+    crate::pair::sort_dedup(&mut out);
+    out
+}
+
+fn proxies(t: &Octree) -> Vec<Proxy> {
+    t.keys
+        .iter()
+        .map(|&k| Proxy::new(k, t.aabb(k).unwrap()))
+        .collect()
+}
+
+#[test]
+fn rtcd_example_straddler_stays_at_root() {
+    let mut t = Octree::new(unit(), 1).unwrap();
+    let big = t.insert(Vec3::ZERO, 0.5).unwrap();
+    let small = t.insert(Vec3::splat(-0.5), 0.1).unwrap();
+    assert_eq!(t.level_of(big), Some(0));
+    assert_eq!(t.level_of(small), Some(1));
+    // Octant 0 is the node right after the root.
+    assert_eq!(t.objs[t.ids[small] as usize].node, 1);
+    assert_eq!(t.stats().per_level[..2], [1, 1]);
+    t.validate();
+}
+
+#[test]
+fn depth_out_of_range_and_bad_bounds_are_refused() {
+    assert_eq!(
+        Octree::new(unit(), MAX_DEPTH + 1).unwrap_err(),
+        Error::DepthOutOfRange(MAX_DEPTH + 1)
+    );
+    let flat = Aabb::new(Vec3::ZERO, Vec3::new(1.0, 0.0, 1.0));
+    assert!(matches!(
+        Octree::new(flat, 3),
+        Err(Error::InvalidBounds { .. })
+    ));
+    let nan = Aabb::new(Vec3::ZERO, Vec3::new(1.0, f32::NAN, 1.0));
+    assert!(matches!(
+        Octree::new(nan, 3),
+        Err(Error::InvalidBounds { .. })
+    ));
+}
+
+#[test]
+fn depth_ten_is_cheap_and_works() {
+    let mut t = Octree::new(unit(), MAX_DEPTH).unwrap();
+    let a = t.insert(Vec3::splat(0.3), 0.0001).unwrap();
+    let b = t.insert(Vec3::splat(0.3001), 0.0001).unwrap();
+    let c = t.insert(Vec3::splat(-0.7), 0.0001).unwrap();
+    assert_eq!(t.level_of(a), Some(MAX_DEPTH));
+    assert_eq!(sorted_pairs(&mut t), vec![Pair::new(a, b)]);
+    // Few pages touched: the node arrays stay tiny although the tree has 1.2 G nodes.
+    assert!(t.nodes.head_len() <= 3 * 11 * 4096);
+    t.remove(c).unwrap();
+    t.validate();
+}
+
+#[test]
+fn outside_spheres_go_to_the_root_and_still_pair() {
+    let mut t = Octree::new(unit(), 3).unwrap();
+    let out = t.insert(Vec3::new(5.0, 0.5, 0.5), 4.2).unwrap();
+    let far = t.insert(Vec3::splat(100.0), 1.0).unwrap();
+    let inside = t.insert(Vec3::new(0.85, 0.5, 0.5), 0.05).unwrap();
+    assert_eq!(t.level_of(out), Some(0));
+    assert_eq!(t.level_of(far), Some(0));
+    assert_eq!(t.stats().overflow, 2);
+    assert_eq!(sorted_pairs(&mut t), vec![Pair::new(out, inside)]);
+    t.update(out, Vec3::ZERO, 0.1).unwrap();
+    assert_eq!(t.stats().overflow, 1);
+    t.validate();
+}
+
+#[test]
+fn a_move_inside_the_node_only_stores_the_sphere() {
+    let mut t = Octree::new(unit(), 2).unwrap();
+    let k = t.insert(Vec3::splat(0.7), 0.05).unwrap();
+    let node = t.objs[0].node;
+    t.update(k, Vec3::splat(0.75), 0.06).unwrap();
+    assert_eq!(t.objs[0].node, node);
+    assert_eq!(t.sphere(k), Some((Vec3::splat(0.75), 0.06)));
+    t.update(k, Vec3::splat(-0.75), 0.06).unwrap();
+    assert_ne!(t.objs[0].node, node);
+    t.validate();
+}
+
+#[test]
+fn bad_input_leaves_the_tree_unchanged() {
+    let mut t = Octree::new(unit(), 3).unwrap();
+    let keys: Vec<_> = (0..20)
+        .map(|i| t.insert(Vec3::splat(i as f32 * 0.1 - 1.0), 0.08).unwrap())
+        .collect();
+    let before = sorted_pairs(&mut t);
+    let boxes: Vec<_> = keys.iter().map(|&k| t.aabb(k)).collect();
+    let nan = Vec3::new(f32::NAN, 0.0, 0.0);
+    let inf = Vec3::new(0.0, f32::INFINITY, 0.0);
+    assert!(matches!(t.insert(nan, 1.0), Err(Error::NonFinite { .. })));
+    assert!(matches!(t.insert(inf, 1.0), Err(Error::NonFinite { .. })));
+    assert!(matches!(
+        t.insert(Vec3::ZERO, f32::NAN),
+        Err(Error::NonFinite { .. })
+    ));
+    assert_eq!(t.insert(Vec3::ZERO, -1.0), Err(Error::NegativeRadius(-1.0)));
+    assert!(matches!(
+        t.update(keys[3], nan, 1.0),
+        Err(Error::NonFinite { .. })
+    ));
+    assert_eq!(
+        t.update(keys[3], Vec3::ZERO, -0.5),
+        Err(Error::NegativeRadius(-0.5))
+    );
+    let stale = keys[5];
+    t.remove(stale).unwrap();
+    assert_eq!(t.remove(stale), Err(Error::UnknownProxy));
+    assert_eq!(t.update(stale, Vec3::ZERO, 1.0), Err(Error::UnknownProxy));
+    t.insert_keyed(stale, Vec3::ZERO, 0.1).unwrap();
+    t.remove(stale).unwrap();
+    let after_remove: Vec<_> = before
+        .iter()
+        .copied()
+        .filter(|p| p.a != stale && p.b != stale)
+        .collect();
+    assert_eq!(sorted_pairs(&mut t), after_remove);
+    for (k, b) in keys.iter().zip(&boxes) {
+        if *k != stale {
+            assert_eq!(t.aabb(*k), *b);
+        }
+    }
+    assert_eq!(t.len(), 19);
+    t.validate();
+}
+
+#[test]
+fn remove_relinks_the_moved_object() {
+    let mut t = Octree::new(unit(), 2).unwrap();
+    let keys: Vec<_> = (0..50)
+        .map(|i| {
+            t.insert(Vec3::splat((i % 7) as f32 * 0.25 - 0.75), 0.1)
+                .unwrap()
+        })
+        .collect();
+    for &k in keys.iter().step_by(3) {
+        t.remove(k).unwrap();
+        t.validate();
+    }
+    assert_eq!(sorted_pairs(&mut t), brute::pairs(&proxies(&t)));
+}
+
+#[test]
+fn gas_pairs_match_the_sweep_reference() {
+    let mut g = Gas::new(3000, 11);
+    let mut t = Octree::new(g.bounds, depth_for(&g.bounds, g.radius)).unwrap();
+    let keys: Vec<_> = g
+        .centers
+        .iter()
+        .map(|&c| t.insert(c, g.radius).unwrap())
+        .collect();
+    for _ in 0..3 {
+        g.step(0.2);
+        for (&k, &c) in keys.iter().zip(&g.centers) {
+            t.update(k, c, g.radius).unwrap();
+        }
+        t.validate();
+        assert_eq!(sorted_pairs(&mut t), brute::sweep_pairs(&proxies(&t)));
+    }
+}
+
+/// The clustered scene must not make the walk quadratic: the AABB tests stay within a small
+/// multiple of spheres + pairs (the naive walk does hundreds per sphere here).
+#[test]
+fn clustered_pair_pass_is_not_quadratic() {
+    let g = Gas::clustered(20_000, 5);
+    let mut t = Octree::new(g.bounds, depth_for(&g.bounds, g.radius)).unwrap();
+    for &c in &g.centers {
+        t.insert(c, g.radius).unwrap();
+    }
+    let pairs = sorted_pairs(&mut t);
+    assert_eq!(pairs, brute::sweep_pairs(&proxies(&t)));
+    let tests = t.stats().aabb_tests;
+    let budget = 12 * (g.len() + pairs.len()) as u64;
+    assert!(
+        tests < budget,
+        "{tests} AABB tests for {} spheres and {} pairs",
+        g.len(),
+        pairs.len()
+    );
+}
