@@ -1,9 +1,11 @@
 //! `BroadPhase`: spheres and rigid bodies behind one set of keys, one sorted pair list per step,
 //! and the pairs that started and stopped overlapping since the last step.
 
+use crate::bvh::{Bvh, BvhConfig};
 use crate::geom::{self, check_aabb, check_sphere};
+use crate::octree::Octree;
 use crate::pair::{self, Pair, ProxyKey};
-use crate::{Aabb, Error, Vec3, brute};
+use crate::{Aabb, Error, Vec3};
 use slotmap::SlotMap;
 
 /// Whether a body moves. Static bodies never pair with each other.
@@ -43,16 +45,6 @@ impl Shape {
             Shape::Sphere { center, radius } => Aabb::from_center_radius(center, radius),
             Shape::Body { aabb, .. } => aabb,
         }
-    }
-
-    fn is_static(&self) -> bool {
-        matches!(
-            self,
-            Shape::Body {
-                kind: BodyKind::Static,
-                ..
-            }
-        )
     }
 }
 
@@ -125,12 +117,20 @@ pub struct StepPairs<'a> {
 #[derive(Clone, Debug)]
 pub struct BroadPhase {
     config: Config,
+    /// Every proxy as the user gave it (no margin); the key space of the whole broadphase.
     proxies: SlotMap<ProxyKey, Shape>,
+    /// Spheres, stored with `radius + margin`.
+    octree: Octree,
+    /// Dynamic bodies, stored grown by the margin; refitted every step.
+    dynamic: Bvh,
+    /// Static bodies, stored grown by the margin; refitted only in a step after a change.
+    statics: Bvh,
+    /// True when a static body was inserted, updated or removed since the last step.
+    statics_changed: bool,
     pairs: Vec<Pair>,
     prev: Vec<Pair>,
     added: Vec<Pair>,
     removed: Vec<Pair>,
-    scratch: Vec<brute::Proxy>,
 }
 
 impl BroadPhase {
@@ -169,16 +169,47 @@ impl BroadPhase {
         Ok(Self::build(config))
     }
 
+    /// Builds from a validated config: every structure's constructor succeeds on it.
     fn build(config: Config) -> Self {
+        let bvh_config = BvhConfig {
+            rebuild_threshold: config.rebuild_threshold,
+            ..BvhConfig::default()
+        };
+        let octree = Octree::new(config.bounds, config.octree_depth);
+        let (dynamic, statics) = (Bvh::new(bvh_config), Bvh::new(bvh_config));
+        let (Ok(octree), Ok(dynamic), Ok(statics)) = (octree, dynamic, statics) else {
+            unreachable!("Config::validate checks every field the structures check");
+        };
         Self {
             config,
             proxies: SlotMap::with_key(),
+            octree,
+            dynamic,
+            statics,
+            statics_changed: false,
             pairs: Vec::new(),
             prev: Vec::new(),
             added: Vec::new(),
             removed: Vec::new(),
-            scratch: Vec::new(),
         }
+    }
+
+    /// The octree holding the spheres (radii grown by the margin): for stats and debug views.
+    #[must_use]
+    pub fn octree(&self) -> &Octree {
+        &self.octree
+    }
+
+    /// The BVH holding the dynamic bodies (boxes grown by the margin).
+    #[must_use]
+    pub fn dynamic_bvh(&self) -> &Bvh {
+        &self.dynamic
+    }
+
+    /// The BVH holding the static bodies (boxes grown by the margin).
+    #[must_use]
+    pub fn static_bvh(&self) -> &Bvh {
+        &self.statics
     }
 
     /// The configuration in force (after [`BroadPhase::new`]'s corrections).
@@ -191,13 +222,32 @@ impl BroadPhase {
     /// centre or radius or a negative radius. A sphere outside `Config::bounds` is accepted.
     pub fn insert_sphere(&mut self, center: Vec3, radius: f32) -> Result<ProxyKey, Error> {
         check_sphere(center, radius)?;
-        Ok(self.proxies.insert(Shape::Sphere { center, radius }))
+        let key = self.proxies.insert(Shape::Sphere { center, radius });
+        let fat = radius + self.config.margin;
+        self.octree
+            .insert_keyed(key, center, fat)
+            .inspect_err(|_| {
+                self.proxies.remove(key);
+            })?;
+        Ok(key)
     }
 
     /// Adds a body by its world AABB. `Err` on a non-finite or inverted box.
     pub fn insert_body(&mut self, aabb: Aabb, kind: BodyKind) -> Result<ProxyKey, Error> {
         check_aabb(&aabb)?;
-        Ok(self.proxies.insert(Shape::Body { aabb, kind }))
+        let key = self.proxies.insert(Shape::Body { aabb, kind });
+        let fat = aabb.grown(self.config.margin);
+        let tree = match kind {
+            BodyKind::Dynamic => &mut self.dynamic,
+            BodyKind::Static => {
+                self.statics_changed = true;
+                &mut self.statics
+            }
+        };
+        tree.insert_keyed(key, fat).inspect_err(|_| {
+            self.proxies.remove(key);
+        })?;
+        Ok(key)
     }
 
     /// Moves or resizes a sphere. `Err(UnknownProxy)` for a stale key, `Err(WrongKind)` for a
@@ -206,6 +256,8 @@ impl BroadPhase {
         check_sphere(center, radius)?;
         match self.proxies.get_mut(key) {
             Some(shape @ Shape::Sphere { .. }) => {
+                let fat = radius + self.config.margin;
+                self.octree.update(key, center, fat)?;
                 *shape = Shape::Sphere { center, radius };
                 Ok(())
             }
@@ -219,7 +271,15 @@ impl BroadPhase {
     pub fn update_body(&mut self, key: ProxyKey, aabb: Aabb) -> Result<(), Error> {
         check_aabb(&aabb)?;
         match self.proxies.get_mut(key) {
-            Some(Shape::Body { aabb: a, .. }) => {
+            Some(Shape::Body { aabb: a, kind }) => {
+                let fat = aabb.grown(self.config.margin);
+                match kind {
+                    BodyKind::Dynamic => self.dynamic.update(key, fat)?,
+                    BodyKind::Static => {
+                        self.statics.update(key, fat)?;
+                        self.statics_changed = true;
+                    }
+                }
                 *a = aabb;
                 Ok(())
             }
@@ -231,10 +291,23 @@ impl BroadPhase {
     /// Removes a proxy; its pairs are reported in `removed` at the next step.
     /// `Err(UnknownProxy)` for a stale key.
     pub fn remove(&mut self, key: ProxyKey) -> Result<(), Error> {
-        self.proxies
-            .remove(key)
-            .map(|_| ())
-            .ok_or(Error::UnknownProxy)
+        let shape = self.proxies.get(key).ok_or(Error::UnknownProxy)?;
+        match *shape {
+            Shape::Sphere { .. } => self.octree.remove(key)?,
+            Shape::Body {
+                kind: BodyKind::Dynamic,
+                ..
+            } => self.dynamic.remove(key)?,
+            Shape::Body {
+                kind: BodyKind::Static,
+                ..
+            } => {
+                self.statics.remove(key)?;
+                self.statics_changed = true;
+            }
+        }
+        self.proxies.remove(key);
+        Ok(())
     }
 
     /// Number of live proxies.
@@ -262,17 +335,43 @@ impl BroadPhase {
     }
 
     /// Computes this step's pairs and their difference with the previous step's.
+    ///
+    /// The pair set is the union of four disjoint parts, each found once: sphere×sphere (the
+    /// octree's walk), dynamic×dynamic (the dynamic tree against itself), dynamic×static (tree
+    /// against tree) and sphere×body (the smaller side queried against the larger). It is then
+    /// sorted, and merged against the previous step's list for `added` / `removed`. Steady
+    /// state allocates nothing: every list is kept and reused.
     pub fn step(&mut self) -> StepPairs<'_> {
+        self.dynamic.refit();
+        if self.statics_changed {
+            self.statics.refit();
+            self.statics_changed = false;
+        }
         core::mem::swap(&mut self.prev, &mut self.pairs);
-        let margin = self.config.margin;
-        self.scratch.clear();
-        self.scratch
-            .extend(self.proxies.iter().map(|(key, s)| brute::Proxy {
-                key,
-                aabb: s.aabb().grown(margin),
-                is_static: s.is_static(),
-            }));
-        self.pairs = brute::sweep_pairs(&self.scratch);
+        let pairs = &mut self.pairs;
+        pairs.clear();
+        self.octree.pairs_into(pairs);
+        self.dynamic
+            .for_each_pair(|a, b| pairs.push(Pair::new(a, b)));
+        self.dynamic
+            .for_each_pair_with(&self.statics, |a, b| pairs.push(Pair::new(a, b)));
+        let bodies = self.dynamic.len() + self.statics.len();
+        if bodies <= self.octree.len() {
+            for tree in [&self.dynamic, &self.statics] {
+                tree.for_each(|body, aabb| {
+                    self.octree
+                        .query_aabb(&aabb, |sphere| pairs.push(Pair::new(sphere, body)));
+                });
+            }
+        } else {
+            self.octree.for_each(|sphere, aabb| {
+                for tree in [&self.dynamic, &self.statics] {
+                    tree.query_aabb(&aabb, |body| pairs.push(Pair::new(sphere, body)));
+                }
+            });
+        }
+        pairs.sort_unstable();
+        debug_assert!(pairs.windows(2).all(|w| w[0] < w[1]), "a pair found twice");
         pair::diff(&self.prev, &self.pairs, &mut self.added, &mut self.removed);
         StepPairs {
             pairs: &self.pairs,
@@ -281,40 +380,100 @@ impl BroadPhase {
         }
     }
 
-    /// Calls `f` with every proxy whose (margin-grown) box overlaps `aabb`; nothing for a
-    /// non-finite or inverted query box.
+    /// Calls `f` with every proxy whose (margin-grown) box overlaps `aabb`, each once, in no
+    /// particular order; nothing for a non-finite or inverted query box.
     pub fn query_aabb(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
         if check_aabb(aabb).is_err() {
             return;
         }
-        let margin = self.config.margin;
-        for (key, s) in &self.proxies {
-            if s.aabb().grown(margin).overlaps(aabb) {
-                f(key);
-            }
-        }
+        self.octree.query_aabb(aabb, &mut f);
+        self.dynamic.query_aabb(aabb, &mut f);
+        self.statics.query_aabb(aabb, &mut f);
     }
 
     /// The nearest proxy hit by the segment `origin + t·dir`, `t ∈ [0, max_t]`, with its `t`
     /// (in units of `dir`, which need not be unit length). Spheres are hit as spheres, bodies
-    /// as their boxes; the margin is ignored. `None` for a non-finite ray or `max_t < 0`.
+    /// as their boxes, both as the user gave them (without the margin); ties go to the smaller
+    /// key. `None` for a non-finite ray or `max_t < 0`.
     #[must_use]
     pub fn cast_ray(&self, origin: Vec3, dir: Vec3, max_t: f32) -> Option<(ProxyKey, f32)> {
         if !geom::ray_is_valid(origin, dir, max_t) {
             return None;
         }
+        let closer = |best: Option<(ProxyKey, f32)>, hit: Option<(ProxyKey, f32)>| match (best, hit)
+        {
+            (Some(b), Some(h)) if (h.1, h.0) < (b.1, b.0) => Some(h),
+            (None, h) => h,
+            (b, _) => b,
+        };
+        if self.config.margin == 0.0 {
+            // The structures hold the exact shapes: their closest-hit searches answer directly.
+            let mut best = self.octree.cast_ray(origin, dir, max_t);
+            for tree in [&self.dynamic, &self.statics] {
+                let limit = best.map_or(max_t, |b| b.1);
+                best = closer(best, tree.cast_ray(origin, dir, limit));
+            }
+            return best;
+        }
+        // Grown shapes: every grown hit is a candidate, re-tested against the exact shape.
         let inv = geom::inverse_dir(dir);
-        self.proxies
-            .iter()
-            .filter_map(|(key, s)| {
-                let t = match *s {
-                    Shape::Sphere { center, radius } => {
-                        geom::ray_sphere(origin, dir, center, radius, max_t)
-                    }
-                    Shape::Body { aabb, .. } => aabb.ray_entry(origin, inv, max_t),
-                };
-                t.map(|t| (key, t))
-            })
-            .min_by(|x, y| x.1.total_cmp(&y.1).then(x.0.cmp(&y.0)))
+        let mut best = None;
+        let mut exact = |key: ProxyKey, _: f32| {
+            let t = match self.proxies.get(key) {
+                Some(&Shape::Sphere { center, radius }) => {
+                    geom::ray_sphere(origin, dir, center, radius, max_t)
+                }
+                Some(Shape::Body { aabb, .. }) => aabb.ray_entry(origin, inv, max_t),
+                None => None,
+            };
+            best = closer(best, t.map(|t| (key, t)));
+        };
+        self.octree.cast_ray_all(origin, dir, max_t, &mut exact);
+        self.dynamic.cast_ray_all(origin, dir, max_t, &mut exact);
+        self.statics.cast_ray_all(origin, dir, max_t, &mut exact);
+        best
+    }
+
+    /// Checks every internal invariant (each structure's `validate`, and that every proxy is
+    /// in exactly the structure its kind says, with its margin-grown box); panics with a
+    /// message on the first broken one. For tests: O(n).
+    pub fn validate(&self) {
+        self.octree.validate();
+        self.dynamic.validate();
+        self.statics.validate();
+        let margin = self.config.margin;
+        let (mut spheres, mut dynamic, mut statics) = (0, 0, 0);
+        for (key, shape) in &self.proxies {
+            let (tree_box, count) = match shape {
+                Shape::Sphere { .. } => (self.octree.aabb(key), &mut spheres),
+                Shape::Body {
+                    kind: BodyKind::Dynamic,
+                    ..
+                } => (self.dynamic.aabb(key), &mut dynamic),
+                Shape::Body {
+                    kind: BodyKind::Static,
+                    ..
+                } => (self.statics.aabb(key), &mut statics),
+            };
+            *count += 1;
+            let want = match *shape {
+                Shape::Sphere { center, radius } => {
+                    Aabb::from_center_radius(center, radius + margin)
+                }
+                Shape::Body { aabb, .. } => aabb.grown(margin),
+            };
+            assert_eq!(tree_box, Some(want), "proxy {key:?} ({shape:?}) misfiled");
+        }
+        assert_eq!(spheres, self.octree.len(), "octree holds unknown spheres");
+        assert_eq!(
+            dynamic,
+            self.dynamic.len(),
+            "dynamic tree holds unknown bodies"
+        );
+        assert_eq!(
+            statics,
+            self.statics.len(),
+            "static tree holds unknown bodies"
+        );
     }
 }

@@ -77,21 +77,19 @@ fn check_step(bp: &mut BroadPhase, model: &[(ProxyKey, Shape)], prev: &[Pair]) -
         .collect();
     let expected = brute::pairs(&proxies);
     let step = bp.step();
-    assert_eq!(
-        step.pairs,
-        expected.as_slice(),
-        "pairs differ from brute force"
+    let (pairs, added, removed) = (
+        step.pairs.to_vec(),
+        step.added.to_vec(),
+        step.removed.to_vec(),
     );
+    bp.validate();
+    assert_eq!(pairs, expected, "pairs differ from brute force");
     let p: BTreeSet<Pair> = prev.iter().copied().collect();
     let c: BTreeSet<Pair> = expected.iter().copied().collect();
-    let added: Vec<Pair> = c.difference(&p).copied().collect();
-    let removed: Vec<Pair> = p.difference(&c).copied().collect();
-    assert_eq!(step.added, added.as_slice(), "added is not cur \\ prev");
-    assert_eq!(
-        step.removed,
-        removed.as_slice(),
-        "removed is not prev \\ cur"
-    );
+    let want_added: Vec<Pair> = c.difference(&p).copied().collect();
+    let want_removed: Vec<Pair> = p.difference(&c).copied().collect();
+    assert_eq!(added, want_added, "added is not cur \\ prev");
+    assert_eq!(removed, want_removed, "removed is not prev \\ cur");
     expected
 }
 

@@ -312,6 +312,15 @@ impl Bvh {
         self.boxes.len() - self.tree_len
     }
 
+    /// Calls `f` with every live primitive's key and current box, in primitive order.
+    pub fn for_each(&self, mut f: impl FnMut(ProxyKey, Aabb)) {
+        for (key, aabb) in self.keys.iter().zip(&self.boxes) {
+            if !key.is_null() {
+                f(*key, *aabb);
+            }
+        }
+    }
+
     /// Shape and history of the tree. O(nodes).
     #[must_use]
     pub fn stats(&self) -> BvhStats {

@@ -268,6 +268,13 @@ impl Octree {
         self.scratch = scratch;
     }
 
+    /// Calls `f` with every sphere's key and box (`center ± radius`), in dense-id order.
+    pub fn for_each(&self, mut f: impl FnMut(ProxyKey, Aabb)) {
+        for (key, obj) in self.keys.iter().zip(&self.objs) {
+            f(*key, obj.aabb);
+        }
+    }
+
     /// Occupancy per level, the overflow count, and the cost of the last pair pass.
     #[must_use]
     pub fn stats(&self) -> OctreeStats {
