@@ -86,6 +86,9 @@ pub struct Octree {
     per_level: [u32; MAX_DEPTH as usize + 1],
     overflow: u32,
     scratch: pairs::Scratch,
+    /// Links since the last [`Octree::sort_spatially`].
+    relinks: usize,
+    reorder: place::Reorder,
 }
 
 impl Octree {
@@ -110,6 +113,8 @@ impl Octree {
             per_level: [0; MAX_DEPTH as usize + 1],
             overflow: 0,
             scratch: pairs::Scratch::default(),
+            relinks: 0,
+            reorder: place::Reorder::default(),
         })
     }
 
@@ -249,6 +254,9 @@ impl Octree {
     /// Calls `f(a, b)` once for every pair of spheres whose AABBs overlap (closed: touching
     /// boxes overlap), in no particular order and with no particular key order inside a pair.
     pub fn for_each_pair(&mut self, mut f: impl FnMut(ProxyKey, ProxyKey)) {
+        if self.relinks > self.objs.len() / 8 {
+            self.sort_spatially();
+        }
         let mut scratch = core::mem::take(&mut self.scratch);
         let keys = &self.keys;
         self.walk_pairs(&mut scratch, &mut |a, b| {
@@ -260,6 +268,9 @@ impl Octree {
     /// Appends every overlapping pair, canonical (`a < b`) but **unsorted**, to `out`
     /// (which is not cleared); sort with [`crate::pair::sort_dedup`] if order matters.
     pub fn pairs_into(&mut self, out: &mut Vec<Pair>) {
+        if self.relinks > self.objs.len() / 8 {
+            self.sort_spatially();
+        }
         let mut scratch = core::mem::take(&mut self.scratch);
         let keys = &self.keys;
         self.walk_pairs(&mut scratch, &mut |a, b| {

@@ -31,6 +31,9 @@ use super::{NONE, Obj, Octree};
 /// Lists (or list pairs) with at most this many candidate pairs are tested all against all;
 /// longer ones are subdivided.
 const LEAF_PAIRS: usize = 64;
+/// Ancestors × own where one side is at most this long are tested all against all: the
+/// subdivision only pays when both sides are long.
+const SHORT_SIDE: usize = 4;
 
 /// One node to visit: its place in the tree and its segment of the ancestor stack.
 #[derive(Clone, Copy, Debug)]
@@ -237,7 +240,7 @@ impl Octree {
             self.split_pairs(s, lo, shift, false, test);
         }
         let anc = f.start as usize..f.end as usize;
-        if anc.len() * n <= LEAF_PAIRS {
+        if anc.len() * n <= LEAF_PAIRS || anc.len().min(n) <= SHORT_SIDE {
             for &x in &s.anc[anc] {
                 for &y in &s.own {
                     test(x, y);
@@ -293,7 +296,7 @@ impl Octree {
             } else {
                 second.len() * second.len().saturating_sub(1) / 2
             };
-            if pairs <= LEAF_PAIRS {
+            if pairs <= LEAF_PAIRS || (bi && first.len().min(second.len()) <= SHORT_SIDE) {
                 let l = &s.lists;
                 for (i, &y) in l[second.clone()].iter().enumerate() {
                     let others = if bi {
@@ -359,7 +362,18 @@ impl Octree {
                 }
             }
             let oct = |i: usize| s.octs[i - p.start as usize];
-            for c in 0..8u32 {
+            let reach = |r: &core::ops::Range<usize>| {
+                r.clone()
+                    .map(oct)
+                    .filter(|&o| o != 0xFF)
+                    .fold(0u8, |m, o| m | o)
+            };
+            let children = if bi {
+                reach(&first) & reach(&second)
+            } else {
+                reach(&second)
+            };
+            for c in (0..8u32).filter(|c| children & (1 << c) != 0) {
                 let keep = |i: &usize| oct(*i) != 0xFF && oct(*i) & (1 << c) != 0;
                 let start = s.lists.len();
                 for i in first.clone().filter(keep) {
