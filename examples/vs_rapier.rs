@@ -5,9 +5,11 @@
 //!     [--steps 30] [--warmup 5] [--index octree|bvh|auto] [--seed 1]
 //! ```
 //!
-//! `--scene` is `gas`, `clustered`, `bodies`, `churn` or `all` (every scene at its default N:
-//! gas, clustered and churn 100 000, bodies 10 000; `--n` overrides it for all). Each step the
-//! scene's motion is fed to both:
+//! `--scene` is `gas`, `clustered`, `bodies`, `churn`, `pile` or `all` (every scene at its
+//! default N: gas, clustered and churn 100 000, bodies and pile 10 000; `--n` overrides it for
+//! all). `pile` is recorded first from a dynamic rapier run (`broadleaf::rapier::record_pile`,
+//! 240 settling steps, untimed) and then replayed like the others. Each step the scene's motion
+//! is fed to both:
 //!
 //! - broadleaf: the frame's removes, inserts and new positions/boxes, then `step()`; spheres go
 //!   in with `insert_sphere` (`--index octree` or `auto`) or as dynamic bodies by their box
@@ -32,7 +34,7 @@
 
 use broadleaf::octree::MAX_DEPTH;
 use broadleaf::pair::{self, Pair};
-use broadleaf::rapier::Comparison;
+use broadleaf::rapier::{Comparison, record_pile};
 use broadleaf::scene::{Bodies, Churn, DT, Frame, Gas, Object, Scene, Spawn};
 use broadleaf::{BodyKind, BroadPhase, Config, ProxyKey, Shape, brute};
 use rapier3d::prelude::*;
@@ -55,7 +57,7 @@ struct Args {
     seed: u64,
 }
 
-const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|all] [--n N] \
+const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|all] [--n N] \
                      [--steps 30] [--warmup 5] [--index octree|bvh|auto] [--seed 1]";
 
 fn parse_args() -> Result<Args, String> {
@@ -95,8 +97,12 @@ fn parse_args() -> Result<Args, String> {
     Ok(args)
 }
 
-fn make_scene(name: &str, n: usize, seed: u64) -> Option<Box<dyn Scene>> {
+/// Unrecorded rapier steps that let the `pile` scene settle before its frames are recorded.
+const PILE_SETTLE_STEPS: usize = 240;
+
+fn make_scene(name: &str, n: usize, seed: u64, steps: usize) -> Option<Box<dyn Scene>> {
     Some(match name {
+        "pile" => Box::new(record_pile(n, seed, PILE_SETTLE_STEPS, steps + 1)),
         "gas" => Box::new(Gas::new(n, seed)),
         "clustered" => Box::new(Gas::clustered(n, seed)),
         "bodies" => Box::new(Bodies::new(n, seed)),
@@ -106,7 +112,11 @@ fn make_scene(name: &str, n: usize, seed: u64) -> Option<Box<dyn Scene>> {
 }
 
 fn default_n(scene: &str) -> usize {
-    if scene == "bodies" { 10_000 } else { 100_000 }
+    if scene == "bodies" || scene == "pile" {
+        10_000
+    } else {
+        100_000
+    }
 }
 
 /// broadleaf's side: the broadphase and the key of each scene id.
@@ -366,7 +376,7 @@ struct Row {
 }
 
 fn run(name: &str, n: usize, args: &Args) -> Row {
-    let mut scene = make_scene(name, n, args.seed).expect("known scene");
+    let mut scene = make_scene(name, n, args.seed, args.warmup + args.steps).expect("known scene");
     let mut ours = Ours::new(scene.bounds(), args.index);
     let mut theirs = Theirs::new();
     let mut spawns = Vec::new();
@@ -418,8 +428,8 @@ fn main() {
         exit(2);
     });
     let names: Vec<&str> = match args.scene.as_str() {
-        "all" => vec!["gas", "clustered", "bodies", "churn"],
-        s if make_scene(s, 0, 0).is_some() => vec![s],
+        "all" => vec!["gas", "clustered", "bodies", "churn", "pile"],
+        s if make_scene(s, 0, 0, 0).is_some() => vec![s],
         s => {
             eprintln!("unknown scene {s}\n{USAGE}");
             exit(2);

@@ -34,11 +34,18 @@
 //! `ActiveCollisionTypes::all()` on every collider.
 
 use crate::pair::{self, Pair, ProxyKey};
-use crate::{Aabb, BodyKind, BroadPhase, Config, Shape, StepPairs, brute};
+use crate::scene::{GAS_RADIUS, Recorded, Rng};
+use crate::{Aabb, BodyKind, BroadPhase, Config, Shape, StepPairs, Vec3, brute};
 use core::fmt;
-use rapier3d::dynamics::RigidBodySet;
-use rapier3d::geometry::{Collider, ColliderHandle, ColliderSet, NarrowPhase};
-use rapier3d::math::Pose;
+use rapier3d::dynamics::{
+    CCDSolver, ImpulseJointSet, IntegrationParameters, IslandManager, MultibodyJointSet,
+    RigidBodyBuilder, RigidBodyHandle, RigidBodySet, SoftBodySet,
+};
+use rapier3d::geometry::{
+    Collider, ColliderBuilder, ColliderHandle, ColliderSet, DefaultBroadPhase, NarrowPhase,
+};
+use rapier3d::math::{Pose, Vector};
+use rapier3d::pipeline::PhysicsPipeline;
 use slotmap::SecondaryMap;
 
 /// What a collider became in the mirror; a change of class re-inserts it under a new key.
@@ -448,6 +455,92 @@ fn intersect(a: &[Pair], b: &[Pair], out: &mut Vec<Pair>) {
             }
         }
     }
+}
+
+/// Layers of balls the `pile` scene drops; its floor is sized so the pile is about this high.
+pub const PILE_LAYERS: usize = 10;
+
+/// Records the `pile` scene with rapier: `n` dynamic balls of radius 0.5 in a jittered grid of
+/// [`PILE_LAYERS`] layers (spacing 1.1 m horizontally, 1.25 m vertically) over a fixed floor
+/// walled in on four sides, under gravity (−9.81 m/s² on y) with rapier's default parameters;
+/// `settle` steps are run unrecorded, then `frames` frames of ball centres are recorded, one per
+/// step (frame 0 is the state after settling). Seeded; deterministic for a given rapier build.
+#[must_use]
+pub fn record_pile(n: usize, seed: u64, settle: usize, frames: usize) -> Recorded {
+    let mut rng = Rng::new(seed);
+    let cols = (n as f32 / PILE_LAYERS as f32).sqrt().ceil().max(1.0) as usize;
+    let spacing = 1.1;
+    let half = 0.5 * cols as f32 * spacing + 0.1;
+    let height = n.div_ceil(cols * cols) as f32 * 1.25 + 2.0;
+    let mut bodies = RigidBodySet::new();
+    let mut colliders = ColliderSet::new();
+    let mut wall = |c: Vec3, h: Vec3, bodies: &mut RigidBodySet| {
+        let body = bodies.insert(RigidBodyBuilder::fixed().translation(c));
+        colliders.insert_with_parent(ColliderBuilder::cuboid(h.x, h.y, h.z), body, bodies);
+    };
+    wall(
+        Vec3::new(0.0, -0.5, 0.0),
+        Vec3::new(half + 1.0, 0.5, half + 1.0),
+        &mut bodies,
+    );
+    for s in [-1.0f32, 1.0] {
+        let (x, z) = (
+            Vec3::new(0.5, height, half + 1.0),
+            Vec3::new(half + 1.0, height, 0.5),
+        );
+        wall(Vec3::new(s * (half + 0.5), height, 0.0), x, &mut bodies);
+        wall(Vec3::new(0.0, height, s * (half + 0.5)), z, &mut bodies);
+    }
+    let r = GAS_RADIUS;
+    let balls: Vec<RigidBodyHandle> = (0..n)
+        .map(|i| {
+            let (layer, cell) = (i / (cols * cols), i % (cols * cols));
+            let jitter = rng.vec3_in(Vec3::splat(-0.04), Vec3::splat(0.04));
+            let c = Vec3::new(
+                -half + 0.1 + spacing * (cell / cols) as f32 + 0.55,
+                1.0 + 1.25 * layer as f32,
+                -half + 0.1 + spacing * (cell % cols) as f32 + 0.55,
+            ) + jitter;
+            let body = bodies.insert(RigidBodyBuilder::dynamic().translation(c));
+            colliders.insert_with_parent(ColliderBuilder::ball(r), body, &mut bodies);
+            body
+        })
+        .collect();
+    let mut pipeline = PhysicsPipeline::new();
+    let params = IntegrationParameters::default();
+    let (mut islands, mut broad_phase) = (IslandManager::new(), DefaultBroadPhase::new());
+    let (mut narrow_phase, mut ccd) = (NarrowPhase::new(), CCDSolver::new());
+    let (mut impulse_joints, mut multibody_joints) =
+        (ImpulseJointSet::new(), MultibodyJointSet::new());
+    let mut soft_bodies = SoftBodySet::new();
+    let mut recorded = Vec::with_capacity(frames);
+    for step in 0..settle + frames {
+        if step >= settle {
+            recorded.push(balls.iter().map(|&h| bodies[h].translation()).collect());
+        }
+        if step + 1 < settle + frames {
+            pipeline.step(
+                Vector::new(0.0, -9.81, 0.0),
+                &params,
+                &mut islands,
+                &mut broad_phase,
+                &mut narrow_phase,
+                &mut bodies,
+                &mut colliders,
+                &mut impulse_joints,
+                &mut multibody_joints,
+                &mut soft_bodies,
+                &mut ccd,
+                &(),
+                &(),
+            );
+        }
+    }
+    let bounds = Aabb::new(
+        Vec3::new(-half, 0.0, -half),
+        Vec3::new(half, 2.0 * height, half),
+    );
+    Recorded::new(bounds, r, recorded)
 }
 
 #[cfg(test)]

@@ -591,6 +591,75 @@ impl Scene for Churn {
     }
 }
 
+/// Spheres replayed from recorded centres, e.g. the `pile` scene recorded from a rapier
+/// simulation (`broadleaf::rapier::record_pile`, feature `rapier`). Frame 0 is the start; each
+/// `advance` moves every sphere to the next frame's centre, and after the last frame they
+/// stay where they are.
+#[derive(Clone, Debug)]
+pub struct Recorded {
+    /// The region the spheres stay in.
+    pub bounds: Aabb,
+    /// Radius of every sphere.
+    pub radius: f32,
+    /// Per frame, the centre of sphere `i` (id `i`) at index `i`; every frame has as many
+    /// centres as frame 0 (longer frames are cut, shorter ones leave the rest in place).
+    pub frames: Vec<Vec<Vec3>>,
+    cursor: usize,
+    centers: Vec<Vec3>,
+}
+
+impl Recorded {
+    /// A replay of `frames` (none: an empty scene) of spheres of `radius` inside `bounds`.
+    #[must_use]
+    pub fn new(bounds: Aabb, radius: f32, frames: Vec<Vec<Vec3>>) -> Self {
+        let centers = frames.first().cloned().unwrap_or_default();
+        Recorded {
+            bounds,
+            radius,
+            frames,
+            cursor: 0,
+            centers,
+        }
+    }
+}
+
+impl Scene for Recorded {
+    fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    fn len(&self) -> usize {
+        self.centers.len()
+    }
+
+    /// Sphere `i` has id `i`.
+    fn spawns(&self, out: &mut Vec<Spawn>) {
+        let radius = self.radius;
+        out.extend(self.centers.iter().enumerate().map(|(i, &center)| Spawn {
+            id: i as u32,
+            object: Object::Sphere { center, radius },
+            is_static: false,
+        }));
+    }
+
+    fn advance(&mut self, frame: &mut Frame) {
+        frame.clear();
+        if self.cursor + 1 < self.frames.len() {
+            self.cursor += 1;
+            for (c, &r) in self.centers.iter_mut().zip(&self.frames[self.cursor]) {
+                *c = r;
+            }
+        }
+        let radius = self.radius;
+        frame.moved.extend(
+            self.centers
+                .iter()
+                .enumerate()
+                .map(|(i, &center)| (i as u32, Object::Sphere { center, radius })),
+        );
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -679,6 +748,9 @@ mod tests {
         replay_matches(Gas::new(300, 4), 50);
         replay_matches(Bodies::new(300, 5), 50);
         replay_matches(Churn::new(300, 6), 50);
+        let frames: Vec<Vec<Vec3>> = (0..5).map(|k| vec![Vec3::splat(k as f32); 3]).collect();
+        let bounds = Aabb::new(Vec3::splat(-1.0), Vec3::splat(6.0));
+        replay_matches(Recorded::new(bounds, 0.5, frames), 10);
     }
 
     #[test]

@@ -249,3 +249,21 @@ fn syncing_after_the_rapier_step_is_one_step_late() {
     assert_eq!((late[3].rapier_lacks, late[3].extra), (1, 1));
     assert!(late[..3].iter().all(Comparison::holds));
 }
+
+/// The recorded `pile` scene: the balls end up at rest inside the scene's bounds.
+#[test]
+fn recorded_pile_settles_inside_its_bounds() {
+    let pile = broadleaf::rapier::record_pile(400, 3, 200, 4);
+    assert_eq!(pile.frames.len(), 4);
+    let inside = pile.bounds.grown(1e-3);
+    for f in &pile.frames {
+        assert_eq!(f.len(), 400);
+        assert!(f.iter().all(|&c| inside.contains_point(c)));
+    }
+    let moved = pile.frames[3]
+        .iter()
+        .zip(&pile.frames[2])
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0f32, f32::max);
+    assert!(moved < 0.05, "still moving {moved} m per step");
+}
