@@ -73,6 +73,8 @@ mod error;
 pub mod geom;
 pub mod octree;
 pub mod pair;
+#[cfg(feature = "rapier")]
+pub mod rapier;
 pub mod scene;
 
 pub use broadphase::{BodyKind, BroadPhase, Config, Shape, StepPairs};

@@ -1,0 +1,482 @@
+//! broadleaf's `BroadPhase` against rapier3d's broad phase on the same seeded scene.
+//!
+//! ```text
+//! cargo run --release --features rapier --example vs_rapier -- --scene gas --n 100000
+//!     [--steps 30] [--warmup 5] [--index octree|bvh|auto] [--seed 1]
+//! ```
+//!
+//! `--scene` is `gas`, `clustered`, `bodies`, `churn`, `pile` or `all` (every scene at its
+//! default N: gas, clustered and churn 100 000, bodies and pile 10 000; `--n` overrides it for
+//! all). `pile` is recorded first from a dynamic rapier run (`broadleaf::rapier::record_pile`,
+//! 240 settling steps, untimed) and then replayed like the others. Each step the scene's motion
+//! is fed to both:
+//!
+//! - broadleaf: the frame's removes, inserts and new positions/boxes, then `step()`; spheres go
+//!   in with `insert_sphere` (`--index octree` or `auto`) or as dynamic bodies by their box
+//!   (`--index bvh`); boxes always go in as bodies. Timed with `Instant` around all of it.
+//! - rapier: kinematic position-based bodies, ball or cuboid colliders with
+//!   `ActiveCollisionTypes::all()`, fixed bodies for static boxes; moved with
+//!   `set_next_kinematic_translation`, then `PhysicsPipeline::step`. Its broad-phase time per
+//!   step is `counters.cd.broad_phase_time` (the BVH update and pair search at the start of
+//!   the step, including a deferred tree optimisation it joins) plus
+//!   `counters.cd.final_broad_phase_time` (the end-of-step leaf refits).
+//!
+//! rapier detects collisions at the start of its step, before the kinematic bodies reach
+//! their targets, so its pairs lag one step: a body enters rapier's world after the step that
+//! detects the previous frame, and one extra, untimed rapier step after the last measured one
+//! yields rapier's pairs of the last measured frame. Those are compared with broadleaf's pairs
+//! of that frame and with brute force (`exact ⊆ ours ⊆ rapier`, static×static left out).
+//!
+//! Times are medians over the measured steps after the warm-up, in ns per object (every live
+//! object, static ones included) per step. The last line is exactly
+//! `ratio=<speed-up> missed=<n> extra=<n>`; for `--scene all` the ratio is the worst (smallest)
+//! speed-up of the scenes and `missed`/`extra` are summed over them.
+
+use broadleaf::octree::MAX_DEPTH;
+use broadleaf::pair::{self, Pair};
+use broadleaf::rapier::{Comparison, record_pile};
+use broadleaf::scene::{Bodies, Churn, DT, Frame, Gas, Object, Scene, Spawn};
+use broadleaf::{BodyKind, BroadPhase, Config, ProxyKey, Shape, brute};
+use rapier3d::prelude::*;
+use std::process::exit;
+use std::time::Instant;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Index {
+    Octree,
+    Bvh,
+    Auto,
+}
+
+struct Args {
+    scene: String,
+    n: Option<usize>,
+    steps: usize,
+    warmup: usize,
+    index: Index,
+    seed: u64,
+}
+
+const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|all] [--n N] \
+                     [--steps 30] [--warmup 5] [--index octree|bvh|auto] [--seed 1]";
+
+fn parse_args() -> Result<Args, String> {
+    let mut args = Args {
+        scene: "gas".into(),
+        n: None,
+        steps: 30,
+        warmup: 5,
+        index: Index::Auto,
+        seed: 1,
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(flag) = it.next() {
+        if flag == "--help" || flag == "-h" {
+            println!("{USAGE}");
+            exit(0);
+        }
+        let value = it.next().ok_or(format!("{flag} needs a value"))?;
+        let number = |v: &str| v.parse::<usize>().map_err(|e| format!("{flag} {v}: {e}"));
+        match flag.as_str() {
+            "--scene" => args.scene = value,
+            "--n" => args.n = Some(number(&value)?),
+            "--steps" => args.steps = number(&value)?.max(1),
+            "--warmup" => args.warmup = number(&value)?,
+            "--seed" => args.seed = number(&value)? as u64,
+            "--index" => {
+                args.index = match value.as_str() {
+                    "octree" => Index::Octree,
+                    "bvh" => Index::Bvh,
+                    "auto" => Index::Auto,
+                    other => return Err(format!("unknown index {other}")),
+                }
+            }
+            other => return Err(format!("unknown flag {other}")),
+        }
+    }
+    Ok(args)
+}
+
+/// Unrecorded rapier steps that let the `pile` scene settle before its frames are recorded.
+const PILE_SETTLE_STEPS: usize = 240;
+
+fn make_scene(name: &str, n: usize, seed: u64, steps: usize) -> Option<Box<dyn Scene>> {
+    Some(match name {
+        "pile" => Box::new(record_pile(n, seed, PILE_SETTLE_STEPS, steps + 1)),
+        "gas" => Box::new(Gas::new(n, seed)),
+        "clustered" => Box::new(Gas::clustered(n, seed)),
+        "bodies" => Box::new(Bodies::new(n, seed)),
+        "churn" => Box::new(Churn::new(n, seed)),
+        _ => return None,
+    })
+}
+
+fn default_n(scene: &str) -> usize {
+    if scene == "bodies" || scene == "pile" {
+        10_000
+    } else {
+        100_000
+    }
+}
+
+/// broadleaf's side: the broadphase and the key of each scene id.
+struct Ours {
+    bp: BroadPhase,
+    keys: Vec<Option<ProxyKey>>,
+    spheres_as_bodies: bool,
+}
+
+impl Ours {
+    fn new(bounds: broadleaf::Aabb, index: Index) -> Self {
+        // Deepest cells at least 2 m wide: two sphere diameters of the gas scenes.
+        let edge = bounds.extent().max_element();
+        let depth = (edge / 2.0).log2().floor().clamp(0.0, MAX_DEPTH as f32) as u32;
+        Ours {
+            bp: BroadPhase::new(Config {
+                bounds,
+                octree_depth: depth,
+                ..Config::default()
+            }),
+            keys: Vec::new(),
+            spheres_as_bodies: index == Index::Bvh,
+        }
+    }
+
+    fn insert(&mut self, s: &Spawn) {
+        let kind = if s.is_static {
+            BodyKind::Static
+        } else {
+            BodyKind::Dynamic
+        };
+        let key = match s.object {
+            Object::Sphere { center, radius } if !self.spheres_as_bodies => {
+                self.bp.insert_sphere(center, radius)
+            }
+            o => self.bp.insert_body(o.aabb(), kind),
+        }
+        .expect("scene objects are finite");
+        let id = s.id as usize;
+        if self.keys.len() <= id {
+            self.keys.resize(id + 1, None);
+        }
+        self.keys[id] = Some(key);
+    }
+
+    fn apply(&mut self, f: &Frame) {
+        for &id in &f.removed {
+            let key = self.keys[id as usize].take().expect("removed a live id");
+            self.bp.remove(key).expect("live key");
+        }
+        for s in &f.inserted {
+            self.insert(s);
+        }
+        for &(id, o) in &f.moved {
+            let key = self.keys[id as usize].expect("moved a live id");
+            match o {
+                Object::Sphere { center, radius } if !self.spheres_as_bodies => {
+                    self.bp.update_sphere(key, center, radius)
+                }
+                o => self.bp.update_body(key, o.aabb()),
+            }
+            .expect("scene objects are finite");
+        }
+    }
+
+    /// Brute force over the current boxes.
+    fn exact(&self) -> Vec<Pair> {
+        let proxies: Vec<brute::Proxy> = self
+            .keys
+            .iter()
+            .flatten()
+            .map(|&key| {
+                let shape = self.bp.shape(key).expect("live key");
+                brute::Proxy {
+                    key,
+                    aabb: shape.aabb(),
+                    is_static: matches!(
+                        shape,
+                        Shape::Body {
+                            kind: BodyKind::Static,
+                            ..
+                        }
+                    ),
+                }
+            })
+            .collect();
+        brute::sweep_pairs(&proxies)
+    }
+}
+
+/// rapier's side: a world of kinematic and fixed bodies, one collider each, and the body of
+/// each scene id. Each collider's `user_data` is its scene id.
+struct Theirs {
+    pipeline: PhysicsPipeline,
+    params: IntegrationParameters,
+    islands: IslandManager,
+    broad_phase: DefaultBroadPhase,
+    narrow_phase: NarrowPhase,
+    bodies: RigidBodySet,
+    colliders: ColliderSet,
+    impulse_joints: ImpulseJointSet,
+    multibody_joints: MultibodyJointSet,
+    soft_bodies: SoftBodySet,
+    ccd: CCDSolver,
+    handles: Vec<Option<RigidBodyHandle>>,
+}
+
+impl Theirs {
+    fn new() -> Self {
+        Theirs {
+            pipeline: PhysicsPipeline::new(),
+            params: IntegrationParameters {
+                dt: DT,
+                ..IntegrationParameters::default()
+            },
+            islands: IslandManager::new(),
+            broad_phase: DefaultBroadPhase::new(),
+            narrow_phase: NarrowPhase::new(),
+            bodies: RigidBodySet::new(),
+            colliders: ColliderSet::new(),
+            impulse_joints: ImpulseJointSet::new(),
+            multibody_joints: MultibodyJointSet::new(),
+            soft_bodies: SoftBodySet::new(),
+            ccd: CCDSolver::new(),
+            handles: Vec::new(),
+        }
+    }
+
+    fn insert(&mut self, s: &Spawn) {
+        let (pose, collider) = match s.object {
+            Object::Sphere { center, radius } => (
+                Pose::from_translation(center),
+                ColliderBuilder::ball(radius),
+            ),
+            Object::Cuboid {
+                center,
+                half_extents: h,
+                rotation,
+            } => (
+                Pose::from_parts(center, rotation),
+                ColliderBuilder::cuboid(h.x, h.y, h.z),
+            ),
+        };
+        let body = if s.is_static {
+            RigidBodyBuilder::fixed()
+        } else {
+            RigidBodyBuilder::kinematic_position_based()
+        };
+        let h = self.bodies.insert(body.pose(pose));
+        let collider = collider
+            .active_collision_types(ActiveCollisionTypes::all())
+            .user_data(u128::from(s.id));
+        self.colliders
+            .insert_with_parent(collider, h, &mut self.bodies);
+        let id = s.id as usize;
+        if self.handles.len() <= id {
+            self.handles.resize(id + 1, None);
+        }
+        self.handles[id] = Some(h);
+    }
+
+    /// Sets every moved body's kinematic target.
+    fn set_targets(&mut self, f: &Frame) {
+        for &(id, o) in &f.moved {
+            if let Some(h) = self.handles[id as usize] {
+                self.bodies[h].set_next_kinematic_translation(o.center());
+            }
+        }
+    }
+
+    /// Applies a frame's removes and inserts (after the step that detected the frame before).
+    fn apply_structure(&mut self, f: &Frame) {
+        for &id in &f.removed {
+            if let Some(h) = self.handles[id as usize].take() {
+                self.bodies.remove(
+                    h,
+                    &mut self.islands,
+                    &mut self.colliders,
+                    &mut self.impulse_joints,
+                    &mut self.multibody_joints,
+                    &mut self.soft_bodies,
+                    true,
+                );
+            }
+        }
+        for s in &f.inserted {
+            self.insert(s);
+        }
+    }
+
+    /// One `PhysicsPipeline::step`; returns its broad-phase time in nanoseconds.
+    fn step(&mut self) -> f64 {
+        self.pipeline.step(
+            Vector::ZERO,
+            &self.params,
+            &mut self.islands,
+            &mut self.broad_phase,
+            &mut self.narrow_phase,
+            &mut self.bodies,
+            &mut self.colliders,
+            &mut self.impulse_joints,
+            &mut self.multibody_joints,
+            &mut self.soft_bodies,
+            &mut self.ccd,
+            &(),
+            &(),
+        );
+        let cd = &self.pipeline.counters.cd;
+        (cd.broad_phase_time.time() + cd.final_broad_phase_time.time()).as_nanos() as f64
+    }
+
+    /// rapier's pairs in broadleaf's keys, static×static left out, sorted; and how many pairs
+    /// named an object broadleaf does not hold.
+    fn pairs(&self, ours: &Ours) -> (Vec<Pair>, usize) {
+        let mut out = Vec::new();
+        let mut unmapped = 0;
+        for cp in self.narrow_phase.contact_pairs() {
+            let key_of = |h: ColliderHandle| {
+                let co = self.colliders.get(h)?;
+                let key = (*ours.keys.get(co.user_data as usize)?)?;
+                let fixed = co
+                    .parent()
+                    .and_then(|p| self.bodies.get(p))
+                    .is_none_or(|rb| rb.is_fixed());
+                Some((key, fixed))
+            };
+            match (key_of(cp.collider1), key_of(cp.collider2)) {
+                (Some((a, fa)), Some((b, fb))) => {
+                    if !(fa && fb) {
+                        out.push(Pair::new(a, b));
+                    }
+                }
+                _ => unmapped += 1,
+            }
+        }
+        pair::sort_dedup(&mut out);
+        (out, unmapped)
+    }
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
+    }
+}
+
+struct Row {
+    scene: String,
+    n: usize,
+    ours_ns: f64,
+    rapier_ns: f64,
+    cmp: Comparison,
+}
+
+fn run(name: &str, n: usize, args: &Args) -> Row {
+    let mut scene = make_scene(name, n, args.seed, args.warmup + args.steps).expect("known scene");
+    let mut ours = Ours::new(scene.bounds(), args.index);
+    let mut theirs = Theirs::new();
+    let mut spawns = Vec::new();
+    scene.spawns(&mut spawns);
+    for s in &spawns {
+        ours.insert(s);
+        theirs.insert(s);
+    }
+    ours.bp.step();
+    theirs.step();
+    let mut frame = Frame::default();
+    let (mut ours_ns, mut rapier_ns) = (Vec::new(), Vec::new());
+    let mut last_pairs = Vec::new();
+    for k in 0..args.warmup + args.steps {
+        scene.advance(&mut frame);
+        let t = Instant::now();
+        ours.apply(&frame);
+        let pairs = ours.bp.step().pairs;
+        let ns = t.elapsed().as_nanos() as f64;
+        last_pairs.clear();
+        last_pairs.extend_from_slice(pairs);
+
+        theirs.set_targets(&frame);
+        let their_ns = theirs.step();
+        theirs.apply_structure(&frame);
+        if k >= args.warmup {
+            let live = scene.len().max(1) as f64;
+            ours_ns.push(ns / live);
+            rapier_ns.push(their_ns / live);
+        }
+    }
+    // rapier detects the last frame's poses (and holds its inserts) in one more step.
+    theirs.step();
+    let (rapier_pairs, unmapped) = theirs.pairs(&ours);
+    let mut cmp = Comparison::new(&last_pairs, &rapier_pairs, &ours.exact());
+    cmp.unmapped = unmapped;
+    Row {
+        scene: name.to_string(),
+        n: scene.len(),
+        ours_ns: median(&mut ours_ns),
+        rapier_ns: median(&mut rapier_ns),
+        cmp,
+    }
+}
+
+fn main() {
+    let args = parse_args().unwrap_or_else(|e| {
+        eprintln!("{e}\n{USAGE}");
+        exit(2);
+    });
+    let names: Vec<&str> = match args.scene.as_str() {
+        "all" => vec!["gas", "clustered", "bodies", "churn", "pile"],
+        s if make_scene(s, 0, 0, 0).is_some() => vec![s],
+        s => {
+            eprintln!("unknown scene {s}\n{USAGE}");
+            exit(2);
+        }
+    };
+    println!(
+        "index {:?}, {} measured steps after {} warm-up, seed {}; times: median ns/object/step",
+        args.index, args.steps, args.warmup, args.seed
+    );
+    println!();
+    println!(
+        "| scene | N | broadleaf ns/object/step | rapier ns/object/step | speed-up | pairs (broadleaf) | pairs (rapier) | exact pairs | missed | extra |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let mut rows = Vec::new();
+    for name in names {
+        let n = args.n.unwrap_or_else(|| default_n(name));
+        let r = run(name, n, &args);
+        println!(
+            "| {} | {} | {:.1} | {:.1} | {:.2} | {} | {} | {} | {} | {} |",
+            r.scene,
+            r.n,
+            r.ours_ns,
+            r.rapier_ns,
+            r.rapier_ns / r.ours_ns,
+            r.cmp.ours,
+            r.cmp.rapier,
+            r.cmp.exact,
+            r.cmp.missed,
+            r.cmp.extra
+        );
+        rows.push(r);
+    }
+    println!();
+    for r in &rows {
+        if !r.cmp.holds() {
+            println!(
+                "WARNING {}: the cross-check does not hold: {}",
+                r.scene, r.cmp
+            );
+        }
+    }
+    let ratio = rows
+        .iter()
+        .map(|r| r.rapier_ns / r.ours_ns)
+        .fold(f64::INFINITY, f64::min);
+    let missed: usize = rows.iter().map(|r| r.cmp.missed).sum();
+    let extra: usize = rows.iter().map(|r| r.cmp.extra).sum();
+    println!("ratio={ratio:.2} missed={missed} extra={extra}");
+}
