@@ -10,6 +10,7 @@ pub mod geom;
 pub mod octree;
 pub mod pair;
 pub mod scene;
+pub mod sim;
 
 pub use broadphase::{BodyKind, BroadPhase, Config, Shape, StepPairs};
 pub use error::Error;
