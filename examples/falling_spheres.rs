@@ -22,7 +22,7 @@ const USAGE: &str = "\
 usage: falling_spheres [--n N] [--steps S] [--index octree|bvh] [--verify]
                        [--out PATH] [--png PATH] [--frames F] [--seed SEED]
   --n N          spheres to drop (default 4000)
-  --steps S      steps of 1/60 s (default 420)
+  --steps S      steps of 1/60 s (default 480)
   --index KIND   where the spheres live: octree (default) or bvh
   --verify       check every step's pairs against brute force over the same boxes
   --out PATH     animated GIF to write (default falling_spheres.gif)
@@ -36,6 +36,8 @@ const RADIUS: f32 = 0.5;
 const DT: f32 = 1.0 / 60.0;
 /// Target width of the picture in pixels (the height follows the container's shape).
 const IMAGE_WIDTH: f32 = 420.0;
+/// Height of the strip above the scene that holds the legend and the step number, in pixels.
+const HEADER: f32 = 26.0;
 
 struct Args {
     n: usize,
@@ -51,7 +53,7 @@ struct Args {
 fn parse_args() -> Result<Args, String> {
     let mut args = Args {
         n: 4000,
-        steps: 420,
+        steps: 480,
         index: IndexKind::Octree,
         verify: false,
         out: PathBuf::from("falling_spheres.gif"),
@@ -496,7 +498,7 @@ impl View {
         let max = (bounds.max.x + pad, interior.max.y + pad);
         let scale = IMAGE_WIDTH / (max.0 - min.0);
         let width = IMAGE_WIDTH.round() as u16;
-        let height = ((max.1 - min.1) * scale).round() as u16;
+        let height = ((max.1 - min.1) * scale + HEADER).round() as u16;
         Self {
             width,
             height,
@@ -512,7 +514,7 @@ impl View {
     }
 
     fn py(&self, y: f32) -> f32 {
-        (self.max.1 - y) * self.scale
+        (self.max.1 - y) * self.scale + HEADER
     }
 
     fn draw(
