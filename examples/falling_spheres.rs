@@ -149,11 +149,13 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     };
     let potential_start = potential(&world);
     let mut bp_ns = Vec::with_capacity(args.steps);
+    let mut step_ms = Vec::with_capacity(args.steps);
     let (mut peak_energy, mut peak_step, mut verified) = (0.0f64, 0, 0);
     let start = Instant::now();
     for step in 0..args.steps {
         let stats = world.step(DT)?;
         bp_ns.push(stats.broadphase_time.as_nanos() as f64 / world.len().max(1) as f64);
+        step_ms.push(stats.total_time.as_secs_f64() * 1e3);
         if stats.kinetic_energy > peak_energy {
             (peak_energy, peak_step) = (stats.kinetic_energy, step);
         }
@@ -195,6 +197,8 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let stats = *world.stats();
     bp_ns.sort_by(f64::total_cmp);
     let median = bp_ns.get(bp_ns.len() / 2).copied().unwrap_or(0.0);
+    step_ms.sort_by(f64::total_cmp);
+    let median_step = step_ms.get(step_ms.len() / 2).copied().unwrap_or(0.0);
     let rows = [
         (
             "objects",
@@ -213,6 +217,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             ),
         ),
         ("median broadphase", format!("{median:.0} ns/object/step")),
+        ("median step", format!("{median_step:.2} ms (World::step)")),
         ("pairs (last step)", stats.pairs.to_string()),
         (
             "contacts (last step)",
@@ -448,7 +453,7 @@ impl Canvas {
         }
     }
 
-    /// Writes `text` (digits, `L`, space) in a 3×5 font scaled by `scale`.
+    /// Writes `text` (digits, `L`, `B`, `V`, `H`, space) in a 3×5 font scaled by `scale`.
     fn text(&mut self, x: i32, y: i32, scale: i32, text: &str, colour: u8) {
         for (k, ch) in text.chars().enumerate() {
             let glyph: [u8; 5] = match ch {
@@ -463,6 +468,9 @@ impl Canvas {
                 '8' => [7, 5, 7, 5, 7],
                 '9' => [7, 5, 7, 1, 7],
                 'L' => [4, 4, 4, 4, 7],
+                'B' => [6, 5, 6, 5, 6],
+                'V' => [5, 5, 5, 5, 2],
+                'H' => [5, 5, 7, 5, 5],
                 _ => [0; 5],
             };
             let ox = x + k as i32 * 4 * scale;
@@ -573,6 +581,10 @@ impl View {
             canvas.fill_rect(x, 8, x + 9, 17, level_index(*level));
             canvas.text(x + 14, 8, 2, &format!("L{level}"), TEXT);
             x += 48;
+        }
+        if levels.contains(&NO_LEVEL) {
+            canvas.fill_rect(x, 8, x + 9, 17, NEUTRAL_FILL);
+            canvas.text(x + 14, 8, 2, "BVH", TEXT);
         }
         let label = step.to_string();
         let w = label.len() as i32 * 8;

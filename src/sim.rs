@@ -284,7 +284,9 @@ pub fn sphere_box(center: Vec3, radius: f32, aabb: &Aabb) -> (Vec3, f32) {
 }
 
 /// Spheres and static boxes under gravity, stepped with a [`BroadPhase`] (see the module docs
-/// for the order of one step).
+/// for the order of one step). Its per-step buffers (pairs, contacts, pseudo-velocities) are
+/// reused and never shrink, so a step allocates only when the contact count reaches a new high
+/// (plus whatever the broadphase's own step allocates).
 #[derive(Clone, Debug)]
 pub struct World {
     config: WorldConfig,
