@@ -18,14 +18,21 @@
 //!    gap `s > 0` approach by at most `s/dt`.
 //! 4. **Velocity solve**: sequential impulses over `velocity_iterations` passes, warm-started
 //!    from the previous step's impulses of the same pair, rolling resistance and friction
-//!    (clamped to the cone `μ·λn`) before the normal impulse. Then one restitution pass (as in Box2D v3): a contact
-//!    that was approaching faster than `restitution_threshold` and carried a normal impulse
-//!    is given the separating speed `e·|v_approach|`.
+//!    (clamped to the cone `μ·λn`) before the normal impulse. Then one restitution pass (as
+//!    in Box2D v3): a contact that was approaching faster than `restitution_threshold` and
+//!    carried a normal impulse is given the separating speed `e·|v_approach|`. (A speculative
+//!    contact thus bounces up to one step's travel before it touches: the price of never
+//!    tunnelling.)
 //! 5. **Position correction** by split impulses: a separate pseudo-velocity removes
 //!    `position_correction` of the penetration beyond `slop` per step and is thrown away after
 //!    the position update, so correcting overlap never adds kinetic energy (Baumgarte in the
 //!    real velocity would).
 //! 6. **Integrate positions**: `x += (v + v_pseudo)·dt`.
+//!
+//! The growth uses the speed before the solve; a sphere that the solve speeds up (a hard push
+//! from behind) can travel further than its grown box and overlap a sphere it had no contact
+//! with. That overlap is found at the next step and removed by the position correction; the
+//! stats' `max_penetration` shows how deep it got.
 //!
 //! Spheres are solid balls that spin (`I = 2/5·m·r²`; orientation itself is not tracked, a
 //! sphere looks the same however it turned): friction acts at the contact point and makes
