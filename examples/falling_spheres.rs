@@ -151,11 +151,13 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut bp_ns = Vec::with_capacity(args.steps);
     let mut step_ms = Vec::with_capacity(args.steps);
     let (mut peak_energy, mut peak_step, mut verified) = (0.0f64, 0, 0);
+    let mut worst_overlap = 0.0f32;
     let start = Instant::now();
     for step in 0..args.steps {
         let stats = world.step(DT)?;
         bp_ns.push(stats.broadphase_time.as_nanos() as f64 / world.len().max(1) as f64);
         step_ms.push(stats.total_time.as_secs_f64() * 1e3);
+        worst_overlap = worst_overlap.max(stats.max_penetration);
         if stats.kinetic_energy > peak_energy {
             (peak_energy, peak_step) = (stats.kinetic_energy, step);
         }
@@ -226,23 +228,23 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         (
             "kinetic energy",
             format!(
-                "start 0 J, peak {peak_energy:.0} J (step {peak_step}), end {:.3} J",
+                "start 0 J, peak {peak_energy:.3e} J (step {peak_step}), end {:.3e} J",
                 stats.kinetic_energy
             ),
         ),
         (
             "potential energy",
             format!(
-                "start {potential_start:.0} J, end {:.0} J",
+                "start {potential_start:.3e} J, end {:.3e} J",
                 potential(&world)
             ),
         ),
         (
             "deepest overlap",
             format!(
-                "{:.4} m ({:.1} % of r)",
-                stats.max_penetration,
-                100.0 * stats.max_penetration / RADIUS
+                "last step {:.1} % of r, worst step {:.1} % of r",
+                100.0 * stats.max_penetration / RADIUS,
+                100.0 * worst_overlap / RADIUS
             ),
         ),
     ];

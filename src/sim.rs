@@ -18,11 +18,12 @@
 //!    gap `s > 0` approach by at most `s/dt`.
 //! 4. **Velocity solve**: sequential impulses over `velocity_iterations` passes, warm-started
 //!    from the previous step's impulses of the same pair, rolling resistance and friction
-//!    (clamped to the cone `μ·λn`) before the normal impulse. Then one restitution pass (as
-//!    in Box2D v3): a contact that was approaching faster than `restitution_threshold` and
-//!    carried a normal impulse is given the separating speed `e·|v_approach|`. (A speculative
-//!    contact thus bounces up to one step's travel before it touches: the price of never
-//!    tunnelling.)
+//!    (clamped to the cone `μ·λn`) before the normal impulse. Restitution is part of the
+//!    normal target, so every pass sees it together with the other contacts (a bounce
+//!    applied after the solve would drive spheres into their neighbours): an impact faster
+//!    than `restitution_threshold` that closes its gap within the step aims for the
+//!    separating speed `e·|v_approach|`. A speculative contact thus bounces up to one step's
+//!    travel before it touches: the price of never tunnelling.
 //! 5. **Position correction** by split impulses: a separate pseudo-velocity removes
 //!    `position_correction` of the penetration beyond `slop` per step and is thrown away after
 //!    the position update, so correcting overlap never adds kinetic energy (Baumgarte in the
@@ -245,8 +246,8 @@ struct Contact {
     /// `rolling_resistance · reduced radius`: the rolling impulse limit per unit normal impulse.
     rolling_arm: f32,
     restitution: f32,
-    /// Normal relative velocity before the solve (negative when approaching).
-    approach: f32,
+    /// The normal relative velocity the solve aims for (see `World::prepare`).
+    target: f32,
     normal_impulse: f32,
     tangent_impulse: Vec3,
     rolling_impulse: Vec3,
@@ -435,11 +436,10 @@ impl World {
         let broadphase_time = bp_start.elapsed();
 
         let (touching, max_penetration) = self.narrow_phase();
-        self.prepare();
+        self.prepare(dt);
         for _ in 0..self.config.velocity_iterations {
-            self.solve_velocities(dt);
+            self.solve_velocities();
         }
-        self.apply_restitution();
         self.solve_positions(dt);
         for ((x, v), p) in self
             .positions
@@ -581,7 +581,7 @@ impl World {
                 rolling_arm: (material_i.rolling_resistance * material_j.rolling_resistance).sqrt()
                     * reduced_radius,
                 restitution: material_i.restitution.max(material_j.restitution),
-                approach: 0.0,
+                target: 0.0,
                 normal_impulse,
                 tangent_impulse,
                 rolling_impulse,
@@ -637,12 +637,25 @@ impl World {
         }
     }
 
-    /// Records every contact's approach speed (before any impulse), then applies the
-    /// warm-start impulses.
-    fn prepare(&mut self) {
+    /// Sets every contact's target normal velocity from its approach speed (before any
+    /// impulse), then applies the warm-start impulses.
+    ///
+    /// The target: an impact faster than `restitution_threshold` that closes the gap within
+    /// this step separates at `e·|approach|`; otherwise a contact with gap `s > 0` may close at
+    /// most `s/dt`, and a touching one must not approach.
+    fn prepare(&mut self, dt: f32) {
+        let threshold = self.config.restitution_threshold;
         for k in 0..self.contacts.len() {
             let c = self.contacts[k];
-            self.contacts[k].approach = self.contact_velocity(&c).dot(c.normal);
+            let approach = self.contact_velocity(&c).dot(c.normal);
+            let hits = approach < -threshold && approach * dt <= -c.separation;
+            self.contacts[k].target = if hits && c.restitution > 0.0 {
+                -c.restitution * approach
+            } else if c.separation > 0.0 {
+                -c.separation / dt
+            } else {
+                0.0
+            };
         }
         for k in 0..self.contacts.len() {
             let c = self.contacts[k];
@@ -652,10 +665,9 @@ impl World {
     }
 
     /// One sequential-impulse pass: per contact, rolling resistance and friction within the
-    /// limits set by the current normal impulse, then the non-penetration impulse (a
-    /// speculative contact with gap `s > 0` may close at most `s/dt`). Impulses are
-    /// accumulated and clamped as totals (Catto 2005).
-    fn solve_velocities(&mut self, dt: f32) {
+    /// limits set by the current normal impulse, then the normal impulse towards the
+    /// contact's target velocity. Impulses are accumulated and clamped as totals (Catto 2005).
+    fn solve_velocities(&mut self) {
         for k in 0..self.contacts.len() {
             let mut c = self.contacts[k];
 
@@ -680,30 +692,7 @@ impl World {
             c.tangent_impulse = t;
 
             let vn = self.contact_velocity(&c).dot(c.normal);
-            let target = if c.separation > 0.0 {
-                -c.separation / dt
-            } else {
-                0.0
-            };
-            let n = (c.normal_impulse + c.normal_mass * (target - vn)).max(0.0);
-            self.apply_impulse(&c, c.normal * (n - c.normal_impulse));
-            c.normal_impulse = n;
-            self.contacts[k] = c;
-        }
-    }
-
-    /// Gives every impact that carried a normal impulse the separating speed
-    /// `restitution · |approach|`, as Box2D v3's restitution pass does.
-    fn apply_restitution(&mut self) {
-        let threshold = self.config.restitution_threshold;
-        for k in 0..self.contacts.len() {
-            let mut c = self.contacts[k];
-            if c.restitution == 0.0 || c.approach > -threshold || c.normal_impulse == 0.0 {
-                continue;
-            }
-            let vn = self.contact_velocity(&c).dot(c.normal);
-            let target = -c.restitution * c.approach;
-            let n = (c.normal_impulse + c.normal_mass * (target - vn)).max(0.0);
+            let n = (c.normal_impulse + c.normal_mass * (c.target - vn)).max(0.0);
             self.apply_impulse(&c, c.normal * (n - c.normal_impulse));
             c.normal_impulse = n;
             self.contacts[k] = c;
