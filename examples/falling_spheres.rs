@@ -140,14 +140,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     bar.set_style(ProgressStyle::with_template(
         "{bar:40.cyan/blue} {pos}/{len} steps  {per_sec}  eta {eta}",
     )?);
-    let potential = |w: &World| -> f64 {
-        let g = -f64::from(w.config().gravity.y);
-        w.positions()
-            .iter()
-            .map(|c| g * f64::from(c.y) * mass_of(RADIUS))
-            .sum()
-    };
-    let potential_start = potential(&world);
+    let potential_start = world.potential_energy();
     let mut bp_ns = Vec::with_capacity(args.steps);
     let mut step_ms = Vec::with_capacity(args.steps);
     let (mut peak_energy, mut peak_step, mut verified) = (0.0f64, 0, 0);
@@ -236,7 +229,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             "potential energy",
             format!(
                 "start {potential_start:.3e} J, end {:.3e} J",
-                potential(&world)
+                world.potential_energy()
             ),
         ),
         (
@@ -260,11 +253,6 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         println!("wrote {}", path.display());
     }
     Ok(())
-}
-
-/// Mass of one sphere of radius `r` at the scene's density (1000 kg/m³).
-fn mass_of(r: f32) -> f64 {
-    1000.0 * 4.0 / 3.0 * std::f64::consts::PI * f64::from(r).powi(3)
 }
 
 /// The brute-force pair set over exactly the boxes the broadphase holds this step.

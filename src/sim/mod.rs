@@ -433,6 +433,18 @@ impl World {
             .sum()
     }
 
+    /// `Σ −m·g·x` over all spheres, in joules: the gravitational potential energy relative to
+    /// the plane through the origin perpendicular to gravity (summed in `f64`, in index order).
+    #[must_use]
+    pub fn potential_energy(&self) -> f64 {
+        let g = self.config.gravity;
+        self.positions
+            .iter()
+            .zip(&self.inv_masses)
+            .map(|(x, w)| -f64::from(g.dot(*x)) / f64::from(*w))
+            .sum()
+    }
+
     /// The settings in force.
     #[must_use]
     pub fn config(&self) -> &WorldConfig {
