@@ -291,6 +291,7 @@ type CellView = (u32, Aabb);
 //     let octree = world.broadphase().octree();
 //     spheres: octree.level_of(key).unwrap_or(NO_LEVEL) per sphere key,
 //     cells:   octree.for_each_occupied_cell(|level, aabb| cells.push((level, aabb))).
+// With `--index bvh` the octree holds no sphere: every level is `None` (drawn as BVH), no cells.
 // ---------------------------------------------------------------------------------------------
 /// Each sphere as `(centre, radius, octree level)` and the occupied octree cells as
 /// `(level, cell box)`.
