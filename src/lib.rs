@@ -76,6 +76,7 @@ pub mod pair;
 #[cfg(feature = "rapier")]
 pub mod rapier;
 pub mod scene;
+pub mod sim;
 
 pub use broadphase::{BodyKind, BroadPhase, Config, Shape, StepPairs};
 pub use bvh::{Bvh, BvhConfig, SplitMethod};
