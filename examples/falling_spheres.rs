@@ -283,58 +283,22 @@ type SphereView = (Vec3, f32, u32);
 /// An occupied octree cell: its level and its box.
 type CellView = (u32, Aabb);
 
-// ---------------------------------------------------------------------------------------------
-// INTEGRATION POINT. Until `BroadPhase::octree()` lands, this computes what the octree does:
-// a sphere lives at the deepest level whose split planes its broadphase box does not straddle
-// (a box outside the bounds lives in the root), and a cell is occupied when a sphere lives in
-// it. Replace the body with
-//     let octree = world.broadphase().octree();
-//     spheres: octree.level_of(key).unwrap_or(NO_LEVEL) per sphere key,
-//     cells:   octree.for_each_occupied_cell(|level, aabb| cells.push((level, aabb))).
-// With `--index bvh` the octree holds no sphere: every level is `None` (drawn as BVH), no cells.
-// ---------------------------------------------------------------------------------------------
 /// Each sphere as `(centre, radius, octree level)` and the occupied octree cells as
-/// `(level, cell box)`.
+/// `(level, cell box)`, straight from the broadphase's octree. With `--index bvh` the octree
+/// holds no sphere: every level is [`NO_LEVEL`] (drawn as BVH) and no cell is occupied.
 fn octree_view(world: &World) -> (Vec<SphereView>, Vec<CellView>) {
-    let bp = world.broadphase();
-    let (bounds, depth) = (bp.config().bounds, bp.config().octree_depth);
-    let in_octree = world.config().index == IndexKind::Octree;
-    let mut occupied = BTreeSet::new();
-    let mut spheres = Vec::with_capacity(world.len());
-    for (i, &key) in world.sphere_keys().iter().enumerate() {
-        let (center, radius) = (world.positions()[i], world.radii()[i]);
-        let Some(aabb) = bp.aabb(key).filter(|_| in_octree) else {
-            spheres.push((center, radius, NO_LEVEL));
-            continue;
-        };
-        let mut placed = (0, [0u64; 3]);
-        if bounds.contains(&aabb) {
-            for level in (0..=depth).rev() {
-                let cells = f64::from(1u32 << level);
-                let cell_of = |p: Vec3, axis: usize| {
-                    let t = f64::from(p[axis] - bounds.min[axis])
-                        / f64::from(bounds.max[axis] - bounds.min[axis]);
-                    ((t * cells).floor() as u64).min((1u64 << level) - 1)
-                };
-                let lo = [0, 1, 2].map(|a| cell_of(aabb.min, a));
-                let hi = [0, 1, 2].map(|a| cell_of(aabb.max, a));
-                if lo == hi {
-                    placed = (level, lo);
-                    break;
-                }
-            }
-        }
-        occupied.insert(placed);
-        spheres.push((center, radius, placed.0));
-    }
-    let cells = occupied
-        .into_iter()
-        .map(|(level, cell)| {
-            let size = bounds.extent() / (1u32 << level) as f32;
-            let min = bounds.min + Vec3::new(cell[0] as f32, cell[1] as f32, cell[2] as f32) * size;
-            (level, Aabb::new(min, min + size))
+    let octree = world.broadphase().octree();
+    let spheres = world
+        .sphere_keys()
+        .iter()
+        .enumerate()
+        .map(|(i, &key)| {
+            let level = octree.level_of(key).unwrap_or(NO_LEVEL);
+            (world.positions()[i], world.radii()[i], level)
         })
         .collect();
+    let mut cells = Vec::new();
+    octree.for_each_occupied_cell(|level, aabb| cells.push((level, aabb)));
     (spheres, cells)
 }
 
