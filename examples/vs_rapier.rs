@@ -32,11 +32,11 @@
 //! `ratio=<speed-up> missed=<n> extra=<n>`; for `--scene all` the ratio is the worst (smallest)
 //! speed-up of the scenes and `missed`/`extra` are summed over them.
 
-use broadleaf::octree::MAX_DEPTH;
+use broadleaf::octree::depth_for;
 use broadleaf::pair::{self, Pair};
 use broadleaf::rapier::{Comparison, record_pile};
-use broadleaf::scene::{Bodies, Churn, DT, Frame, Gas, Object, Scene, Spawn};
-use broadleaf::{BodyKind, BroadPhase, Config, ProxyKey, Shape, brute};
+use broadleaf::scene::{Bodies, Churn, DT, Feed, Frame, GAS_RADIUS, Gas, Object, Scene, Spawn};
+use broadleaf::{BroadPhase, Config, brute};
 use rapier3d::prelude::*;
 use std::process::exit;
 use std::time::Instant;
@@ -122,88 +122,19 @@ fn default_n(scene: &str) -> usize {
 /// broadleaf's side: the broadphase and the key of each scene id.
 struct Ours {
     bp: BroadPhase,
-    keys: Vec<Option<ProxyKey>>,
-    spheres_as_bodies: bool,
+    feed: Feed,
 }
 
 impl Ours {
     fn new(bounds: broadleaf::Aabb, index: Index) -> Self {
-        // Deepest cells at least 2 m wide: two sphere diameters of the gas scenes.
-        let edge = bounds.extent().max_element();
-        let depth = (edge / 2.0).log2().floor().clamp(0.0, MAX_DEPTH as f32) as u32;
         Ours {
             bp: BroadPhase::new(Config {
                 bounds,
-                octree_depth: depth,
+                octree_depth: depth_for(&bounds, GAS_RADIUS),
                 ..Config::default()
             }),
-            keys: Vec::new(),
-            spheres_as_bodies: index == Index::Bvh,
+            feed: Feed::new(index == Index::Bvh),
         }
-    }
-
-    fn insert(&mut self, s: &Spawn) {
-        let kind = if s.is_static {
-            BodyKind::Static
-        } else {
-            BodyKind::Dynamic
-        };
-        let key = match s.object {
-            Object::Sphere { center, radius } if !self.spheres_as_bodies => {
-                self.bp.insert_sphere(center, radius)
-            }
-            o => self.bp.insert_body(o.aabb(), kind),
-        }
-        .expect("scene objects are finite");
-        let id = s.id as usize;
-        if self.keys.len() <= id {
-            self.keys.resize(id + 1, None);
-        }
-        self.keys[id] = Some(key);
-    }
-
-    fn apply(&mut self, f: &Frame) {
-        for &id in &f.removed {
-            let key = self.keys[id as usize].take().expect("removed a live id");
-            self.bp.remove(key).expect("live key");
-        }
-        for s in &f.inserted {
-            self.insert(s);
-        }
-        for &(id, o) in &f.moved {
-            let key = self.keys[id as usize].expect("moved a live id");
-            match o {
-                Object::Sphere { center, radius } if !self.spheres_as_bodies => {
-                    self.bp.update_sphere(key, center, radius)
-                }
-                o => self.bp.update_body(key, o.aabb()),
-            }
-            .expect("scene objects are finite");
-        }
-    }
-
-    /// Brute force over the current boxes.
-    fn exact(&self) -> Vec<Pair> {
-        let proxies: Vec<brute::Proxy> = self
-            .keys
-            .iter()
-            .flatten()
-            .map(|&key| {
-                let shape = self.bp.shape(key).expect("live key");
-                brute::Proxy {
-                    key,
-                    aabb: shape.aabb(),
-                    is_static: matches!(
-                        shape,
-                        Shape::Body {
-                            kind: BodyKind::Static,
-                            ..
-                        }
-                    ),
-                }
-            })
-            .collect();
-        brute::sweep_pairs(&proxies)
     }
 }
 
@@ -336,7 +267,7 @@ impl Theirs {
         for cp in self.narrow_phase.contact_pairs() {
             let key_of = |h: ColliderHandle| {
                 let co = self.colliders.get(h)?;
-                let key = (*ours.keys.get(co.user_data as usize)?)?;
+                let key = ours.feed.key(u32::try_from(co.user_data).ok()?)?;
                 let fixed = co
                     .parent()
                     .and_then(|p| self.bodies.get(p))
@@ -381,8 +312,10 @@ fn run(name: &str, n: usize, args: &Args) -> Row {
     let mut theirs = Theirs::new();
     let mut spawns = Vec::new();
     scene.spawns(&mut spawns);
+    ours.feed
+        .spawn(&mut ours.bp, &spawns)
+        .expect("scene objects are finite");
     for s in &spawns {
-        ours.insert(s);
         theirs.insert(s);
     }
     ours.bp.step();
@@ -393,7 +326,9 @@ fn run(name: &str, n: usize, args: &Args) -> Row {
     for k in 0..args.warmup + args.steps {
         scene.advance(&mut frame);
         let t = Instant::now();
-        ours.apply(&frame);
+        ours.feed
+            .apply(&mut ours.bp, &frame)
+            .expect("scene frames are valid");
         let pairs = ours.bp.step().pairs;
         let ns = t.elapsed().as_nanos() as f64;
         last_pairs.clear();
@@ -411,7 +346,11 @@ fn run(name: &str, n: usize, args: &Args) -> Row {
     // rapier detects the last frame's poses (and holds its inserts) in one more step.
     theirs.step();
     let (rapier_pairs, unmapped) = theirs.pairs(&ours);
-    let mut cmp = Comparison::new(&last_pairs, &rapier_pairs, &ours.exact());
+    let mut cmp = Comparison::new(
+        &last_pairs,
+        &rapier_pairs,
+        &brute::broadphase_pairs(&ours.bp),
+    );
     cmp.unmapped = unmapped;
     Row {
         scene: name.to_string(),

@@ -334,6 +334,11 @@ impl BroadPhase {
         self.proxies.get(key).copied()
     }
 
+    /// Every live proxy with its shape as the user gave it, in slot order.
+    pub fn iter(&self) -> impl Iterator<Item = (ProxyKey, Shape)> + '_ {
+        self.proxies.iter().map(|(key, shape)| (key, *shape))
+    }
+
     /// Computes this step's pairs and their difference with the previous step's.
     ///
     /// The pair set is the union of four disjoint parts, each found once: sphere×sphere (the

@@ -1,7 +1,7 @@
 //! Seeded scene generators shared by tests, examples and benches (see `benchmarks.md`): the
 //! same seed gives the same motion everywhere, so a number can be reproduced with one command.
 
-use crate::{Aabb, Vec3};
+use crate::{Aabb, BodyKind, BroadPhase, Error, ProxyKey, Vec3};
 use glam::{Mat3, Quat};
 
 /// A small PCG32 generator (O'Neill's `pcg32_random_r`): deterministic on every platform, no
@@ -588,6 +588,83 @@ impl Scene for Churn {
                 });
             }
         }
+    }
+}
+
+/// Feeds a [`Scene`]'s objects and frames into a [`BroadPhase`], keeping the key of each scene
+/// id: the one adapter tests, benches and examples share.
+#[derive(Clone, Debug, Default)]
+pub struct Feed {
+    keys: Vec<Option<ProxyKey>>,
+    spheres_as_bodies: bool,
+}
+
+impl Feed {
+    /// An empty feed. With `spheres_as_bodies`, spheres go to the dynamic BVH as their boxes
+    /// (`insert_body`) instead of the octree, so both structures can run the same motion.
+    #[must_use]
+    pub fn new(spheres_as_bodies: bool) -> Self {
+        Feed {
+            keys: Vec::new(),
+            spheres_as_bodies,
+        }
+    }
+
+    /// Inserts every spawn; `Err` from the broadphase on a non-finite object.
+    pub fn spawn(&mut self, bp: &mut BroadPhase, spawns: &[Spawn]) -> Result<(), Error> {
+        spawns.iter().try_for_each(|s| self.insert(bp, s))
+    }
+
+    fn insert(&mut self, bp: &mut BroadPhase, s: &Spawn) -> Result<(), Error> {
+        let kind = if s.is_static {
+            BodyKind::Static
+        } else {
+            BodyKind::Dynamic
+        };
+        let key = match s.object {
+            Object::Sphere { center, radius } if !self.spheres_as_bodies => {
+                bp.insert_sphere(center, radius)?
+            }
+            o => bp.insert_body(o.aabb(), kind)?,
+        };
+        let id = s.id as usize;
+        if self.keys.len() <= id {
+            self.keys.resize(id + 1, None);
+        }
+        self.keys[id] = Some(key);
+        Ok(())
+    }
+
+    /// Applies a frame: removes, then inserts, then moves. `Err(UnknownProxy)` for an id this
+    /// feed does not hold, or the broadphase's error on a bad object.
+    pub fn apply(&mut self, bp: &mut BroadPhase, frame: &Frame) -> Result<(), Error> {
+        for &id in &frame.removed {
+            let key = self.take(id).ok_or(Error::UnknownProxy)?;
+            bp.remove(key)?;
+        }
+        for s in &frame.inserted {
+            self.insert(bp, s)?;
+        }
+        for &(id, o) in &frame.moved {
+            let key = self.key(id).ok_or(Error::UnknownProxy)?;
+            match o {
+                Object::Sphere { center, radius } if !self.spheres_as_bodies => {
+                    bp.update_sphere(key, center, radius)?;
+                }
+                o => bp.update_body(key, o.aabb())?,
+            }
+        }
+        Ok(())
+    }
+
+    /// The key of scene object `id`, if it is live.
+    #[must_use]
+    pub fn key(&self, id: u32) -> Option<ProxyKey> {
+        self.keys.get(id as usize).copied().flatten()
+    }
+
+    fn take(&mut self, id: u32) -> Option<ProxyKey> {
+        self.keys.get_mut(id as usize).and_then(Option::take)
     }
 }
 
