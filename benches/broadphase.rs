@@ -43,5 +43,139 @@ fn octree_step(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, octree_step);
-criterion_main!(benches);
+
+// ---------------------------------------------------------------------------------------------
+// BVH: SAH builds, and refit + self pairs of moving boxes.
+// ---------------------------------------------------------------------------------------------
+mod bvh_benches {
+    use broadleaf::bvh::{Bvh, BvhConfig};
+    use broadleaf::scene::{DT, GAS_SPEED, Rng};
+    use broadleaf::{Aabb, ProxyKey, Vec3};
+    use criterion::{BenchmarkId, Criterion, Throughput};
+    use std::hint::black_box;
+
+    /// A local stand-in for the `bodies` scene until it lands in `scene.rs`: `n` boxes with
+    /// half-extents log-uniform in [0.1, 2] m per axis, centres uniform in a cube sized so the
+    /// boxes fill about 10 % of it, velocities uniform in [−5, 5]³ m/s, reflecting at the walls.
+    pub struct Bodies {
+        half: f32,
+        centers: Vec<Vec3>,
+        extents: Vec<Vec3>,
+        velocities: Vec<Vec3>,
+    }
+
+    impl Bodies {
+        pub fn new(n: usize, seed: u64) -> Self {
+            let mut rng = Rng::new(seed);
+            let (lo, hi) = (0.1f32.ln(), 2.0f32.ln());
+            let extents: Vec<Vec3> = (0..n)
+                .map(|_| {
+                    Vec3::new(
+                        rng.range(lo, hi).exp(),
+                        rng.range(lo, hi).exp(),
+                        rng.range(lo, hi).exp(),
+                    )
+                })
+                .collect();
+            let volume: f32 = extents.iter().map(|e| 8.0 * e.x * e.y * e.z).sum();
+            let half = (volume / 0.1).cbrt() * 0.5;
+            let centers = (0..n)
+                .map(|_| rng.vec3_in(Vec3::splat(-half), Vec3::splat(half)))
+                .collect();
+            let velocities = (0..n)
+                .map(|_| rng.vec3_in(Vec3::splat(-GAS_SPEED), Vec3::splat(GAS_SPEED)))
+                .collect();
+            Bodies {
+                half,
+                centers,
+                extents,
+                velocities,
+            }
+        }
+
+        pub fn aabbs(&self) -> Vec<Aabb> {
+            (0..self.centers.len()).map(|i| self.aabb(i)).collect()
+        }
+
+        fn aabb(&self, i: usize) -> Aabb {
+            Aabb::from_center_half_extents(self.centers[i], self.extents[i])
+        }
+
+        pub fn step(&mut self, dt: f32) {
+            let h = self.half;
+            for (c, v) in self.centers.iter_mut().zip(&mut self.velocities) {
+                *c += *v * dt;
+                for axis in 0..3 {
+                    if c[axis].abs() > h {
+                        c[axis] = (2.0 * h.copysign(c[axis]) - c[axis]).clamp(-h, h);
+                        v[axis] = -v[axis];
+                    }
+                }
+            }
+        }
+    }
+
+    fn build(c: &mut Criterion) {
+        let mut group = c.benchmark_group("bvh_build_sah");
+        group.sample_size(10);
+        for n in [100_000usize, 1_000_000] {
+            let boxes = Bodies::new(n, 1).aabbs();
+            let (mut bvh, _) = Bvh::from_aabbs(BvhConfig::default(), &boxes).unwrap();
+            group.throughput(Throughput::Elements(n as u64));
+            group.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, _| {
+                b.iter(|| {
+                    bvh.rebuild();
+                    black_box(bvh.sah_cost())
+                });
+            });
+        }
+        group.finish();
+    }
+
+    /// One physics step of `n` moving boxes: move them (a few ns each), update every box, refit,
+    /// collect all self pairs.
+    fn refit_pairs(c: &mut Criterion) {
+        let mut group = c.benchmark_group("bvh_refit_pairs");
+        for n in [10_000usize, 100_000] {
+            let mut scene = Bodies::new(n, 2);
+            let (mut bvh, keys) = Bvh::from_aabbs(BvhConfig::default(), &scene.aabbs()).unwrap();
+            let mut pairs: Vec<(ProxyKey, ProxyKey)> = Vec::new();
+            group.throughput(Throughput::Elements(n as u64));
+            group.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, _| {
+                b.iter(|| {
+                    scene.step(DT);
+                    for (i, &k) in keys.iter().enumerate() {
+                        bvh.update(k, scene.aabb(i)).unwrap();
+                    }
+                    bvh.refit();
+                    pairs.clear();
+                    bvh.for_each_pair(|a, b| pairs.push((a, b)));
+                    black_box(pairs.len())
+                });
+            });
+            let s = bvh.stats();
+            eprintln!(
+                "bvh_refit_pairs/{n}: {} pairs, {} rebuilds, {} refits, cost ratio {:.3}, depth {}",
+                pairs.len(),
+                s.rebuilds,
+                s.refits,
+                s.cost_ratio,
+                s.depth
+            );
+        }
+        group.finish();
+    }
+
+    pub fn register(c: &mut Criterion) {
+        build(c);
+        refit_pairs(c);
+    }
+}
+
+fn benches(c: &mut Criterion) {
+    octree_step(c);
+    bvh_benches::register(c);
+}
+
+criterion_group!(broadphase, benches);
+criterion_main!(broadphase);

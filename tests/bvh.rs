@@ -98,13 +98,13 @@ fn check_all(
         }
         let mut all = Vec::new();
         bvh.cast_ray_all(origin, dir, max_t, |k, t| all.push((k, t)));
-        all.sort_unstable_by(|a, b| a.0.cmp(&b.0));
+        all.sort_unstable_by_key(|a| a.0);
         let inv = broadleaf::geom::inverse_dir(dir);
         let mut want_all: Vec<(ProxyKey, f32)> = ps
             .iter()
             .filter_map(|p| p.aabb.ray_entry(origin, inv, max_t).map(|t| (p.key, t)))
             .collect();
-        want_all.sort_unstable_by(|a, b| a.0.cmp(&b.0));
+        want_all.sort_unstable_by_key(|a| a.0);
         assert_eq!(all, want_all, "cast_ray_all");
     }
 }
@@ -183,9 +183,8 @@ proptest! {
                     let i = i as usize % model.len();
                     // Half small moves, half teleports anywhere.
                     let b = if rng.below(2) == 0 {
-                        let (k, b) = model[i];
+                        let b = model[i].1;
                         let d = (rng.vec3_in(Vec3::splat(-1.0), Vec3::splat(1.0)) * 2.0).round() * 0.5;
-                        let _ = k;
                         Aabb::new(b.min + d, b.max + d)
                     } else {
                         random_box(&mut rng, 10.0)
@@ -476,4 +475,72 @@ fn many_changes_trigger_a_rebuild() {
         (2, 0, 0, 99)
     );
     bvh.validate();
+}
+
+#[test]
+fn deep_tree_spills_the_inline_stacks() {
+    // Middle splits of exponentially spaced boxes peel one or two boxes per level: deeper than
+    // the inline stacks (64), so queries must spill to the heap and still be exact.
+    let boxes: Vec<Aabb> = (0..120)
+        .map(|i| {
+            let x = 2f32.powi(i);
+            Aabb::new(Vec3::new(x, 0.0, 0.0), Vec3::new(x * 1.2, 1.0, 1.0))
+        })
+        .collect();
+    let (mut bvh, keys) = Bvh::from_aabbs(config(SplitMethod::Middle, 1), &boxes).unwrap();
+    assert!(bvh.stats().depth > 64, "depth {}", bvh.stats().depth);
+    let model: Vec<(ProxyKey, Aabb)> = keys.into_iter().zip(boxes).collect();
+    let copy = bvh.clone();
+    check_all(&mut bvh, &model, &copy, &model, &mut Rng::new(8));
+    // A ray along the line from beyond the far end hits the last box first.
+    let far = Vec3::new(2f32.powi(121), 0.5, 0.5);
+    let hit = bvh.cast_ray(far, -Vec3::X, f32::INFINITY);
+    assert_eq!(hit.map(|h| h.0), Some(model[119].0));
+}
+
+#[test]
+fn a_long_line_builds_refits_and_traverses_iteratively() {
+    // 200k boxes on a line (1M in release takes the same code path): build, update, refit,
+    // pairs, queries and rays all run on explicit stacks. Neighbours touch, so the pair set
+    // is exactly the n − 1 consecutive pairs.
+    let n = 200_000;
+    let boxes: Vec<Aabb> = (0..n)
+        .map(|i| {
+            Aabb::new(
+                Vec3::new(i as f32, 0.0, 0.0),
+                Vec3::new(i as f32 + 1.0, 1.0, 1.0),
+            )
+        })
+        .collect();
+    for method in [SplitMethod::Sah, SplitMethod::Middle] {
+        let (mut bvh, keys) = Bvh::from_aabbs(config(method, 4), &boxes).unwrap();
+        bvh.validate();
+        for (k, b) in keys.iter().zip(&boxes).step_by(3) {
+            bvh.update(*k, Aabb::new(b.min, b.max + Vec3::new(0.0, 0.5, 0.0)))
+                .unwrap();
+        }
+        bvh.refit();
+        bvh.validate();
+        let mut count = 0usize;
+        let mut ok = true;
+        bvh.for_each_pair(|a, b| {
+            count += 1;
+            let (i, j) = (
+                keys.binary_search(&a).unwrap(),
+                keys.binary_search(&b).unwrap(),
+            );
+            ok &= i.abs_diff(j) == 1;
+        });
+        assert!(ok, "a pair of non-neighbours");
+        assert_eq!(count, n - 1);
+        let mut hits = Vec::new();
+        bvh.query_aabb(
+            &Aabb::new(Vec3::new(10.5, 0.0, 0.0), Vec3::new(12.5, 0.0, 0.0)),
+            |k| hits.push(k),
+        );
+        hits.sort_unstable();
+        assert_eq!(hits, keys[10..=12]);
+        let hit = bvh.cast_ray(Vec3::new(-5.0, 0.5, 0.5), Vec3::X, f32::INFINITY);
+        assert_eq!(hit, Some((keys[0], 5.0)));
+    }
 }

@@ -36,6 +36,16 @@ pub(crate) struct BuildScratch {
     refs: Vec<BuildRef>,
     tasks: Vec<Task>,
     keys: Vec<ProxyKey>,
+    bins: Bins,
+}
+
+/// SAH bins, sized to `sah_buckets` once per build and reset per node (only the used ones:
+/// resetting a fixed 64-entry array per node dominated small nodes).
+#[derive(Clone, Debug, Default)]
+struct Bins {
+    buckets: Vec<Bucket>,
+    /// The union of the buckets right of each plane.
+    right: Vec<Bucket>,
 }
 
 /// A chosen split: `refs[..mid]` go left; the bounds and centroid bounds of both halves.
@@ -45,7 +55,7 @@ struct Split {
     right: (Aabb, Aabb),
 }
 
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 struct Bucket {
     count: u32,
     bounds: Aabb,
@@ -97,6 +107,7 @@ impl Bvh {
             &self.config,
             &mut s.refs,
             &mut s.tasks,
+            &mut s.bins,
             &mut self.nodes,
             &mut self.parent,
             &mut self.leaf_of,
@@ -131,6 +142,7 @@ fn build_nodes(
     config: &BvhConfig,
     refs: &mut [BuildRef],
     tasks: &mut Vec<Task>,
+    bins: &mut Bins,
     nodes: &mut Vec<Node>,
     parent: &mut Vec<u32>,
     leaf_of: &mut [u32],
@@ -139,6 +151,9 @@ fn build_nodes(
         return;
     }
     let (bounds, centroids) = bounds_of(refs);
+    let nb = config.sah_buckets as usize;
+    bins.buckets.resize(nb, Bucket::EMPTY);
+    bins.right.resize(nb, Bucket::EMPTY);
     tasks.clear();
     tasks.push(Task {
         start: 0,
@@ -155,7 +170,13 @@ fn build_nodes(
         }
         parent.push(t.parent);
         let range = t.start as usize..t.end as usize;
-        match split(config, &mut refs[range.clone()], &t.bounds, &t.centroids) {
+        match split(
+            config,
+            bins,
+            &mut refs[range.clone()],
+            &t.bounds,
+            &t.centroids,
+        ) {
             None => {
                 nodes.push(Node::leaf(&t.bounds, t.start, t.end - t.start));
                 leaf_of[range].fill(index);
@@ -188,6 +209,7 @@ fn build_nodes(
 /// halves non-empty, so the build always terminates.
 fn split(
     config: &BvhConfig,
+    bins: &mut Bins,
     refs: &mut [BuildRef],
     bounds: &Aabb,
     centroids: &Aabb,
@@ -209,7 +231,7 @@ fn split(
         };
     }
     match config.split {
-        SplitMethod::Sah => sah_split(config, refs, bounds, centroids, axis),
+        SplitMethod::Sah => sah_split(config, bins, refs, bounds, centroids, axis),
         _ if small => None,
         SplitMethod::Middle => {
             let mid_point = centroids.center()[axis];
@@ -235,6 +257,7 @@ fn split(
 // centroid (the extremes of the centroid bounds), so every candidate has two non-empty sides.
 fn sah_split(
     config: &BvhConfig,
+    bins: &mut Bins,
     refs: &mut [BuildRef],
     bounds: &Aabb,
     centroids: &Aabb,
@@ -242,35 +265,37 @@ fn sah_split(
 ) -> Option<Split> {
     let n = refs.len();
     let nb = config.sah_buckets as usize;
+    if n <= nb {
+        return sweep_split(config, bins, refs, bounds, axis);
+    }
     let lo = centroids.min[axis];
     let scale = nb as f32 / (centroids.max[axis] - lo);
     let bucket_of = |r: &BuildRef| (((r.aabb.center()[axis] - lo) * scale) as usize).min(nb - 1);
 
-    let mut buckets = [Bucket::EMPTY; MAX_BUCKETS];
+    let Bins { buckets, right } = bins;
+    buckets.fill(Bucket::EMPTY);
     for r in refs.iter() {
         let b = &mut buckets[bucket_of(r)];
         let c = r.aabb.center();
         b.count += 1;
         b.bounds = b.bounds.union(&r.aabb);
-        b.centroids = b.centroids.union(&Aabb::new(c, c));
+        b.centroids = Aabb::new(b.centroids.min.min(c), b.centroids.max.max(c));
     }
-    // right_area[i], right_count[i]: the union of buckets i+1.. (the right side of plane i).
-    let mut right_area = [0.0f32; MAX_BUCKETS];
-    let mut right_count = [0u32; MAX_BUCKETS];
+    // right[i]: the union of buckets i+1.. (the right side of plane i).
     let mut acc = Bucket::EMPTY;
     for i in (1..nb).rev() {
         acc = acc.merge(&buckets[i]);
-        right_area[i - 1] = acc.bounds.surface_area();
-        right_count[i - 1] = acc.count;
+        right[i - 1] = acc;
     }
-    let (mut best_cost, mut best_plane) = (f32::INFINITY, 0);
+    let (mut best_cost, mut best_plane, mut best_left) = (f32::INFINITY, 0, Bucket::EMPTY);
     let mut acc = Bucket::EMPTY;
     for i in 0..nb - 1 {
         acc = acc.merge(&buckets[i]);
-        let cost =
-            acc.count as f32 * acc.bounds.surface_area() + right_count[i] as f32 * right_area[i];
-        if cost < best_cost {
-            (best_cost, best_plane) = (cost, i);
+        let cost = acc.count as f32 * acc.bounds.surface_area()
+            + right[i].count as f32 * right[i].bounds.surface_area();
+        // `i == 0`: areas overflow to ∞ for huge boxes, and the best must still be a plane.
+        if i == 0 || cost < best_cost {
+            (best_cost, best_plane, best_left) = (cost, i, acc);
         }
     }
     let area = bounds.surface_area();
@@ -282,17 +307,47 @@ fn sah_split(
         debug_assert!(false, "SAH split left a side empty");
         return Some(halves(refs, n / 2));
     }
-    let left = buckets[..=best_plane]
-        .iter()
-        .fold(Bucket::EMPTY, |a, b| a.merge(b));
-    let right = buckets[best_plane + 1..nb]
-        .iter()
-        .fold(Bucket::EMPTY, |a, b| a.merge(b));
+    let best_right = right[best_plane];
     Some(Split {
         mid,
-        left: (left.bounds, left.centroids),
-        right: (right.bounds, right.centroids),
+        left: (best_left.bounds, best_left.centroids),
+        right: (best_right.bounds, best_right.centroids),
     })
+}
+
+/// SAH for a node with no more primitives than buckets: sort them by centroid along `axis`
+/// and evaluate the cost of all n − 1 splits between neighbours exactly (same cost and leaf
+/// rule as the binned version, which would spend more time on its buckets than on the node).
+fn sweep_split(
+    config: &BvhConfig,
+    bins: &mut Bins,
+    refs: &mut [BuildRef],
+    bounds: &Aabb,
+    axis: usize,
+) -> Option<Split> {
+    let n = refs.len();
+    refs.sort_unstable_by(|a, b| a.aabb.center()[axis].total_cmp(&b.aabb.center()[axis]));
+    let right = &mut bins.right;
+    let mut acc = Aabb::EMPTY;
+    for i in (1..n).rev() {
+        acc = acc.union(&refs[i].aabb);
+        right[i - 1].bounds = acc;
+    }
+    let (mut best_cost, mut best_mid) = (f32::INFINITY, 1);
+    let mut acc = Aabb::EMPTY;
+    for i in 0..n - 1 {
+        acc = acc.union(&refs[i].aabb);
+        let cost = (i + 1) as f32 * acc.surface_area()
+            + (n - i - 1) as f32 * right[i].bounds.surface_area();
+        if cost < best_cost {
+            (best_cost, best_mid) = (cost, i + 1);
+        }
+    }
+    let area = bounds.surface_area();
+    if n <= config.max_leaf_size as usize && n as f32 * area <= area + best_cost {
+        return None;
+    }
+    Some(halves(refs, best_mid))
 }
 
 /// Splits at the median centroid along `axis` (`select_nth_unstable_by`, O(n)).
@@ -360,6 +415,14 @@ mod tests {
             .collect()
     }
 
+    fn bins() -> Bins {
+        let nb = BvhConfig::default().sah_buckets as usize;
+        Bins {
+            buckets: vec![Bucket::EMPTY; nb],
+            right: vec![Bucket::EMPTY; nb],
+        }
+    }
+
     #[test]
     fn partition_moves_the_left_ones_first() {
         let mut r = refs(&[5.0, 1.0, 7.0, 2.0, 9.0, 0.0]);
@@ -374,7 +437,7 @@ mod tests {
         let mut r = refs(&[0.0, 0.5, 1.0, 100.0, 100.5, 101.0, 0.2, 100.2, 0.7]);
         let (b, c) = bounds_of(&r);
         let config = BvhConfig::default();
-        let s = split(&config, &mut r, &b, &c).expect("a split");
+        let s = split(&config, &mut bins(), &mut r, &b, &c).expect("a split");
         assert_eq!(s.mid, 5);
         assert!(r[..5].iter().all(|r| r.aabb.min.x < 50.0));
         assert_eq!(s.left.0, bounds_of(&r[..5]).0);
@@ -387,8 +450,11 @@ mod tests {
         let config = BvhConfig::default();
         let mut r = refs(&[3.0; 4]);
         let (b, c) = bounds_of(&r);
-        assert!(split(&config, &mut r, &b, &c).is_none());
+        assert!(split(&config, &mut bins(), &mut r, &b, &c).is_none());
         let mut r = refs(&[3.0; 9]);
-        assert_eq!(split(&config, &mut r, &b, &c).map(|s| s.mid), Some(4));
+        assert_eq!(
+            split(&config, &mut bins(), &mut r, &b, &c).map(|s| s.mid),
+            Some(4)
+        );
     }
 }

@@ -100,7 +100,7 @@ impl BvhConfig {
         if !(self.rebuild_threshold.is_finite() && self.rebuild_threshold >= 1.0) {
             return bad("rebuild_threshold", self.rebuild_threshold);
         }
-        if !(self.rebuild_after_changes >= 0.0) {
+        if self.rebuild_after_changes.is_nan() || self.rebuild_after_changes < 0.0 {
             return bad("rebuild_after_changes", self.rebuild_after_changes);
         }
         Ok(())
@@ -350,5 +350,81 @@ impl Bvh {
             rebuilds: self.rebuilds,
             refits: self.refits,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Vec3;
+    use crate::scene::Rng;
+
+    #[test]
+    fn insert_keyed_takes_the_callers_keys() {
+        let mut outer = SlotMap::<ProxyKey, ()>::with_key();
+        let mut bvh = Bvh::new(BvhConfig::default()).unwrap();
+        let b = Aabb::new(Vec3::ZERO, Vec3::ONE);
+        let k = outer.insert(());
+        bvh.insert_keyed(k, b).unwrap();
+        assert_eq!(bvh.insert_keyed(k, b), Err(Error::UnknownProxy));
+        assert_eq!(
+            bvh.insert_keyed(ProxyKey::null(), b),
+            Err(Error::UnknownProxy)
+        );
+        let bad = Aabb::new(Vec3::ONE, Vec3::ZERO);
+        assert!(bvh.insert_keyed(outer.insert(()), bad).is_err());
+        assert_eq!(bvh.len(), 1);
+        bvh.refit();
+        assert_eq!(bvh.aabb(k), Some(b));
+        bvh.remove(k).unwrap();
+        outer.remove(k);
+        let k2 = outer.insert(());
+        assert!(!bvh.contains(k) && !bvh.contains(k2));
+        bvh.validate();
+    }
+
+    /// Stands in for a counting allocator (which needs `unsafe impl GlobalAlloc`): after a
+    /// warm-up, a step of update-all + refit + pairs must not grow or move any buffer.
+    #[test]
+    fn steady_state_steps_reuse_every_buffer() {
+        let mut rng = Rng::new(4);
+        let mut boxes: Vec<Aabb> = (0..2000)
+            .map(|_| {
+                Aabb::from_center_radius(rng.vec3_in(Vec3::splat(-20.0), Vec3::splat(20.0)), 0.6)
+            })
+            .collect();
+        let config = BvhConfig {
+            rebuild_threshold: 1e6,
+            ..BvhConfig::default()
+        };
+        let (mut bvh, keys) = Bvh::from_aabbs(config, &boxes).unwrap();
+        let fingerprint = |b: &Bvh| {
+            [
+                (b.nodes.as_ptr() as usize, b.nodes.capacity()),
+                (b.boxes.as_ptr() as usize, b.boxes.capacity()),
+                (b.pair_stack.as_ptr() as usize, b.pair_stack.capacity()),
+                (b.sweep_a.as_ptr() as usize, b.sweep_a.capacity()),
+            ]
+        };
+        let mut pairs = Vec::with_capacity(100_000);
+        let mut step = |bvh: &mut Bvh, boxes: &mut [Aabb], rng: &mut Rng| {
+            for (b, k) in boxes.iter_mut().zip(&keys) {
+                let d = rng.vec3_in(Vec3::splat(-0.05), Vec3::splat(0.05));
+                *b = Aabb::new(b.min + d, b.max + d);
+                bvh.update(*k, *b).unwrap();
+            }
+            bvh.refit();
+            pairs.clear();
+            bvh.for_each_pair(|a, b| pairs.push((a, b)));
+        };
+        for _ in 0..5 {
+            step(&mut bvh, &mut boxes, &mut rng);
+        }
+        let before = fingerprint(&bvh);
+        for _ in 0..20 {
+            step(&mut bvh, &mut boxes, &mut rng);
+            assert_eq!(fingerprint(&bvh), before);
+        }
+        assert_eq!(bvh.stats().rebuilds, 1);
     }
 }

@@ -2,6 +2,7 @@
 //! lists against both (tree queries and sort-and-sweep on x).
 
 use super::Bvh;
+use super::node::Node;
 use crate::{Aabb, ProxyKey};
 
 impl Bvh {
@@ -40,7 +41,10 @@ impl Bvh {
                 }
             } else {
                 let (l, r) = node.children(a);
-                stack.extend_from_slice(&[(l, r), (r, r), (l, l)]);
+                if self.nodes[l as usize].overlaps(&self.nodes[r as usize]) {
+                    stack.push((l, r));
+                }
+                stack.extend_from_slice(&[(r, r), (l, l)]);
             }
         }
         self.pair_stack = stack;
@@ -72,7 +76,9 @@ impl Bvh {
     pub fn for_each_pair_with(&mut self, other: &Bvh, mut f: impl FnMut(ProxyKey, ProxyKey)) {
         let mut stack = core::mem::take(&mut self.pair_stack);
         stack.clear();
-        if !self.nodes.is_empty() && !other.nodes.is_empty() {
+        if let (Some(a), Some(b)) = (self.nodes.first(), other.nodes.first())
+            && a.overlaps(b)
+        {
             stack.push((0, 0));
         }
         while let Some((a, b)) = stack.pop() {
@@ -98,9 +104,10 @@ impl Bvh {
     }
 }
 
-/// One item `(a, b)` of a descent over two disjoint subtrees, `a` in `ta` and `b` in `tb`:
-/// nothing if their boxes are apart, every overlapping primitive pair if both are leaves,
-/// else the items of the larger interior node's children against the other.
+/// One item `(a, b)` of a descent over two disjoint subtrees with overlapping boxes, `a` in
+/// `ta` and `b` in `tb`: every overlapping primitive pair if both are leaves, else the items
+/// of the larger interior node's children against the other, for the children whose box
+/// overlaps the other's (pruned before the push, not after the pop).
 #[inline]
 fn cross_step(
     ta: &Bvh,
@@ -112,9 +119,7 @@ fn cross_step(
 ) {
     let na = &ta.nodes[a as usize];
     let nb = &tb.nodes[b as usize];
-    if !na.overlaps(nb) {
-        return;
-    }
+    debug_assert!(na.overlaps(nb));
     match (na.is_leaf(), nb.is_leaf()) {
         (true, true) => {
             let b_box = nb.aabb();
@@ -130,28 +135,38 @@ fn cross_step(
                 }
             }
         }
-        (false, true) => push_children_a(na, a, b, stack),
-        (true, false) => push_children_b(nb, a, b, stack),
+        (false, true) => push_children_a(ta, na, a, nb, b, stack),
+        (true, false) => push_children_b(na, a, tb, nb, b, stack),
         (false, false) => {
             if na.aabb().surface_area() >= nb.aabb().surface_area() {
-                push_children_a(na, a, b, stack);
+                push_children_a(ta, na, a, nb, b, stack);
             } else {
-                push_children_b(nb, a, b, stack);
+                push_children_b(na, a, tb, nb, b, stack);
             }
         }
     }
 }
 
+/// Pushes `(child, b)` for the children of `a` whose box overlaps `b`'s.
 #[inline]
-fn push_children_a(na: &super::node::Node, a: u32, b: u32, stack: &mut Vec<(u32, u32)>) {
+fn push_children_a(ta: &Bvh, na: &Node, a: u32, nb: &Node, b: u32, stack: &mut Vec<(u32, u32)>) {
     let (l, r) = na.children(a);
-    stack.extend_from_slice(&[(r, b), (l, b)]);
+    for c in [r, l] {
+        if ta.nodes[c as usize].overlaps(nb) {
+            stack.push((c, b));
+        }
+    }
 }
 
+/// Pushes `(a, child)` for the children of `b` whose box overlaps `a`'s.
 #[inline]
-fn push_children_b(nb: &super::node::Node, a: u32, b: u32, stack: &mut Vec<(u32, u32)>) {
+fn push_children_b(na: &Node, a: u32, tb: &Bvh, nb: &Node, b: u32, stack: &mut Vec<(u32, u32)>) {
     let (l, r) = nb.children(b);
-    stack.extend_from_slice(&[(a, r), (a, l)]);
+    for c in [r, l] {
+        if tb.nodes[c as usize].overlaps(na) {
+            stack.push((a, c));
+        }
+    }
 }
 
 /// Fills `order` with the indices `range`, sorted by `boxes[i].min.x`.
