@@ -46,6 +46,17 @@ impl Shape {
             Shape::Body { aabb, .. } => aabb,
         }
     }
+
+    /// The box the broadphase pairs: a sphere's `center ± (radius + margin)`, a body's box
+    /// grown by `margin` on every side. (For a sphere this is not always bit-equal to
+    /// `aabb().grown(margin)`, which rounds twice.)
+    #[must_use]
+    pub fn grown_aabb(&self, margin: f32) -> Aabb {
+        match *self {
+            Shape::Sphere { center, radius } => Aabb::from_center_radius(center, radius + margin),
+            Shape::Body { aabb, .. } => aabb.grown(margin),
+        }
+    }
 }
 
 /// Settings of a [`BroadPhase`]. Every field has a default; see each field for its range.
@@ -461,12 +472,7 @@ impl BroadPhase {
                 } => (self.statics.aabb(key), &mut statics),
             };
             *count += 1;
-            let want = match *shape {
-                Shape::Sphere { center, radius } => {
-                    Aabb::from_center_radius(center, radius + margin)
-                }
-                Shape::Body { aabb, .. } => aabb.grown(margin),
-            };
+            let want = shape.grown_aabb(margin);
             assert_eq!(tree_box, Some(want), "proxy {key:?} ({shape:?}) misfiled");
         }
         assert_eq!(spheres, self.octree.len(), "octree holds unknown spheres");

@@ -75,7 +75,7 @@ pub fn broadphase_pairs(bp: &crate::BroadPhase) -> Vec<Pair> {
         .iter()
         .map(|(key, shape)| Proxy {
             key,
-            aabb: shape.aabb().grown(margin),
+            aabb: shape.grown_aabb(margin),
             is_static: matches!(
                 shape,
                 crate::Shape::Body {

@@ -286,7 +286,7 @@ impl Mirror {
                 let shape = self.broadphase.shape(key)?;
                 Some(brute::Proxy {
                     key,
-                    aabb: shape.aabb().grown(margin),
+                    aabb: shape.grown_aabb(margin),
                     is_static: matches!(
                         shape,
                         Shape::Body {

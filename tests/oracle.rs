@@ -65,7 +65,7 @@ fn check_step(bp: &mut BroadPhase, model: &[(ProxyKey, Shape)], prev: &[Pair]) -
         .iter()
         .map(|&(key, shape)| brute::Proxy {
             key,
-            aabb: shape.aabb().grown(margin),
+            aabb: shape.grown_aabb(margin),
             is_static: matches!(
                 shape,
                 Shape::Body {
@@ -167,7 +167,7 @@ proptest! {
     #[test]
     fn pairs_and_events_equal_brute_force(
         depth in 0u32..=5,
-        margin in prop_oneof![3 => Just(0.0f32), 1 => Just(0.25f32)],
+        margin in prop_oneof![3 => Just(0.0f32), 1 => Just(0.25f32), 1 => Just(0.1f32)],
         ops in prop::collection::vec(op(), 0..160),
     ) {
         run(depth, margin, &ops);

@@ -149,7 +149,7 @@ fn check(bp: &mut BroadPhase, model: &[(ProxyKey, Shape)], prev: &[Pair], margin
         .iter()
         .map(|&(key, shape)| brute::Proxy {
             key,
-            aabb: shape.aabb().grown(margin),
+            aabb: shape.grown_aabb(margin),
             is_static: matches!(shape, Shape::Body { kind: BodyKind::Static, .. }),
         })
         .collect();
