@@ -1,0 +1,129 @@
+//! No allocation per step in steady state, and no memory growth under churn, measured with a
+//! counting global allocator (this test binary only; the library itself has no `unsafe`).
+
+use broadleaf::scene::{Churn, Feed, Frame, Gas, Scene};
+use broadleaf::{BroadPhase, Config, octree::depth_for};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicIsize, AtomicUsize, Ordering};
+
+/// Forwards to the system allocator and counts allocations and live bytes.
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+static LIVE_BYTES: AtomicIsize = AtomicIsize::new(0);
+
+// SAFETY: every method forwards to `System` with the caller's arguments unchanged, so
+// `System`'s guarantees carry over; the counters are plain atomics and never affect memory.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        LIVE_BYTES.fetch_add(layout.size() as isize, Ordering::Relaxed);
+        // SAFETY: forwarded as is (see the impl's comment).
+        unsafe { System.alloc(layout) }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        LIVE_BYTES.fetch_sub(layout.size() as isize, Ordering::Relaxed);
+        // SAFETY: forwarded as is.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        LIVE_BYTES.fetch_add(layout.size() as isize, Ordering::Relaxed);
+        // SAFETY: forwarded as is.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        LIVE_BYTES.fetch_add(
+            new_size as isize - layout.size() as isize,
+            Ordering::Relaxed,
+        );
+        // SAFETY: forwarded as is.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// The counters are process-wide: tests that read them must not overlap.
+static SERIAL: Mutex<()> = Mutex::new(());
+
+fn setup(scene: &impl Scene) -> (BroadPhase, Feed) {
+    let bounds = scene.bounds();
+    let mut bp = BroadPhase::new(Config {
+        bounds,
+        octree_depth: depth_for(&bounds, 0.5),
+        ..Config::default()
+    });
+    let mut feed = Feed::new(false);
+    let mut spawns = Vec::new();
+    scene.spawns(&mut spawns);
+    feed.spawn(&mut bp, &spawns).expect("finite scene");
+    (bp, feed)
+}
+
+#[test]
+fn steady_gas_steps_allocate_nothing() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let mut gas = Gas::new(10_000, 7);
+    let (mut bp, mut feed) = setup(&gas);
+    let mut frame = Frame::default();
+    // Warm-up: buffers reach their working sizes (and the frame its capacity).
+    for _ in 0..30 {
+        gas.advance(&mut frame);
+        feed.apply(&mut bp, &frame).unwrap();
+        bp.step();
+    }
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let probe: Vec<u64> = std::hint::black_box(Vec::with_capacity(16));
+    assert_eq!(
+        ALLOCATIONS.load(Ordering::Relaxed),
+        before + 1,
+        "the counter counts"
+    );
+    drop(probe);
+    let mut counts = Vec::with_capacity(60);
+    for _ in 0..60 {
+        gas.advance(&mut frame);
+        let before = ALLOCATIONS.load(Ordering::Relaxed);
+        feed.apply(&mut bp, &frame).unwrap();
+        let out = bp.step();
+        assert!(!out.pairs.is_empty());
+        counts.push(ALLOCATIONS.load(Ordering::Relaxed) - before);
+    }
+    assert!(
+        counts.iter().all(|&c| c == 0),
+        "allocations per step after warm-up: {counts:?}"
+    );
+}
+
+#[test]
+fn churn_does_not_grow_memory() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let mut churn = Churn::new(10_000, 3);
+    let (mut bp, mut feed) = setup(&churn);
+    let mut frame = Frame::default();
+    let mut live_at = Vec::new();
+    for step in 0..200 {
+        churn.advance(&mut frame);
+        feed.apply(&mut bp, &frame).unwrap();
+        bp.step();
+        if step % 25 == 24 {
+            live_at.push(LIVE_BYTES.load(Ordering::Relaxed));
+        }
+    }
+    // After the first 50 steps every buffer has its working size; churn (1 % removed and
+    // inserted per step) then reuses slots and capacity. Allow 5 % for capacity that grows
+    // to a new peak pair count.
+    let settled = live_at[1];
+    let last = *live_at.last().unwrap();
+    assert!(
+        (last as f64) <= settled as f64 * 1.05,
+        "live bytes every 25 steps: {live_at:?}"
+    );
+}
