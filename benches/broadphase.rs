@@ -171,7 +171,101 @@ mod bvh_benches {
     }
 }
 
+// ---------------------------------------------------------------------------------------------
+// Scenes: broadleaf's whole `BroadPhase` step next to rapier's broad phase, same motion.
+// ---------------------------------------------------------------------------------------------
+mod scene_benches {
+    use broadleaf::octree::depth_for;
+    use broadleaf::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Scene, Spawn};
+    use broadleaf::{BroadPhase, Config};
+    use criterion::{BenchmarkId, Criterion, Throughput};
+    use std::hint::black_box;
+    use std::time::{Duration, Instant};
+
+    /// The benchmarked scenes at their criterion sizes (vs_rapier runs the larger ones).
+    fn scenes() -> Vec<(&'static str, Box<dyn FnMut() -> Box<dyn Scene>>)> {
+        vec![
+            ("gas", Box::new(|| Box::new(Gas::new(10_000, 1)))),
+            ("gas", Box::new(|| Box::new(Gas::new(100_000, 1)))),
+            (
+                "clustered",
+                Box::new(|| Box::new(Gas::clustered(10_000, 1))),
+            ),
+            ("bodies", Box::new(|| Box::new(Bodies::new(10_000, 1)))),
+            ("churn", Box::new(|| Box::new(Churn::new(10_000, 1)))),
+        ]
+    }
+
+    /// broadleaf: each iteration advances the scene (untimed) and times applying the frame
+    /// plus `step()` — the full step of `benchmarks.md`.
+    fn broadleaf(scene: &mut dyn Scene, iters: u64) -> Duration {
+        let bounds = scene.bounds();
+        let mut bp = BroadPhase::new(Config {
+            bounds,
+            octree_depth: depth_for(&bounds, GAS_RADIUS),
+            ..Config::default()
+        });
+        let mut feed = Feed::new(false);
+        let mut spawns: Vec<Spawn> = Vec::new();
+        scene.spawns(&mut spawns);
+        feed.spawn(&mut bp, &spawns).expect("finite scene");
+        bp.step();
+        let mut frame = Frame::default();
+        let mut total = Duration::ZERO;
+        for _ in 0..iters {
+            scene.advance(&mut frame);
+            let t = Instant::now();
+            feed.apply(&mut bp, &frame).expect("valid frame");
+            black_box(bp.step().pairs.len());
+            total += t.elapsed();
+        }
+        total
+    }
+
+    /// rapier: the same frames as kinematic targets; the time is rapier's own broad-phase
+    /// counter for each `PhysicsPipeline::step`.
+    #[cfg(feature = "rapier")]
+    fn rapier(scene: &mut dyn Scene, iters: u64) -> Duration {
+        let mut world = broadleaf::rapier::SceneWorld::new();
+        let mut spawns: Vec<Spawn> = Vec::new();
+        scene.spawns(&mut spawns);
+        for s in &spawns {
+            world.insert(s);
+        }
+        world.step();
+        let mut frame = Frame::default();
+        let mut total = Duration::ZERO;
+        for _ in 0..iters {
+            scene.advance(&mut frame);
+            world.set_targets(&frame);
+            total += world.step();
+            world.apply_structure(&frame);
+        }
+        total
+    }
+
+    pub fn register(c: &mut Criterion) {
+        for (name, mut make) in scenes() {
+            let n = make().len();
+            let mut group = c.benchmark_group(format!("{name}/{n}"));
+            group.sample_size(10);
+            group.warm_up_time(Duration::from_secs(1));
+            group.measurement_time(Duration::from_secs(3));
+            group.throughput(Throughput::Elements(n as u64));
+            group.bench_function(BenchmarkId::new("broadleaf", n), |b| {
+                b.iter_custom(|iters| broadleaf(&mut *make(), iters));
+            });
+            #[cfg(feature = "rapier")]
+            group.bench_function(BenchmarkId::new("rapier", n), |b| {
+                b.iter_custom(|iters| rapier(&mut *make(), iters));
+            });
+            group.finish();
+        }
+    }
+}
+
 fn benches(c: &mut Criterion) {
+    scene_benches::register(c);
     octree_step(c);
     bvh_benches::register(c);
 }

@@ -33,11 +33,9 @@
 //! speed-up of the scenes and `missed`/`extra` are summed over them.
 
 use broadleaf::octree::depth_for;
-use broadleaf::pair::{self, Pair};
-use broadleaf::rapier::{Comparison, record_pile};
-use broadleaf::scene::{Bodies, Churn, DT, Feed, Frame, GAS_RADIUS, Gas, Object, Scene, Spawn};
+use broadleaf::rapier::{Comparison, SceneWorld, record_pile};
+use broadleaf::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Scene};
 use broadleaf::{BroadPhase, Config, brute};
-use rapier3d::prelude::*;
 use std::process::exit;
 use std::time::Instant;
 
@@ -138,156 +136,6 @@ impl Ours {
     }
 }
 
-/// rapier's side: a world of kinematic and fixed bodies, one collider each, and the body of
-/// each scene id. Each collider's `user_data` is its scene id.
-struct Theirs {
-    pipeline: PhysicsPipeline,
-    params: IntegrationParameters,
-    islands: IslandManager,
-    broad_phase: DefaultBroadPhase,
-    narrow_phase: NarrowPhase,
-    bodies: RigidBodySet,
-    colliders: ColliderSet,
-    impulse_joints: ImpulseJointSet,
-    multibody_joints: MultibodyJointSet,
-    soft_bodies: SoftBodySet,
-    ccd: CCDSolver,
-    handles: Vec<Option<RigidBodyHandle>>,
-}
-
-impl Theirs {
-    fn new() -> Self {
-        Theirs {
-            pipeline: PhysicsPipeline::new(),
-            params: IntegrationParameters {
-                dt: DT,
-                ..IntegrationParameters::default()
-            },
-            islands: IslandManager::new(),
-            broad_phase: DefaultBroadPhase::new(),
-            narrow_phase: NarrowPhase::new(),
-            bodies: RigidBodySet::new(),
-            colliders: ColliderSet::new(),
-            impulse_joints: ImpulseJointSet::new(),
-            multibody_joints: MultibodyJointSet::new(),
-            soft_bodies: SoftBodySet::new(),
-            ccd: CCDSolver::new(),
-            handles: Vec::new(),
-        }
-    }
-
-    fn insert(&mut self, s: &Spawn) {
-        let (pose, collider) = match s.object {
-            Object::Sphere { center, radius } => (
-                Pose::from_translation(center),
-                ColliderBuilder::ball(radius),
-            ),
-            Object::Cuboid {
-                center,
-                half_extents: h,
-                rotation,
-            } => (
-                Pose::from_parts(center, rotation),
-                ColliderBuilder::cuboid(h.x, h.y, h.z),
-            ),
-        };
-        let body = if s.is_static {
-            RigidBodyBuilder::fixed()
-        } else {
-            RigidBodyBuilder::kinematic_position_based()
-        };
-        let h = self.bodies.insert(body.pose(pose));
-        let collider = collider
-            .active_collision_types(ActiveCollisionTypes::all())
-            .user_data(u128::from(s.id));
-        self.colliders
-            .insert_with_parent(collider, h, &mut self.bodies);
-        let id = s.id as usize;
-        if self.handles.len() <= id {
-            self.handles.resize(id + 1, None);
-        }
-        self.handles[id] = Some(h);
-    }
-
-    /// Sets every moved body's kinematic target.
-    fn set_targets(&mut self, f: &Frame) {
-        for &(id, o) in &f.moved {
-            if let Some(h) = self.handles[id as usize] {
-                self.bodies[h].set_next_kinematic_translation(o.center());
-            }
-        }
-    }
-
-    /// Applies a frame's removes and inserts (after the step that detected the frame before).
-    fn apply_structure(&mut self, f: &Frame) {
-        for &id in &f.removed {
-            if let Some(h) = self.handles[id as usize].take() {
-                self.bodies.remove(
-                    h,
-                    &mut self.islands,
-                    &mut self.colliders,
-                    &mut self.impulse_joints,
-                    &mut self.multibody_joints,
-                    &mut self.soft_bodies,
-                    true,
-                );
-            }
-        }
-        for s in &f.inserted {
-            self.insert(s);
-        }
-    }
-
-    /// One `PhysicsPipeline::step`; returns its broad-phase time in nanoseconds.
-    fn step(&mut self) -> f64 {
-        self.pipeline.step(
-            Vector::ZERO,
-            &self.params,
-            &mut self.islands,
-            &mut self.broad_phase,
-            &mut self.narrow_phase,
-            &mut self.bodies,
-            &mut self.colliders,
-            &mut self.impulse_joints,
-            &mut self.multibody_joints,
-            &mut self.soft_bodies,
-            &mut self.ccd,
-            &(),
-            &(),
-        );
-        let cd = &self.pipeline.counters.cd;
-        (cd.broad_phase_time.time() + cd.final_broad_phase_time.time()).as_nanos() as f64
-    }
-
-    /// rapier's pairs in broadleaf's keys, static×static left out, sorted; and how many pairs
-    /// named an object broadleaf does not hold.
-    fn pairs(&self, ours: &Ours) -> (Vec<Pair>, usize) {
-        let mut out = Vec::new();
-        let mut unmapped = 0;
-        for cp in self.narrow_phase.contact_pairs() {
-            let key_of = |h: ColliderHandle| {
-                let co = self.colliders.get(h)?;
-                let key = ours.feed.key(u32::try_from(co.user_data).ok()?)?;
-                let fixed = co
-                    .parent()
-                    .and_then(|p| self.bodies.get(p))
-                    .is_none_or(|rb| rb.is_fixed());
-                Some((key, fixed))
-            };
-            match (key_of(cp.collider1), key_of(cp.collider2)) {
-                (Some((a, fa)), Some((b, fb))) => {
-                    if !(fa && fb) {
-                        out.push(Pair::new(a, b));
-                    }
-                }
-                _ => unmapped += 1,
-            }
-        }
-        pair::sort_dedup(&mut out);
-        (out, unmapped)
-    }
-}
-
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     let m = v.len() / 2;
@@ -309,7 +157,7 @@ struct Row {
 fn run(name: &str, n: usize, args: &Args) -> Row {
     let mut scene = make_scene(name, n, args.seed, args.warmup + args.steps).expect("known scene");
     let mut ours = Ours::new(scene.bounds(), args.index);
-    let mut theirs = Theirs::new();
+    let mut theirs = SceneWorld::new();
     let mut spawns = Vec::new();
     scene.spawns(&mut spawns);
     ours.feed
@@ -335,7 +183,7 @@ fn run(name: &str, n: usize, args: &Args) -> Row {
         last_pairs.extend_from_slice(pairs);
 
         theirs.set_targets(&frame);
-        let their_ns = theirs.step();
+        let their_ns = theirs.step().as_nanos() as f64;
         theirs.apply_structure(&frame);
         if k >= args.warmup {
             let live = scene.len().max(1) as f64;
@@ -345,7 +193,7 @@ fn run(name: &str, n: usize, args: &Args) -> Row {
     }
     // rapier detects the last frame's poses (and holds its inserts) in one more step.
     theirs.step();
-    let (rapier_pairs, unmapped) = theirs.pairs(&ours);
+    let (rapier_pairs, unmapped) = theirs.pairs(&ours.feed);
     let mut cmp = Comparison::new(
         &last_pairs,
         &rapier_pairs,

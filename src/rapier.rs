@@ -34,15 +34,17 @@
 //! `ActiveCollisionTypes::all()` on every collider.
 
 use crate::pair::{self, Pair, ProxyKey};
-use crate::scene::{GAS_RADIUS, Recorded, Rng};
+use crate::scene::{DT, Feed, Frame, GAS_RADIUS, Object, Recorded, Rng, Spawn};
 use crate::{Aabb, BodyKind, BroadPhase, Config, Shape, StepPairs, Vec3, brute};
 use core::fmt;
+use core::time::Duration;
 use rapier3d::dynamics::{
     CCDSolver, ImpulseJointSet, IntegrationParameters, IslandManager, MultibodyJointSet,
     RigidBodyBuilder, RigidBodyHandle, RigidBodySet, SoftBodySet,
 };
 use rapier3d::geometry::{
-    Collider, ColliderBuilder, ColliderHandle, ColliderSet, DefaultBroadPhase, NarrowPhase,
+    ActiveCollisionTypes, Collider, ColliderBuilder, ColliderHandle, ColliderSet,
+    DefaultBroadPhase, NarrowPhase,
 };
 use rapier3d::math::{Pose, Vector};
 use rapier3d::pipeline::PhysicsPipeline;
@@ -541,6 +543,171 @@ pub fn record_pile(n: usize, seed: u64, settle: usize, frames: usize) -> Recorde
         Vec3::new(half, 2.0 * height, half),
     );
     Recorded::new(bounds, r, recorded)
+}
+
+/// A [`Scene`] played in rapier: kinematic position-based bodies (fixed ones for static
+/// objects), one collider each with `ActiveCollisionTypes::all()`, driven by the scene's
+/// frames. Each collider's `user_data` is its scene id. Used by `vs_rapier` and the benches to
+/// time rapier's broad phase on exactly the motion broadleaf sees.
+///
+/// Per frame: [`SceneWorld::set_targets`], [`SceneWorld::step`] (whose pairs are those of the
+/// poses *before* the targets, see the module docs), then [`SceneWorld::apply_structure`].
+pub struct SceneWorld {
+    pipeline: PhysicsPipeline,
+    params: IntegrationParameters,
+    islands: IslandManager,
+    broad_phase: DefaultBroadPhase,
+    narrow_phase: NarrowPhase,
+    bodies: RigidBodySet,
+    colliders: ColliderSet,
+    impulse_joints: ImpulseJointSet,
+    multibody_joints: MultibodyJointSet,
+    soft_bodies: SoftBodySet,
+    ccd: CCDSolver,
+    handles: Vec<Option<RigidBodyHandle>>,
+}
+
+impl SceneWorld {
+    /// An empty world stepping at [`DT`], gravity off.
+    #[must_use]
+    pub fn new() -> Self {
+        SceneWorld {
+            pipeline: PhysicsPipeline::new(),
+            params: IntegrationParameters {
+                dt: DT,
+                ..IntegrationParameters::default()
+            },
+            islands: IslandManager::new(),
+            broad_phase: DefaultBroadPhase::new(),
+            narrow_phase: NarrowPhase::new(),
+            bodies: RigidBodySet::new(),
+            colliders: ColliderSet::new(),
+            impulse_joints: ImpulseJointSet::new(),
+            multibody_joints: MultibodyJointSet::new(),
+            soft_bodies: SoftBodySet::new(),
+            ccd: CCDSolver::new(),
+            handles: Vec::new(),
+        }
+    }
+
+    /// Adds one scene object as a body with one collider.
+    pub fn insert(&mut self, s: &Spawn) {
+        let (pose, collider) = match s.object {
+            Object::Sphere { center, radius } => (
+                Pose::from_translation(center),
+                ColliderBuilder::ball(radius),
+            ),
+            Object::Cuboid {
+                center,
+                half_extents: h,
+                rotation,
+            } => (
+                Pose::from_parts(center, rotation),
+                ColliderBuilder::cuboid(h.x, h.y, h.z),
+            ),
+        };
+        let body = if s.is_static {
+            RigidBodyBuilder::fixed()
+        } else {
+            RigidBodyBuilder::kinematic_position_based()
+        };
+        let h = self.bodies.insert(body.pose(pose));
+        let collider = collider
+            .active_collision_types(ActiveCollisionTypes::all())
+            .user_data(u128::from(s.id));
+        self.colliders
+            .insert_with_parent(collider, h, &mut self.bodies);
+        let id = s.id as usize;
+        if self.handles.len() <= id {
+            self.handles.resize(id + 1, None);
+        }
+        self.handles[id] = Some(h);
+    }
+
+    /// Sets every moved body's kinematic target.
+    pub fn set_targets(&mut self, f: &Frame) {
+        for &(id, o) in &f.moved {
+            if let Some(&Some(h)) = self.handles.get(id as usize) {
+                self.bodies[h].set_next_kinematic_translation(o.center());
+            }
+        }
+    }
+
+    /// Applies a frame's removes and inserts (after the step that detected the frame before).
+    pub fn apply_structure(&mut self, f: &Frame) {
+        for &id in &f.removed {
+            if let Some(h) = self.handles.get_mut(id as usize).and_then(Option::take) {
+                self.bodies.remove(
+                    h,
+                    &mut self.islands,
+                    &mut self.colliders,
+                    &mut self.impulse_joints,
+                    &mut self.multibody_joints,
+                    &mut self.soft_bodies,
+                    true,
+                );
+            }
+        }
+        for s in &f.inserted {
+            self.insert(s);
+        }
+    }
+
+    /// One `PhysicsPipeline::step`; returns its broad-phase time (rapier's `profiler`
+    /// counters: the broad-phase update plus the end-of-step tree refit).
+    pub fn step(&mut self) -> Duration {
+        self.pipeline.step(
+            Vector::ZERO,
+            &self.params,
+            &mut self.islands,
+            &mut self.broad_phase,
+            &mut self.narrow_phase,
+            &mut self.bodies,
+            &mut self.colliders,
+            &mut self.impulse_joints,
+            &mut self.multibody_joints,
+            &mut self.soft_bodies,
+            &mut self.ccd,
+            &(),
+            &(),
+        );
+        let cd = &self.pipeline.counters.cd;
+        cd.broad_phase_time.time() + cd.final_broad_phase_time.time()
+    }
+
+    /// rapier's pairs in broadleaf's keys, static×static left out, sorted; and how many pairs
+    /// named an object broadleaf does not hold.
+    pub fn pairs(&self, feed: &Feed) -> (Vec<Pair>, usize) {
+        let mut out = Vec::new();
+        let mut unmapped = 0;
+        for cp in self.narrow_phase.contact_pairs() {
+            let key_of = |h: ColliderHandle| {
+                let co = self.colliders.get(h)?;
+                let key = feed.key(u32::try_from(co.user_data).ok()?)?;
+                let fixed = co
+                    .parent()
+                    .and_then(|p| self.bodies.get(p))
+                    .is_none_or(|rb| rb.is_fixed());
+                Some((key, fixed))
+            };
+            match (key_of(cp.collider1), key_of(cp.collider2)) {
+                (Some((a, fa)), Some((b, fb))) => {
+                    if !(fa && fb) {
+                        out.push(Pair::new(a, b));
+                    }
+                }
+                _ => unmapped += 1,
+            }
+        }
+        pair::sort_dedup(&mut out);
+        (out, unmapped)
+    }
+}
+
+impl Default for SceneWorld {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 #[cfg(test)]
