@@ -182,8 +182,11 @@ mod scene_benches {
     use std::hint::black_box;
     use std::time::{Duration, Instant};
 
+    /// Makes a fresh copy of a scene (each criterion sample starts from the same state).
+    type MakeScene = Box<dyn FnMut() -> Box<dyn Scene>>;
+
     /// The benchmarked scenes at their criterion sizes (vs_rapier runs the larger ones).
-    fn scenes() -> Vec<(&'static str, Box<dyn FnMut() -> Box<dyn Scene>>)> {
+    fn scenes() -> Vec<(&'static str, MakeScene)> {
         vec![
             ("gas", Box::new(|| Box::new(Gas::new(10_000, 1)))),
             ("gas", Box::new(|| Box::new(Gas::new(100_000, 1)))),
