@@ -53,10 +53,15 @@ struct Args {
     warmup: usize,
     index: Index,
     seed: u64,
+    /// Several sizes of one scene instead of `n` (`--sizes 1000,10000,100000`).
+    sizes: Vec<usize>,
+    /// Where to write an SVG plot of ns/object/step against N.
+    plot: Option<String>,
 }
 
 const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|all] [--n N] \
-                     [--steps 30] [--warmup 5] [--index octree|bvh|auto] [--seed 1]";
+                     [--steps 30] [--warmup 5] [--index octree|bvh|auto] [--seed 1] \
+                     [--sizes N1,N2,...] [--plot PATH.svg]";
 
 fn parse_args() -> Result<Args, String> {
     let mut args = Args {
@@ -66,6 +71,8 @@ fn parse_args() -> Result<Args, String> {
         warmup: 5,
         index: Index::Auto,
         seed: 1,
+        sizes: Vec::new(),
+        plot: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -81,6 +88,10 @@ fn parse_args() -> Result<Args, String> {
             "--steps" => args.steps = number(&value)?.max(1),
             "--warmup" => args.warmup = number(&value)?,
             "--seed" => args.seed = number(&value)? as u64,
+            "--sizes" => {
+                args.sizes = value.split(',').map(number).collect::<Result<_, _>>()?;
+            }
+            "--plot" => args.plot = Some(value),
             "--index" => {
                 args.index = match value.as_str() {
                     "octree" => Index::Octree,
@@ -232,8 +243,18 @@ fn main() {
     );
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     let mut rows = Vec::new();
-    for name in names {
-        let n = args.n.unwrap_or_else(|| default_n(name));
+    let runs: Vec<(&str, usize)> = if args.sizes.is_empty() {
+        names
+            .iter()
+            .map(|&name| (name, args.n.unwrap_or_else(|| default_n(name))))
+            .collect()
+    } else {
+        names
+            .iter()
+            .flat_map(|&name| args.sizes.iter().map(move |&n| (name, n)))
+            .collect()
+    };
+    for (name, n) in runs {
         let r = run(name, n, &args);
         println!(
             "| {} | {} | {:.1} | {:.1} | {:.2} | {} | {} | {} | {} | {} |",
@@ -259,6 +280,12 @@ fn main() {
             );
         }
     }
+    if let Some(path) = &args.plot {
+        match std::fs::write(path, plot_svg(&rows)) {
+            Ok(()) => println!("wrote {path}"),
+            Err(e) => eprintln!("cannot write {path}: {e}"),
+        }
+    }
     let ratio = rows
         .iter()
         .map(|r| r.rapier_ns / r.ours_ns)
@@ -266,4 +293,101 @@ fn main() {
     let missed: usize = rows.iter().map(|r| r.cmp.missed).sum();
     let extra: usize = rows.iter().map(|r| r.cmp.extra).sum();
     println!("ratio={ratio:.2} missed={missed} extra={extra}");
+}
+
+/// A log–log SVG plot of ns/object/step against N, one line per engine and scene; drawn by
+/// hand (a few dozen SVG elements), so the example needs no plotting dependency.
+fn plot_svg(rows: &[Row]) -> String {
+    let (w, h, left, right, top, bottom) = (640.0, 400.0, 70.0, 150.0, 30.0, 50.0);
+    let xs: Vec<f64> = rows.iter().map(|r| (r.n as f64).log10()).collect();
+    let ys: Vec<f64> = rows
+        .iter()
+        .flat_map(|r| [r.ours_ns.log10(), r.rapier_ns.log10()])
+        .collect();
+    let (x0, x1) = (
+        xs.iter().copied().fold(f64::INFINITY, f64::min).floor(),
+        xs.iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max)
+            .ceil()
+            .max(1.0),
+    );
+    let (y0, y1) = (
+        ys.iter().copied().fold(f64::INFINITY, f64::min).floor(),
+        ys.iter().copied().fold(f64::NEG_INFINITY, f64::max).ceil(),
+    );
+    let px = |x: f64| left + (x - x0) / (x1 - x0).max(1e-9) * (w - left - right);
+    let py = |y: f64| h - bottom - (y - y0) / (y1 - y0).max(1e-9) * (h - top - bottom);
+    let mut svg = format!(
+        "<svg xmlns='http://www.w3.org/2000/svg' width='{w}' height='{h}' font-family='sans-serif' font-size='12'>\n<rect width='100%' height='100%' fill='white'/>\n"
+    );
+    for e in x0 as i32..=x1 as i32 {
+        let x = px(f64::from(e));
+        svg += &format!(
+            "<line x1='{x}' y1='{top}' x2='{x}' y2='{}' stroke='#ddd'/><text x='{x}' y='{}' text-anchor='middle'>1e{e}</text>\n",
+            h - bottom,
+            h - bottom + 16.0
+        );
+    }
+    for e in y0 as i32..=y1 as i32 {
+        let y = py(f64::from(e));
+        svg += &format!(
+            "<line x1='{left}' y1='{y}' x2='{}' y2='{y}' stroke='#ddd'/><text x='{}' y='{}' text-anchor='end'>1e{e}</text>\n",
+            w - right,
+            left - 6.0,
+            y + 4.0
+        );
+    }
+    svg += &format!(
+        "<text x='{}' y='{}' text-anchor='middle'>objects N</text><text x='16' y='{}' transform='rotate(-90 16 {})' text-anchor='middle'>ns / object / step</text>\n",
+        (left + w - right) / 2.0,
+        h - 10.0,
+        (top + h - bottom) / 2.0,
+        (top + h - bottom) / 2.0
+    );
+    let mut scenes: Vec<&str> = rows.iter().map(|r| r.scene.as_str()).collect();
+    scenes.dedup();
+    let mut legend = 0.0;
+    for (k, scene) in scenes.iter().enumerate() {
+        let of_scene: Vec<&Row> = rows.iter().filter(|r| r.scene == *scene).collect();
+        let engines: [(&str, &str, fn(&Row) -> f64); 2] = [
+            ("broadleaf", "#2a9d8f", |r| r.ours_ns),
+            ("rapier", "#e76f51", |r| r.rapier_ns),
+        ];
+        for (engine, colour, value) in engines {
+            let dash = if k == 0 {
+                ""
+            } else {
+                " stroke-dasharray='6 3'"
+            };
+            let points: Vec<String> = of_scene
+                .iter()
+                .map(|r| {
+                    format!(
+                        "{:.1},{:.1}",
+                        px((r.n as f64).log10()),
+                        py(value(r).log10())
+                    )
+                })
+                .collect();
+            svg += &format!(
+                "<polyline points='{}' fill='none' stroke='{colour}' stroke-width='2'{dash}/>\n",
+                points.join(" ")
+            );
+            for p in &points {
+                let (x, y) = p.split_once(',').unwrap_or(("0", "0"));
+                svg += &format!("<circle cx='{x}' cy='{y}' r='3' fill='{colour}'/>\n");
+            }
+            let ly = top + 10.0 + legend * 18.0;
+            svg += &format!(
+                "<line x1='{}' y1='{ly}' x2='{}' y2='{ly}' stroke='{colour}' stroke-width='2'{dash}/><text x='{}' y='{}'>{engine} {scene}</text>\n",
+                w - right + 10.0,
+                w - right + 34.0,
+                w - right + 40.0,
+                ly + 4.0
+            );
+            legend += 1.0;
+        }
+    }
+    svg + "</svg>\n"
 }
