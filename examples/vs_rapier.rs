@@ -295,6 +295,9 @@ fn main() {
     println!("ratio={ratio:.2} missed={missed} extra={extra}");
 }
 
+/// One line of the plot: engine name, colour, and which time of a row it draws.
+type Engine = (&'static str, &'static str, fn(&Row) -> f64);
+
 /// A log–log SVG plot of ns/object/step against N, one line per engine and scene; drawn by
 /// hand (a few dozen SVG elements), so the example needs no plotting dependency.
 fn plot_svg(rows: &[Row]) -> String {
@@ -350,7 +353,7 @@ fn plot_svg(rows: &[Row]) -> String {
     let mut legend = 0.0;
     for (k, scene) in scenes.iter().enumerate() {
         let of_scene: Vec<&Row> = rows.iter().filter(|r| r.scene == *scene).collect();
-        let engines: [(&str, &str, fn(&Row) -> f64); 2] = [
+        let engines: [Engine; 2] = [
             ("broadleaf", "#2a9d8f", |r| r.ours_ns),
             ("rapier", "#e76f51", |r| r.rapier_ns),
         ];
