@@ -85,3 +85,8 @@ pub use geom::Aabb;
 pub use glam::Vec3;
 pub use octree::Octree;
 pub use pair::{Pair, ProxyKey};
+
+/// The README's code blocks, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;
