@@ -100,7 +100,7 @@ impl BvhConfig {
         if !(self.rebuild_threshold.is_finite() && self.rebuild_threshold >= 1.0) {
             return bad("rebuild_threshold", self.rebuild_threshold);
         }
-        if !(self.rebuild_after_changes >= 0.0) {
+        if self.rebuild_after_changes.is_nan() || self.rebuild_after_changes < 0.0 {
             return bad("rebuild_after_changes", self.rebuild_after_changes);
         }
         Ok(())
