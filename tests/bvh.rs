@@ -98,13 +98,13 @@ fn check_all(
         }
         let mut all = Vec::new();
         bvh.cast_ray_all(origin, dir, max_t, |k, t| all.push((k, t)));
-        all.sort_unstable_by(|a, b| a.0.cmp(&b.0));
+        all.sort_unstable_by_key(|a| a.0);
         let inv = broadleaf::geom::inverse_dir(dir);
         let mut want_all: Vec<(ProxyKey, f32)> = ps
             .iter()
             .filter_map(|p| p.aabb.ray_entry(origin, inv, max_t).map(|t| (p.key, t)))
             .collect();
-        want_all.sort_unstable_by(|a, b| a.0.cmp(&b.0));
+        want_all.sort_unstable_by_key(|a| a.0);
         assert_eq!(all, want_all, "cast_ray_all");
     }
 }
