@@ -142,6 +142,8 @@ pub struct BroadPhase {
     prev: Vec<Pair>,
     added: Vec<Pair>,
     removed: Vec<Pair>,
+    /// The second buffer of [`pair::sort`].
+    sort_scratch: Vec<Pair>,
 }
 
 impl BroadPhase {
@@ -202,6 +204,7 @@ impl BroadPhase {
             prev: Vec::new(),
             added: Vec::new(),
             removed: Vec::new(),
+            sort_scratch: Vec::new(),
         }
     }
 
@@ -386,7 +389,7 @@ impl BroadPhase {
                 }
             });
         }
-        pairs.sort_unstable();
+        pair::sort(pairs, &mut self.sort_scratch);
         debug_assert!(pairs.windows(2).all(|w| w[0] < w[1]), "a pair found twice");
         pair::diff(&self.prev, &self.pairs, &mut self.added, &mut self.removed);
         StepPairs {

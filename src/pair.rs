@@ -33,6 +33,89 @@ impl Pair {
     }
 }
 
+/// Bits per digit of [`sort`]'s radix passes.
+const RADIX_BITS: u32 = 11;
+/// Lists shorter than this are sorted by comparison.
+const RADIX_MIN: usize = 256;
+
+/// A key's slot index: the low 32 bits of `as_ffi()` (slotmap 1.x: `(version << 32) | idx`).
+/// Keys order by `(idx, version)`, and two live keys of one slot map never share an index, so
+/// among live keys the slot index alone orders them; `tests::slot_index_orders_live_keys`
+/// pins this down against slotmap.
+#[inline]
+fn slot(k: ProxyKey) -> u32 {
+    use slotmap::Key;
+    k.data().as_ffi() as u32
+}
+
+/// Sorts a pair list by `(a, b)`, exactly as `pairs.sort_unstable()` would; `scratch` is
+/// reused and never shrinks.
+///
+/// LSD radix sort on `(slot(a), slot(b))`, the key's slot indices: a few streaming passes of
+/// 11-bit digits over only the bits the largest index uses, skipping digits every pair shares.
+/// This equals the pairs' `Ord` when no two distinct keys share a slot (true for the live keys
+/// of one slot map, e.g. a step's pairs); a final O(n) check falls back to a comparison sort
+/// if that does not hold, so the result is always sorted.
+pub fn sort(pairs: &mut Vec<Pair>, scratch: &mut Vec<Pair>) {
+    let n = pairs.len();
+    let max = pairs.iter().fold(0, |m, p| m | slot(p.a) | slot(p.b));
+    let bits = 32 - max.leading_zeros();
+    if n < RADIX_MIN || bits == 0 {
+        pairs.sort_unstable();
+        return;
+    }
+    let per_key = bits.div_ceil(RADIX_BITS);
+    let width = bits.div_ceil(per_key);
+    let radix = 1usize << width;
+    let mask = (radix - 1) as u32;
+    // Digit `d` of the 2·per_key digits, least significant first: b's digits, then a's.
+    let digit = move |p: &Pair, d: u32| {
+        let (k, d) = if d < per_key {
+            (p.b, d)
+        } else {
+            (p.a, d - per_key)
+        };
+        ((slot(k) >> (d * width)) & mask) as usize
+    };
+    let passes = 2 * per_key;
+    // At most 3 digits per key (32 bits / 11); on the stack, so a step allocates nothing.
+    let mut counts = [[0u32; 1 << RADIX_BITS]; 6];
+    for p in pairs.iter() {
+        for d in 0..passes {
+            counts[d as usize][digit(p, d)] += 1;
+        }
+    }
+    scratch.clear();
+    scratch.resize(
+        n,
+        Pair {
+            a: pairs[0].a,
+            b: pairs[0].b,
+        },
+    );
+    for d in 0..passes {
+        let c = &mut counts[d as usize][..radix];
+        if c.iter().any(|&k| k as usize == n) {
+            continue;
+        }
+        let mut sum = 0;
+        for k in c.iter_mut() {
+            let here = *k;
+            *k = sum;
+            sum += here;
+        }
+        for p in pairs.iter() {
+            let b = digit(p, d);
+            scratch[c[b] as usize] = *p;
+            c[b] += 1;
+        }
+        core::mem::swap(pairs, scratch);
+    }
+    if !pairs.windows(2).all(|w| w[0] <= w[1]) {
+        pairs.sort_unstable();
+    }
+}
+
 /// Sorts a pair list by `(a, b)` and removes duplicates, in place.
 pub fn sort_dedup(pairs: &mut Vec<Pair>) {
     pairs.sort_unstable();
@@ -71,7 +154,7 @@ pub fn diff(prev: &[Pair], cur: &[Pair], added: &mut Vec<Pair>, removed: &mut Ve
 #[cfg(test)]
 mod tests {
     use super::*;
-    use slotmap::SlotMap;
+    use slotmap::{Key, SlotMap};
     use std::collections::BTreeSet;
 
     #[test]
@@ -81,6 +164,72 @@ mod tests {
         let y = sm.insert(());
         assert_eq!(Pair::new(x, y), Pair::new(y, x));
         assert!(Pair::new(y, x).a < Pair::new(y, x).b);
+    }
+
+    #[test]
+    fn slot_index_orders_live_keys() {
+        // Churn the slot map so versions differ, then check that on live keys the slot index
+        // (low bits of `as_ffi`) orders exactly as `Ord`, and that distinct live keys never
+        // share a slot: the premise of `sort`'s radix key.
+        let mut sm = SlotMap::<ProxyKey, ()>::with_key();
+        let mut live: Vec<ProxyKey> = (0..500).map(|_| sm.insert(())).collect();
+        for round in 0..5 {
+            live.retain(|&k| {
+                let keep = slot(k) % (round + 2) != 0;
+                if !keep {
+                    sm.remove(k);
+                }
+                keep
+            });
+            live.extend((0..200).map(|_| sm.insert(())));
+        }
+        let mut by_ord = live.clone();
+        by_ord.sort_unstable();
+        let mut by_slot = live.clone();
+        by_slot.sort_unstable_by_key(|&k| slot(k));
+        assert_eq!(by_ord, by_slot);
+        assert!(by_slot.windows(2).all(|w| slot(w[0]) < slot(w[1])));
+        assert!(
+            live.iter().any(|k| k.data().as_ffi() >> 32 > 1),
+            "versions were bumped"
+        );
+    }
+
+    #[test]
+    fn radix_sort_equals_sort_unstable() {
+        let mut sm = SlotMap::<ProxyKey, ()>::with_key();
+        let keys: Vec<_> = (0..3000).map(|_| sm.insert(())).collect();
+        let mut seed = 11u32;
+        let mut next = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as usize
+        };
+        let mut scratch = Vec::new();
+        for len in [0, 1, 255, 256, 5000] {
+            let mut pairs: Vec<Pair> = (0..len)
+                .filter_map(|_| {
+                    let (i, j) = (next() % keys.len(), next() % keys.len());
+                    (i != j).then(|| Pair::new(keys[i], keys[j]))
+                })
+                .collect();
+            let mut want = pairs.clone();
+            want.sort_unstable();
+            sort(&mut pairs, &mut scratch);
+            assert_eq!(pairs, want);
+        }
+        // Keys of two slot maps may share a slot: the fallback still sorts by `Ord`.
+        let mut other = SlotMap::<ProxyKey, ()>::with_key();
+        other.insert(());
+        let stale = other.insert(());
+        other.remove(stale);
+        let bumped = other.insert(());
+        let mut pairs: Vec<Pair> = (0..300)
+            .map(|i| Pair::new(keys[i % 7 + 10], if i % 2 == 0 { keys[1] } else { bumped }))
+            .collect();
+        let mut want = pairs.clone();
+        want.sort_unstable();
+        sort(&mut pairs, &mut scratch);
+        assert_eq!(pairs, want);
     }
 
     #[test]

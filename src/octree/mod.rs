@@ -3,8 +3,9 @@
 //!
 //! Every sphere lives in the deepest node whose split planes its AABB does not straddle
 //! ([`place`]); the placement is computed in O(1) from integer cell coordinates, and a move that
-//! keeps the node only stores the new sphere. Pairs come from one depth-first walk with a
-//! filtered ancestor stack ([`pairs`]); queries and rays walk only occupied subtrees
+//! keeps the node only stores the new sphere. Pairs come from a pass that radix-sorts the
+//! spheres into depth-first node order and streams over the node runs with a filtered ancestor
+//! stack ([`pairs`]); queries and rays follow the per-node lists through occupied subtrees
 //! ([`query`]); [`Octree::validate`] checks every invariant ([`validate`]).
 //!
 //! Memory: the tree is "preallocated" in the sense of implicit indexing (level `L` starts at
@@ -30,8 +31,8 @@ pub const MAX_DEPTH: u32 = 10;
 /// "No object" / "no node" in the flat arrays.
 const NONE: u32 = u32::MAX;
 
-/// Hot per-sphere data, indexed by dense id; the pair walk reads `aabb`, `qmin`/`qmax` and
-/// `next`, so they share one cache line.
+/// Per-sphere data, indexed by dense id (insertion order, so `update` streams). The pair pass
+/// reads `aabb`, `qmin`/`qmax` and `walk_key`; queries follow the node lists.
 #[derive(Clone, Copy, Debug)]
 struct Obj {
     /// `center ± radius`, the box every pair test uses. 24 bytes.
@@ -45,8 +46,11 @@ struct Obj {
     /// Neighbours in the node's list, `NONE` at the ends. 8 bytes.
     next: u32,
     prev: u32,
+    /// The node's key in depth-first walk order ([`Octree::walk_key`]), set on every link.
+    /// 8 bytes.
+    walk_key: u64,
 }
-const _: () = assert!(core::mem::size_of::<Obj>() == 48);
+const _: () = assert!(core::mem::size_of::<Obj>() == 56);
 
 /// Per-depth occupancy and the cost of the last pair pass, from [`Octree::stats`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -86,9 +90,6 @@ pub struct Octree {
     per_level: [u32; MAX_DEPTH as usize + 1],
     overflow: u32,
     scratch: pairs::Scratch,
-    /// Links since the last [`Octree::sort_spatially`].
-    relinks: usize,
-    reorder: place::Reorder,
 }
 
 impl Octree {
@@ -113,8 +114,6 @@ impl Octree {
             per_level: [0; MAX_DEPTH as usize + 1],
             overflow: 0,
             scratch: pairs::Scratch::default(),
-            relinks: 0,
-            reorder: place::Reorder::default(),
         })
     }
 
@@ -253,30 +252,16 @@ impl Octree {
 
     /// Calls `f(a, b)` once for every pair of spheres whose AABBs overlap (closed: touching
     /// boxes overlap), in no particular order and with no particular key order inside a pair.
-    pub fn for_each_pair(&mut self, mut f: impl FnMut(ProxyKey, ProxyKey)) {
-        if self.relinks > self.objs.len() / 8 {
-            self.sort_spatially();
-        }
+    pub fn for_each_pair(&mut self, f: impl FnMut(ProxyKey, ProxyKey)) {
         let mut scratch = core::mem::take(&mut self.scratch);
-        let keys = &self.keys;
-        self.walk_pairs(&mut scratch, &mut |a, b| {
-            f(keys[a as usize], keys[b as usize]);
-        });
+        self.walk_pairs(&mut scratch, f);
         self.scratch = scratch;
     }
 
     /// Appends every overlapping pair, canonical (`a < b`) but **unsorted**, to `out`
     /// (which is not cleared); sort with [`crate::pair::sort_dedup`] if order matters.
     pub fn pairs_into(&mut self, out: &mut Vec<Pair>) {
-        if self.relinks > self.objs.len() / 8 {
-            self.sort_spatially();
-        }
-        let mut scratch = core::mem::take(&mut self.scratch);
-        let keys = &self.keys;
-        self.walk_pairs(&mut scratch, &mut |a, b| {
-            out.push(Pair::new(keys[a as usize], keys[b as usize]));
-        });
-        self.scratch = scratch;
+        self.for_each_pair(|a, b| out.push(Pair::new(a, b)));
     }
 
     /// Calls `f` with every sphere's key and box (`center ± radius`), in dense-id order.
@@ -308,6 +293,7 @@ impl Octree {
             node: NONE,
             next: NONE,
             prev: NONE,
+            walk_key: 0,
         });
         self.spheres.push((center, radius));
         self.keys.push(key);

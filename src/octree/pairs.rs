@@ -1,406 +1,569 @@
-//! All overlapping pairs: one depth-first walk with a filtered ancestor stack (RTCD 7.3's
-//! `TestAllCollisions`), and a subdivision of long lists.
+//! All overlapping pairs: the spheres sorted into depth-first node order, then one streaming
+//! walk over node runs with a filtered ancestor stack (RTCD 7.3's `TestAllCollisions`), and
+//! axis sweeps inside long lists.
+//!
+//! Order. Every sphere carries its node's walk key (see [`Octree::walk_key`]): the node's
+//! Morton prefix shifted to the deepest level, then the level as a tie-break, so a node sorts
+//! right after its ancestors and before its subtree, and every subtree is one contiguous key
+//! range. A pass LSD-radix-sorts `(walk key, id)` (two or three streaming passes; the order of
+//! the dense ids is left alone, so `update` keeps streaming in insertion order) and gathers each
+//! sphere's box and cell range into a contiguous walk-ordered array. The walk then never chases
+//! a list: each node is a run of that array.
 //!
 //! The walk. A sphere placed in node `n` has its integer range inside `n`'s cell, so it can
 //! only overlap spheres placed in `n`, in `n`'s ancestors, or in `n`'s subtree; testing each
 //! node's spheres against each other and against its ancestors' spheres finds every pair
 //! exactly once (at the deeper of the two nodes). The naive walk hands every ancestor sphere to
-//! every descendant, which is quadratic in the root's straddlers. Here a child receives only
-//! the ancestor and parent spheres whose integer range overlaps the child's cell: a sphere `a`
-//! that overlaps a sphere `b` placed in the child's subtree has a range overlapping `b`'s
-//! (the cell map is monotone), and `b`'s range lies inside the child's cell, so `a` is never
-//! filtered out wrongly. Ranges are clamped to the grid, so overflow spheres in the root are
-//! filtered the same way. The ancestor stack is one `Vec` of segments; a frame owns the
-//! segment `start..end`, and everything after `end` belongs to finished frames.
+//! every descendant, which is quadratic in the root's straddlers. Here the path from the root
+//! to the current node is a stack of levels, and level `l` holds **copies** of the ancestor
+//! spheres whose integer range overlaps the level-`l` cell: the parent level's copies plus the
+//! parent node's own spheres, filtered by that cell. A sphere `a` that overlaps a sphere `b`
+//! placed in the cell's subtree has a range overlapping `b`'s (the cell map is monotone), and
+//! `b`'s range lies inside the cell, so `a` is never filtered out wrongly. Ranges are clamped
+//! to the grid, so overflow spheres in the root are filtered the same way. Levels between the
+//! current node and its nearest occupied ancestor are filtered too (with no own spheres), so a
+//! long list is narrowed step by step and shared by all the nodes under a level.
 //!
-//! Long lists. A node's own spheres straddle its mid planes, so they lie on up to three planes
-//! — a 2-D distribution that a 1-D sweep handles in O(n^1.5) (the root of the `clustered` scene
-//! holds a quarter of all spheres). Long lists (own × own, or ancestors × own) are therefore
-//! split further over the node's cell, virtually: each part of the cell hands each of its
-//! eight octants the spheres whose range overlaps it, until a part holds few candidate pairs or
-//! reaches the deepest level. A pair can then meet in several parts; it is tested only in the
-//! part that contains the integer point `p = max(qmin_a, qmin_b)` (per axis), which lies in
-//! both ranges, hence in exactly one part of every subdivision level, and both spheres reach
-//! that part. Spheres that overlap all eight octants of a part are tested there against the
-//! whole part and not handed down, so a big sphere is never copied into many small parts.
-//! A deepest-level part that is still long (a crowd) is swept along x.
+//! Long own lists. A node's own spheres straddle its mid planes, so they lie on up to three
+//! planes, a 2-D distribution that a 1-D sweep handles badly (every sphere of a plane overlaps
+//! every other along the plane's normal). A long own list is therefore split further over the
+//! node's cell, virtually: each part of the cell hands each of its eight octants copies of the
+//! spheres whose range reaches it, until a part is short or reaches the deepest level (then it
+//! is swept along x). A pair can meet in several parts; it is tested only in the part that
+//! contains the integer point `p = max(qmin_a, qmin_b)` (per axis), which lies in both ranges,
+//! hence in exactly one part of every subdivision level, and both spheres reach that part.
+//! Spheres that reach all eight octants of a part are tested there against the whole part and
+//! not handed down, so a big sphere is never copied into many small parts.
+//!
+//! Ancestors × own. Ancestor planes are never inside a node's cell, so an ancestor sphere that
+//! reaches the cell lies on a face of it. Each sphere gets a group, the first axis whose mid
+//! plane of its own node it straddles (2 if none): an ancestor sphere of group `g` is thin along
+//! `g`, and a long ancestors × own list is swept, for each `g`, along axis `g` between the
+//! ancestors of group `g` and all own spheres; each pair is tested once, on its ancestor's axis.
 
-use super::place::node_index;
-use super::{NONE, Obj, Octree};
+use super::Octree;
+use crate::ProxyKey;
+use glam::Vec3A;
 
-/// Lists (or list pairs) with at most this many candidate pairs are tested all against all;
-/// longer ones are subdivided.
-const LEAF_PAIRS: usize = 64;
-/// Ancestors × own where one side is at most this long are tested all against all: the
-/// subdivision only pays when both sides are long.
+/// Lists with at most this many spheres are tested all against all; longer ones are swept.
+const SHORT_SELF: usize = 16;
+/// Ancestors × own with at most this many candidate pairs, or with a side of at most
+/// `SHORT_SIDE` spheres, are tested all against all; longer ones are swept.
+const SHORT_CROSS: usize = 1024;
 const SHORT_SIDE: usize = 4;
+/// Bits per radix-sort digit.
+const RADIX_BITS: u32 = 11;
 
-/// One node to visit: its place in the tree and its segment of the ancestor stack.
+/// A sphere as the walk reads it: box, integer cell range and walk position. 48 bytes.
 #[derive(Clone, Copy, Debug)]
-struct Frame {
-    node: u32,
-    code: u32,
-    level: u32,
-    /// Cell coordinates at `level`.
-    cell: [u32; 3],
-    start: u32,
-    end: u32,
+struct Hot {
+    /// `center ± radius`. 32 bytes.
+    min: Vec3A,
+    max: Vec3A,
+    /// Cell range at the deepest level, clamped to the grid. 12 bytes.
+    qmin: [u16; 3],
+    qmax: [u16; 3],
+    /// Position in walk order (index of `Scratch::keys` and `Scratch::group`). 4 bytes.
+    pos: u32,
+}
+const _: () = assert!(core::mem::size_of::<Hot>() == 48);
+
+impl Hot {
+    #[inline]
+    fn overlaps(&self, o: &Hot) -> bool {
+        (self.min.cmple(o.max) & o.min.cmple(self.max)).all()
+    }
+
+    /// True if the cell range meets the cell `lo..=hi`.
+    #[inline]
+    fn reaches(&self, lo: [u32; 3], hi: [u32; 3]) -> bool {
+        (0..3).all(|a| u32::from(self.qmin[a]) <= hi[a] && u32::from(self.qmax[a]) >= lo[a])
+    }
 }
 
-/// A part of a node's cell in the subdivision of a long list: its integer corner and size
-/// `2^shift`, and its lists in `Scratch::lists`.
+/// One level of the path from the root to the current node.
+#[derive(Clone, Copy, Debug)]
+struct Level {
+    /// Morton code of the path's node at this level.
+    code: u32,
+    /// The node's own spheres in walk order (empty for a node only passed through).
+    own: (u32, u32),
+    /// Copies of the ancestor spheres that reach this level's cell, in `Scratch::anc`.
+    cands: (u32, u32),
+}
+
+/// A sphere's extent along a sweep axis.
+#[derive(Clone, Copy, Debug)]
+struct Entry {
+    lo: f32,
+    hi: f32,
+    /// Index in the swept list.
+    i: u32,
+}
+
+/// A part of a node's cell in the subdivision of a long own list: its integer corner, its
+/// size `2^shift`, and its spheres `Work::buf[start..end]`.
 #[derive(Clone, Copy, Debug)]
 struct Part {
     lo: [u32; 3],
     shift: u32,
     start: u32,
-    mid: u32,
     end: u32,
 }
 
-/// A sphere's extent along the sweep axis.
-#[derive(Clone, Copy, Debug)]
-struct Entry {
-    lo: f32,
-    hi: f32,
-    id: u32,
+/// Buffers of the long-list passes.
+#[derive(Clone, Debug, Default)]
+struct Work {
+    parts: Vec<Part>,
+    buf: Vec<Hot>,
+    octs: Vec<u8>,
+    sweep: Vec<Entry>,
+    sweep_own: Vec<Entry>,
 }
 
-/// Buffers of the pair walk, reused by every pass; they never shrink.
+/// Buffers of the pair pass, reused by every pass; they never shrink.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Scratch {
-    stack: Vec<Frame>,
-    anc: Vec<u32>,
-    own: Vec<u32>,
-    /// Candidates for the children of the current node, with the octants they overlap.
-    cand: Vec<(u32, u8)>,
-    /// Parts of the current subdivision still to visit, and their lists (segments, like the
-    /// ancestor stack): a part's first list is `start..mid`, its second `mid..end`.
-    parts: Vec<Part>,
-    lists: Vec<u32>,
-    /// Octants of each sphere of the current part.
-    octs: Vec<u8>,
-    /// The two sides of a crowded part, sorted along x.
-    sorted: [Vec<Entry>; 2],
+    /// `(walk key << 32) | id`, sorted, and the radix sort's second buffer.
+    items: Vec<u64>,
+    items_tmp: Vec<u64>,
+    /// `(walk key, id)` for trees too deep for a 32-bit key (depth 10).
+    wide: Vec<(u64, u32)>,
+    counts: Vec<u32>,
+    /// Walk-ordered copies: hot data, walk key, proxy key and sweep group of each sphere.
+    hot: Vec<Hot>,
+    node_key: Vec<u64>,
+    keys: Vec<ProxyKey>,
+    group: Vec<u8>,
+    path: Vec<Level>,
+    anc: Vec<Hot>,
+    work: Work,
     pub(super) tests: u64,
     pub(super) nodes_visited: u32,
 }
 
-/// Octants of a node with mid cell `mid` that the range of `o` overlaps (bit `x | y<<1 | z<<2`).
+/// Compacts every third bit of `x` (bit 3i → bit i); the inverse of `place::spread3`.
 #[inline]
-fn octants(o: &Obj, mid: [u32; 3]) -> u8 {
+fn compact3(x: u32) -> u32 {
+    let mut x = x & 0x0924_9249;
+    x = (x | (x >> 2)) & 0x030c_30c3;
+    x = (x | (x >> 4)) & 0x0300_f00f;
+    x = (x | (x >> 8)) & 0x0300_00ff;
+    (x | (x >> 16)) & 0x3ff
+}
+
+/// LSD radix sort of `items` by bits `lo..lo + bits`, stable; `tmp` and `counts` are scratch.
+/// Digits every item shares are skipped.
+fn radix_sort(items: &mut Vec<u64>, tmp: &mut Vec<u64>, counts: &mut Vec<u32>, lo: u32, bits: u32) {
+    let n = items.len();
+    let radix = 1usize << RADIX_BITS;
+    let mask = (radix - 1) as u64;
+    let passes = bits.div_ceil(RADIX_BITS) as usize;
+    counts.clear();
+    counts.resize(radix * passes, 0);
+    for &x in items.iter() {
+        for p in 0..passes {
+            let d = ((x >> (lo + p as u32 * RADIX_BITS)) & mask) as usize;
+            counts[p * radix + d] += 1;
+        }
+    }
+    tmp.resize(n, 0);
+    for p in 0..passes {
+        let c = &mut counts[p * radix..(p + 1) * radix];
+        if c.iter().any(|&k| k as usize == n) {
+            continue;
+        }
+        let mut sum = 0;
+        for k in c.iter_mut() {
+            let here = *k;
+            *k = sum;
+            sum += here;
+        }
+        let shift = lo + p as u32 * RADIX_BITS;
+        for &x in items.iter() {
+            let d = ((x >> shift) & mask) as usize;
+            tmp[c[d] as usize] = x;
+            c[d] += 1;
+        }
+        core::mem::swap(items, tmp);
+    }
+}
+
+/// Counts and runs the AABB tests of one pass, mapping walk positions to proxy keys.
+struct Tester<'a, F> {
+    keys: &'a [ProxyKey],
+    tests: u64,
+    emit: F,
+}
+
+impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
+    #[inline]
+    fn test(&mut self, a: &Hot, b: &Hot) {
+        self.tests += 1;
+        if a.overlaps(b) {
+            (self.emit)(self.keys[a.pos as usize], self.keys[b.pos as usize]);
+        }
+    }
+
+    /// Every pair within `list`, whose cell ranges lie in the cell at `lo` of size `2^shift`,
+    /// by the virtual subdivision of the module docs.
+    fn self_pairs(&mut self, list: &[Hot], lo: [u32; 3], shift: u32, w: &mut Work) {
+        if list.len() <= SHORT_SELF {
+            for (i, a) in list.iter().enumerate() {
+                for b in &list[i + 1..] {
+                    self.test(a, b);
+                }
+            }
+            return;
+        }
+        w.buf.clear();
+        w.buf.extend_from_slice(list);
+        w.parts.clear();
+        w.parts.push(Part {
+            lo,
+            shift,
+            start: 0,
+            end: list.len() as u32,
+        });
+        while let Some(p) = w.parts.pop() {
+            w.buf.truncate(p.end as usize);
+            let seg = p.start as usize..p.end as usize;
+            // Test a pair here only if its point `max(qmin_a, qmin_b)` is in this part.
+            let lo = p.lo;
+            let here =
+                |a: &Hot, b: &Hot| (0..3).all(|k| u32::from(a.qmin[k].max(b.qmin[k])) >= lo[k]);
+            if seg.len() <= SHORT_SELF || p.shift == 0 {
+                let l = &w.buf[seg];
+                if l.len() <= SHORT_SELF {
+                    for (i, a) in l.iter().enumerate() {
+                        for b in &l[i + 1..] {
+                            if here(a, b) {
+                                self.test(a, b);
+                            }
+                        }
+                    }
+                } else {
+                    // A crowd in one deepest cell: sweep along x.
+                    let e = &mut w.sweep;
+                    e.clear();
+                    e.extend(l.iter().enumerate().map(|(i, h)| Entry {
+                        lo: h.min.x,
+                        hi: h.max.x,
+                        i: i as u32,
+                    }));
+                    e.sort_unstable_by(|x, y| x.lo.total_cmp(&y.lo));
+                    for (k, x) in e.iter().enumerate() {
+                        let a = &l[x.i as usize];
+                        for y in e[k + 1..].iter().take_while(|y| y.lo <= x.hi) {
+                            let b = &l[y.i as usize];
+                            if here(a, b) {
+                                self.test(a, b);
+                            }
+                        }
+                    }
+                }
+                continue;
+            }
+            let half = 1u32 << (p.shift - 1);
+            let mid = lo.map(|l| l + half);
+            w.octs.clear();
+            w.octs
+                .extend(w.buf[seg.clone()].iter().map(|h| octants(h, mid)));
+            // Spheres reaching all eight octants are tested here against the whole part and
+            // not handed down, so a big sphere is never copied into many small parts.
+            for (i, &o) in w.octs.iter().enumerate() {
+                if o == 0xFF {
+                    let a = w.buf[seg.start + i];
+                    for (j, &o2) in w.octs.iter().enumerate() {
+                        if j != i && (o2 != 0xFF || j > i) {
+                            let b = w.buf[seg.start + j];
+                            if here(&a, &b) {
+                                self.test(&a, &b);
+                            }
+                        }
+                    }
+                }
+            }
+            for c in 0..8u32 {
+                let start = w.buf.len();
+                for (i, &o) in w.octs.iter().enumerate() {
+                    if o != 0xFF && o & (1 << c) != 0 {
+                        let h = w.buf[seg.start + i];
+                        w.buf.push(h);
+                    }
+                }
+                if w.buf.len() - start >= 2 {
+                    w.parts.push(Part {
+                        lo: [0, 1, 2].map(|a| lo[a] + ((c >> a) & 1) * half),
+                        shift: p.shift - 1,
+                        start: start as u32,
+                        end: w.buf.len() as u32,
+                    });
+                } else {
+                    w.buf.truncate(start);
+                }
+            }
+        }
+    }
+
+    /// Every pair across the ancestor copies `cands` and the node's own spheres `own`.
+    /// Ancestor spheres lie on the faces of the node's cell (ancestor planes are never inside
+    /// it); one of group `g` lies on a face normal to axis `g`, so it is swept along `g`,
+    /// where it is thin, against all own spheres.
+    fn cross_pairs(&mut self, cands: &[Hot], own: &[Hot], group: &[u8], w: &mut Work) {
+        if cands.len() * own.len() <= SHORT_CROSS || cands.len().min(own.len()) <= SHORT_SIDE {
+            for x in cands {
+                for y in own {
+                    self.test(x, y);
+                }
+            }
+            return;
+        }
+        for axis in 0..3 {
+            let ea = &mut w.sweep;
+            ea.clear();
+            ea.extend(
+                cands
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, h)| usize::from(group[h.pos as usize]) == axis)
+                    .map(|(i, h)| Entry {
+                        lo: h.min[axis],
+                        hi: h.max[axis],
+                        i: i as u32,
+                    }),
+            );
+            if ea.is_empty() {
+                continue;
+            }
+            ea.sort_unstable_by(|x, y| x.lo.total_cmp(&y.lo));
+            let eb = &mut w.sweep_own;
+            eb.clear();
+            eb.extend(own.iter().enumerate().map(|(i, h)| Entry {
+                lo: h.min[axis],
+                hi: h.max[axis],
+                i: i as u32,
+            }));
+            eb.sort_unstable_by(|x, y| x.lo.total_cmp(&y.lo));
+            // In merged order, each entry scans the other list's entries not yet passed while
+            // they start before it ends: a pair overlapping on the axis is met once.
+            let (mut i, mut j) = (0, 0);
+            while i < ea.len() && j < eb.len() {
+                if ea[i].lo <= eb[j].lo {
+                    let x = ea[i];
+                    for y in eb[j..].iter().take_while(|y| y.lo <= x.hi) {
+                        self.test(&cands[x.i as usize], &own[y.i as usize]);
+                    }
+                    i += 1;
+                } else {
+                    let y = eb[j];
+                    for x in ea[i..].iter().take_while(|x| x.lo <= y.hi) {
+                        self.test(&cands[x.i as usize], &own[y.i as usize]);
+                    }
+                    j += 1;
+                }
+            }
+        }
+    }
+}
+
+/// Octants of a cell with mid cell `mid` that the range of `h` reaches (bit `x | y<<1 | z<<2`).
+#[inline]
+fn octants(h: &Hot, mid: [u32; 3]) -> u8 {
     const HIGH: [u8; 3] = [0xAA, 0xCC, 0xF0];
     let mut m = 0xFF;
     for a in 0..3 {
-        if u32::from(o.qmin[a]) >= mid[a] {
+        if u32::from(h.qmin[a]) >= mid[a] {
             m &= HIGH[a];
         }
-        if u32::from(o.qmax[a]) < mid[a] {
+        if u32::from(h.qmax[a]) < mid[a] {
             m &= !HIGH[a];
         }
     }
     m
 }
 
-/// Tests every pair of one list sorted by `lo`.
-fn sweep_self(list: &[Entry], test: &mut impl FnMut(u32, u32)) {
-    for (i, e) in list.iter().enumerate() {
-        for f in &list[i + 1..] {
-            if f.lo > e.hi {
-                break;
-            }
-            test(e.id, f.id);
-        }
-    }
-}
-
-/// Tests every pair across two lists sorted by `lo`: in merged order, each entry scans the
-/// other list's entries not yet passed while they start before it ends, so a pair that
-/// overlaps on the axis is tested once, by whichever of the two starts first.
-fn sweep_bi(a: &[Entry], b: &[Entry], test: &mut impl FnMut(u32, u32)) {
-    let (mut i, mut j) = (0, 0);
-    while i < a.len() && j < b.len() {
-        if a[i].lo <= b[j].lo {
-            let e = a[i];
-            for f in b[j..].iter().take_while(|f| f.lo <= e.hi) {
-                test(e.id, f.id);
-            }
-            i += 1;
-        } else {
-            let e = b[j];
-            for f in a[i..].iter().take_while(|f| f.lo <= e.hi) {
-                test(f.id, e.id);
-            }
-            j += 1;
-        }
-    }
-}
-
 impl Octree {
-    /// Calls `emit(i, j)` with dense ids for every overlapping pair, once; counts the AABB
-    /// tests and visited nodes into `s`.
-    pub(super) fn walk_pairs(&self, s: &mut Scratch, emit: &mut impl FnMut(u32, u32)) {
+    /// Calls `emit(a, b)` for every overlapping pair, once; records the AABB tests and the
+    /// visited nodes in `s`.
+    pub(super) fn walk_pairs(&self, s: &mut Scratch, emit: impl FnMut(ProxyKey, ProxyKey)) {
         s.tests = 0;
         s.nodes_visited = 0;
-        s.stack.clear();
-        s.anc.clear();
         if self.objs.is_empty() {
             return;
         }
-        let objs = &self.objs[..];
-        let mut tests = 0u64;
-        let mut test = |x: u32, y: u32| {
-            tests += 1;
-            if objs[x as usize].aabb.overlaps(&objs[y as usize].aabb) {
-                emit(x, y);
-            }
+        self.sort_into_walk_order(s);
+        let d = self.depth;
+        let n = s.hot.len();
+        let mut t = Tester {
+            keys: &s.keys,
+            tests: 0,
+            emit,
         };
-        s.stack.push(Frame {
-            node: 0,
+        s.path.clear();
+        s.anc.clear();
+        s.path.push(Level {
             code: 0,
-            level: 0,
-            cell: [0; 3],
-            start: 0,
-            end: 0,
+            own: (0, 0),
+            cands: (0, 0),
         });
-        while let Some(f) = s.stack.pop() {
-            s.anc.truncate(f.end as usize);
-            s.nodes_visited += 1;
-            s.own.clear();
-            let mut i = self.nodes.head(f.node);
-            while i != NONE {
-                s.own.push(i);
-                i = objs[i as usize].next;
+        let mut visited = 0u32;
+        let mut i = 0;
+        while i < n {
+            let key = s.node_key[i];
+            let j = i + s.node_key[i..].iter().take_while(|&&k| k == key).count();
+            let level = (key & 15) as usize;
+            let prefix = (key >> 4) as u32;
+            // The deepest level of the path that is this node or one of its ancestors (the
+            // root always is).
+            let mut m = (s.path.len() - 1).min(level);
+            while m > 0 && s.path[m].code != prefix >> (3 * (d - m as u32)) {
+                m -= 1;
             }
-            let shift = self.depth - f.level;
-            let lo = f.cell.map(|c| c << shift);
-            self.node_pairs(s, &f, lo, shift, &mut test);
-            let mask = self.nodes.mask(f.node);
-            if mask == 0 {
-                continue;
-            }
-            // A non-empty child mask means `f.level < depth`, so `shift >= 1`.
-            let mid = lo.map(|l| l + (1 << (shift - 1)));
-            s.cand.clear();
-            for k in f.start as usize..f.end as usize {
-                let id = s.anc[k];
-                let o = octants(&objs[id as usize], mid) & mask;
-                if o != 0 {
-                    s.cand.push((id, o));
-                }
-            }
-            for &id in &s.own {
-                let o = octants(&objs[id as usize], mid) & mask;
-                if o != 0 {
-                    s.cand.push((id, o));
-                }
-            }
-            for c in (0..8u32).rev().filter(|c| mask & (1 << c) != 0) {
+            s.path.truncate(m + 1);
+            s.anc.truncate(s.path[m].cands.1 as usize);
+            let corner = [
+                compact3(prefix),
+                compact3(prefix >> 1),
+                compact3(prefix >> 2),
+            ];
+            for l in m + 1..=level {
+                visited += 1;
+                let parent = s.path[l - 1];
+                let shift = d - l as u32;
+                let lo = corner.map(|c| c >> shift << shift);
+                let hi = lo.map(|c| c + (1 << shift) - 1);
                 let start = s.anc.len() as u32;
-                s.anc.extend(
-                    s.cand
-                        .iter()
-                        .filter(|&&(_, o)| o & (1 << c) != 0)
-                        .map(|&(id, _)| id),
-                );
-                let code = f.code * 8 + c;
-                s.stack.push(Frame {
-                    node: node_index(f.level + 1, code),
-                    code,
-                    level: f.level + 1,
-                    cell: [0, 1, 2].map(|a| f.cell[a] * 2 + ((c >> a) & 1)),
-                    start,
-                    end: s.anc.len() as u32,
+                for k in parent.cands.0..parent.cands.1 {
+                    let h = s.anc[k as usize];
+                    if h.reaches(lo, hi) {
+                        s.anc.push(h);
+                    }
+                }
+                for h in &s.hot[parent.own.0 as usize..parent.own.1 as usize] {
+                    if h.reaches(lo, hi) {
+                        s.anc.push(*h);
+                    }
+                }
+                s.path.push(Level {
+                    code: prefix >> (3 * shift),
+                    own: (0, 0),
+                    cands: (start, s.anc.len() as u32),
                 });
             }
+            if level == 0 {
+                visited += 1;
+            }
+            let here = &mut s.path[level];
+            here.own = (i as u32, j as u32);
+            let cands = &s.anc[here.cands.0 as usize..here.cands.1 as usize];
+            let own = &s.hot[i..j];
+            let shift = d - level as u32;
+            let lo = corner.map(|c| c >> shift << shift);
+            t.self_pairs(own, lo, shift, &mut s.work);
+            if !cands.is_empty() {
+                t.cross_pairs(cands, own, &s.group, &mut s.work);
+            }
+            i = j;
         }
-        s.tests = tests;
+        s.tests = t.tests;
+        s.nodes_visited = visited;
     }
 
-    /// Pairs among the node's own spheres (`s.own`) and between them and the ancestors in
-    /// `s.anc[f.start..f.end]`.
-    fn node_pairs(
-        &self,
-        s: &mut Scratch,
-        f: &Frame,
-        lo: [u32; 3],
-        shift: u32,
-        test: &mut impl FnMut(u32, u32),
-    ) {
-        let n = s.own.len();
-        if n * n.saturating_sub(1) / 2 <= LEAF_PAIRS {
-            for (i, &x) in s.own.iter().enumerate() {
-                for &y in &s.own[i + 1..] {
-                    test(x, y);
-                }
-            }
-        } else {
-            s.lists.clear();
-            s.lists.extend_from_slice(&s.own);
-            self.split_pairs(s, lo, shift, false, test);
-        }
-        let anc = f.start as usize..f.end as usize;
-        if anc.len() * n <= LEAF_PAIRS || anc.len().min(n) <= SHORT_SIDE {
-            for &x in &s.anc[anc] {
-                for &y in &s.own {
-                    test(x, y);
-                }
-            }
-        } else {
-            s.lists.clear();
-            s.lists.extend_from_slice(&s.anc[anc]);
-            s.lists.extend_from_slice(&s.own);
-            self.split_pairs(s, lo, shift, true, test);
-        }
-    }
-
-    /// Tests the pairs of `s.lists` — within it (`bi == false`), or between its first part and
-    /// the last `s.own.len()` entries (`bi == true`) — by subdividing the cell at `lo` of size
-    /// `2^shift`; see the module docs for the rule that makes each pair meet once.
-    fn split_pairs(
-        &self,
-        s: &mut Scratch,
-        lo: [u32; 3],
-        shift: u32,
-        bi: bool,
-        test: &mut impl FnMut(u32, u32),
-    ) {
-        let objs = &self.objs[..];
-        let end = s.lists.len() as u32;
-        let mid = if bi { end - s.own.len() as u32 } else { 0 };
-        s.parts.clear();
-        s.parts.push(Part {
-            lo,
-            shift,
-            start: 0,
-            mid,
-            end,
-        });
-        while let Some(p) = s.parts.pop() {
-            s.lists.truncate(p.end as usize);
-            // `p = max(qmin_x, qmin_y) >= lo` per axis: the pair's point is in this part (it
-            // is never past the part's far side, as both ranges overlap the part).
-            let lo = p.lo;
-            let mut tested = |x: u32, y: u32| {
-                let (a, b) = (&objs[x as usize], &objs[y as usize]);
-                if (0..3).all(|k| a.qmin[k].max(b.qmin[k]) as u32 >= lo[k]) {
-                    test(x, y);
-                }
-            };
-            let (first, second) = (
-                p.start as usize..p.mid as usize,
-                p.mid as usize..p.end as usize,
-            );
-            let pairs = if bi {
-                first.len() * second.len()
+    /// Sorts the spheres by walk key and fills the walk-ordered arrays of `s`: box and cell
+    /// range, walk key, proxy key, and the sweep group (the first axis whose mid plane of its
+    /// own node the sphere straddles, 2 if none).
+    fn sort_into_walk_order(&self, s: &mut Scratch) {
+        let Scratch {
+            items,
+            items_tmp,
+            wide,
+            counts,
+            hot,
+            node_key,
+            keys,
+            group,
+            ..
+        } = s;
+        hot.clear();
+        node_key.clear();
+        keys.clear();
+        group.clear();
+        let mut gather = |key: u64, id: u32| {
+            let o = &self.objs[id as usize];
+            let shift = self.depth - (key & 15) as u32;
+            let g = if shift == 0 {
+                2
             } else {
-                second.len() * second.len().saturating_sub(1) / 2
+                (0..3)
+                    .find(|&a| (o.qmin[a] ^ o.qmax[a]) >> (shift - 1) != 0)
+                    .unwrap_or(2) as u8
             };
-            if pairs <= LEAF_PAIRS || (bi && first.len().min(second.len()) <= SHORT_SIDE) {
-                let l = &s.lists;
-                for (i, &y) in l[second.clone()].iter().enumerate() {
-                    let others = if bi {
-                        &l[first.clone()]
-                    } else {
-                        &l[p.mid as usize + i + 1..p.end as usize]
-                    };
-                    for &x in others {
-                        tested(x, y);
-                    }
-                }
-                continue;
-            }
-            if p.shift == 0 {
-                // A crowd in one deepest cell: sweep along x.
-                for (side, range) in [first, second].into_iter().enumerate() {
-                    let v = &mut s.sorted[side];
-                    v.clear();
-                    v.extend(s.lists[range].iter().map(|&id| {
-                        let b = &objs[id as usize].aabb;
-                        Entry {
-                            lo: b.min.x,
-                            hi: b.max.x,
-                            id,
-                        }
-                    }));
-                    v.sort_unstable_by(|x, y| x.lo.total_cmp(&y.lo));
-                }
-                if bi {
-                    sweep_bi(&s.sorted[0], &s.sorted[1], &mut tested);
-                } else {
-                    sweep_self(&s.sorted[1], &mut tested);
-                }
-                continue;
-            }
-            let half = 1u32 << (p.shift - 1);
-            let centre = lo.map(|l| l + half);
-            s.octs.clear();
-            s.octs.extend(
-                s.lists[p.start as usize..p.end as usize]
+            hot.push(Hot {
+                min: o.aabb.min.into(),
+                max: o.aabb.max.into(),
+                qmin: o.qmin,
+                qmax: o.qmax,
+                pos: keys.len() as u32,
+            });
+            node_key.push(key);
+            keys.push(self.keys[id as usize]);
+            group.push(g);
+        };
+        let key_bits = 3 * self.depth + 4;
+        if key_bits <= 32 {
+            items.clear();
+            items.extend(
+                self.objs
                     .iter()
-                    .map(|&id| octants(&objs[id as usize], centre)),
+                    .enumerate()
+                    .map(|(id, o)| (o.walk_key << 32) | id as u64),
             );
-            // Spheres overlapping all eight octants are resolved here against the whole part.
-            let l = &s.lists;
-            let big = |i: usize| s.octs[i - p.start as usize] == 0xFF;
-            if bi {
-                for i in second.clone().filter(|&i| big(i)) {
-                    for j in first.clone() {
-                        tested(l[j], l[i]);
-                    }
-                }
-                for i in first.clone().filter(|&i| big(i)) {
-                    for j in second.clone().filter(|&j| !big(j)) {
-                        tested(l[i], l[j]);
-                    }
-                }
-            } else {
-                for i in second.clone().filter(|&i| big(i)) {
-                    for j in second.clone().filter(|&j| j > i || (j < i && !big(j))) {
-                        tested(l[j], l[i]);
-                    }
-                }
+            radix_sort(items, items_tmp, counts, 32, key_bits);
+            for &x in items.iter() {
+                gather(x >> 32, x as u32);
             }
-            let oct = |i: usize| s.octs[i - p.start as usize];
-            let reach = |r: &core::ops::Range<usize>| {
-                r.clone()
-                    .map(oct)
-                    .filter(|&o| o != 0xFF)
-                    .fold(0u8, |m, o| m | o)
-            };
-            let children = if bi {
-                reach(&first) & reach(&second)
-            } else {
-                reach(&second)
-            };
-            for c in (0..8u32).filter(|c| children & (1 << c) != 0) {
-                let keep = |i: &usize| oct(*i) != 0xFF && oct(*i) & (1 << c) != 0;
-                let start = s.lists.len();
-                for i in first.clone().filter(keep) {
-                    s.lists.push(s.lists[i]);
-                }
-                let cmid = s.lists.len();
-                for i in second.clone().filter(keep) {
-                    s.lists.push(s.lists[i]);
-                }
-                let cend = s.lists.len();
-                let useful = if bi {
-                    cmid > start && cend > cmid
-                } else {
-                    cend - cmid >= 2
-                };
-                if useful {
-                    s.parts.push(Part {
-                        lo: [0, 1, 2].map(|a| lo[a] + ((c >> a) & 1) * half),
-                        shift: p.shift - 1,
-                        start: start as u32,
-                        mid: cmid as u32,
-                        end: cend as u32,
-                    });
-                } else {
-                    s.lists.truncate(start);
-                }
+        } else {
+            wide.clear();
+            wide.extend(
+                self.objs
+                    .iter()
+                    .enumerate()
+                    .map(|(id, o)| (o.walk_key, id as u32)),
+            );
+            wide.sort_unstable();
+            for &(key, id) in wide.iter() {
+                gather(key, id);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn compact3_inverts_spread3() {
+        for c in [[0, 0, 0], [1, 2, 3], [1023, 0, 511], [1023, 1023, 1023]] {
+            let m = super::super::place::morton(c);
+            assert_eq!([compact3(m), compact3(m >> 1), compact3(m >> 2)], c);
+        }
+    }
+
+    #[test]
+    fn radix_sort_sorts_by_the_key_bits_and_is_stable() {
+        let mut seed = 3u64;
+        let mut items: Vec<u64> = (0..5000u64)
+            .map(|id| {
+                seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+                ((seed >> 40) & 0x3f_ffff) << 32 | id
+            })
+            .collect();
+        let mut want = items.clone();
+        want.sort_by_key(|x| x >> 32);
+        let (mut tmp, mut counts) = (Vec::new(), Vec::new());
+        radix_sort(&mut items, &mut tmp, &mut counts, 32, 22);
+        assert_eq!(items, want);
     }
 }

@@ -210,24 +210,37 @@ impl Octree {
         (aabb, qmin, qmax, node, outside)
     }
 
-    /// The deepest-level cell of a point, clamped to the grid.
+    /// The deepest-level cell of a point, clamped to the grid. After clamping to `[0, top]`
+    /// the value is non-negative, where truncation (`as`) equals `floor`, and `floor` commutes
+    /// with the clamp to integer limits; this avoids a libm `floorf` call per coordinate.
     #[inline]
     pub(super) fn quantize(&self, p: Vec3) -> [u16; 3] {
         let top = ((1u32 << self.depth) - 1) as f32;
         let q = ((p - self.bounds.min) * self.scale)
-            .floor()
             .max(Vec3::ZERO)
             .min(Vec3::splat(top));
         [q.x as u16, q.y as u16, q.z as u16]
     }
 
+    /// The key that puts `node` in depth-first walk order: the node's Morton code at its
+    /// level `L`, shifted to the deepest level (`<< 3·(depth − L)`, the code of the node's first
+    /// deepest-level cell), then `L` in the low 4 bits. A node's subtree shares its shifted
+    /// prefix range and is deeper, so the node sorts before its subtree and after everything
+    /// that precedes it; `3·depth + 4` bits.
+    pub(super) fn walk_key(&self, node: u32) -> u64 {
+        let level = self.nodes.level_of(node);
+        let code = u64::from(node - LEVEL_START[level as usize]);
+        ((code << (3 * (self.depth - level))) << 4) | u64::from(level)
+    }
+
     /// Pushes object `id` at the front of `node`'s list.
     pub(super) fn link(&mut self, id: u32, node: u32) {
-        self.relinks += 1;
+        let walk_key = self.walk_key(node);
         let became_occupied = self.nodes.is_empty(node);
         let head = self.nodes.head(node);
         let o = &mut self.objs[id as usize];
         o.node = node;
+        o.walk_key = walk_key;
         o.prev = NONE;
         o.next = head;
         if head != NONE {
@@ -255,82 +268,6 @@ impl Octree {
         if self.nodes.is_empty(node) {
             self.nodes.mark_empty(node);
         }
-    }
-}
-
-/// Buffers of [`Octree::sort_spatially`], reused; they never shrink.
-#[derive(Clone, Debug, Default)]
-pub(super) struct Reorder {
-    stack: Vec<(u32, u32)>,
-    order: Vec<u32>,
-    new_id: Vec<u32>,
-    objs: Vec<Obj>,
-    spheres: Vec<(Vec3, f32)>,
-    keys: Vec<crate::ProxyKey>,
-}
-
-impl Octree {
-    /// Renumbers the dense ids in the pair walk's node order, so that a node's list and its
-    /// neighbours' lists are contiguous in memory: the walk then streams through `objs`
-    /// instead of missing the cache on every `next`. O(n); the pair passes call it once
-    /// relinks since the last renumbering exceed an eighth of the spheres.
-    pub(super) fn sort_spatially(&mut self) {
-        let n = self.objs.len();
-        let mut r = core::mem::take(&mut self.reorder);
-        r.order.clear();
-        r.stack.clear();
-        r.stack.push((0, 0));
-        while let Some((level, code)) = r.stack.pop() {
-            let node = node_index(level, code);
-            let mut i = self.nodes.head(node);
-            while i != NONE {
-                r.order.push(i);
-                i = self.objs[i as usize].next;
-            }
-            let mask = self.nodes.mask(node);
-            for c in (0..8).rev().filter(|c| mask & (1 << c) != 0) {
-                r.stack.push((level + 1, code * 8 + c));
-            }
-        }
-        debug_assert_eq!(r.order.len(), n);
-        r.new_id.clear();
-        r.new_id.resize(n, NONE);
-        for (new, &old) in r.order.iter().enumerate() {
-            r.new_id[old as usize] = new as u32;
-        }
-        let map = |i: u32| {
-            if i == NONE {
-                NONE
-            } else {
-                r.new_id[i as usize]
-            }
-        };
-        r.objs.clear();
-        r.objs.extend(r.order.iter().map(|&old| {
-            let mut o = self.objs[old as usize];
-            o.next = map(o.next);
-            o.prev = map(o.prev);
-            o
-        }));
-        r.spheres.clear();
-        r.spheres
-            .extend(r.order.iter().map(|&old| self.spheres[old as usize]));
-        r.keys.clear();
-        r.keys
-            .extend(r.order.iter().map(|&old| self.keys[old as usize]));
-        core::mem::swap(&mut self.objs, &mut r.objs);
-        core::mem::swap(&mut self.spheres, &mut r.spheres);
-        core::mem::swap(&mut self.keys, &mut r.keys);
-        for (id, o) in self.objs.iter().enumerate() {
-            if o.prev == NONE {
-                self.nodes.set_head(o.node, id as u32);
-            }
-        }
-        for (id, &key) in self.keys.iter().enumerate() {
-            self.ids.insert(key, id as u32);
-        }
-        self.relinks = 0;
-        self.reorder = r;
     }
 }
 

@@ -197,3 +197,41 @@ fn clustered_pair_pass_is_not_quadratic() {
         pairs.len()
     );
 }
+
+/// The pair pass sorts with a 32-bit radix key up to depth 9 and a comparison sort at depth
+/// 10, and splits long own lists into parts down to the deepest level: every depth, with
+/// crowds, big, zero-radius, coincident and outside spheres, must give the brute-force set.
+#[test]
+fn walk_order_pairs_match_brute_force_at_every_depth() {
+    let mut rng = crate::scene::Rng::new(17);
+    for depth in [0, 1, 3, 8, 9, MAX_DEPTH] {
+        let mut t = Octree::new(unit(), depth).unwrap();
+        for i in 0..600 {
+            let (c, r) = match i % 6 {
+                // A crowd in one small region, so deep lists are long.
+                0 | 1 => (rng.vec3_in(Vec3::splat(0.1), Vec3::splat(0.12)), 0.003),
+                // Straddlers of the root planes.
+                2 => (
+                    Vec3::new(0.0, rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)),
+                    0.02,
+                ),
+                3 => (
+                    rng.vec3_in(Vec3::splat(-1.5), Vec3::splat(1.5)),
+                    rng.range(0.0, 0.05),
+                ),
+                4 => (Vec3::splat(0.25), 0.0),
+                _ => (
+                    rng.vec3_in(Vec3::splat(-1.0), Vec3::ONE),
+                    rng.range(0.0, 0.6),
+                ),
+            };
+            t.insert(c, r).unwrap();
+        }
+        t.validate();
+        assert_eq!(
+            sorted_pairs(&mut t),
+            brute::pairs(&proxies(&t)),
+            "depth {depth}"
+        );
+    }
+}

@@ -5,7 +5,7 @@ use super::{MAX_DEPTH, NONE, Octree};
 
 impl Octree {
     /// Checks every invariant and panics with a message naming the first one broken: each
-    /// sphere's box, cell range and node are what placement gives for its stored sphere; every
+    /// sphere's box, cell range, node and walk key are what placement gives for its stored sphere; every
     /// node list is doubly linked and reaches exactly the spheres that name its node; a child
     /// bit is set iff the child's subtree holds a sphere; per-level, overflow and key-map counts
     /// agree. O(n + occupied nodes); for tests and debugging.
@@ -36,6 +36,7 @@ impl Octree {
                 "stale cell range at id {id}"
             );
             assert_eq!(o.node, node, "id {id} is not in the node placement gives");
+            assert_eq!(o.walk_key, self.walk_key(node), "stale walk key at id {id}");
             per_level[self.nodes.level_of(node) as usize] += 1;
             overflow += u32::from(outside);
         }

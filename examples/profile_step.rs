@@ -1,0 +1,137 @@
+//! Times one scene step for profiling: `cargo run --release --example profile_step --
+//! --scene gas|clustered --n 100000 --steps 30 --depth D --what octree|broadphase`.
+//!
+//! Runs 5 warm-up steps, then `--steps` measured ones, and prints the median ns/object/step,
+//! the pair count of the last step and (for `octree`) the tree's stats. Each step advances the
+//! scene by `DT`, applies every sphere's new centre and collects the pairs; with `octree` the
+//! pairs are `Octree::pairs_into` (unsorted), with `broadphase` the whole `BroadPhase::step`
+//! (sorted list plus added / removed). Under callgrind, `--toggle-collect=*measured*` counts
+//! only the measured steps.
+
+use broadleaf::octree::{Octree, depth_for};
+use broadleaf::scene::{DT, Gas};
+use broadleaf::{BroadPhase, Config, Pair, ProxyKey};
+use std::hint::black_box;
+use std::time::Instant;
+
+const WARMUP: usize = 5;
+
+struct Args {
+    scene: String,
+    n: usize,
+    steps: usize,
+    depth: Option<u32>,
+    what: String,
+}
+
+fn parse() -> Args {
+    let mut a = Args {
+        scene: "gas".into(),
+        n: 100_000,
+        steps: 30,
+        depth: None,
+        what: "octree".into(),
+    };
+    let argv: Vec<String> = std::env::args().skip(1).collect();
+    for kv in argv.chunks(2) {
+        let v = kv.get(1).map(String::as_str).unwrap_or_default();
+        match kv[0].as_str() {
+            "--scene" => a.scene = v.into(),
+            "--n" => a.n = v.parse().expect("--n takes a count"),
+            "--steps" => a.steps = v.parse().expect("--steps takes a count"),
+            "--depth" => a.depth = Some(v.parse().expect("--depth takes a level")),
+            "--what" => a.what = v.into(),
+            other => panic!("unknown argument {other}"),
+        }
+    }
+    a
+}
+
+/// One measured step; a separate function so callgrind can toggle collection on it.
+#[inline(never)]
+fn measured_step(run: &mut dyn FnMut() -> usize) -> usize {
+    run()
+}
+
+fn main() {
+    let args = parse();
+    let mut gas = match args.scene.as_str() {
+        "gas" => Gas::new(args.n, 1),
+        "clustered" => Gas::clustered(args.n, 1),
+        other => panic!("unknown scene {other}"),
+    };
+    let depth = args
+        .depth
+        .unwrap_or_else(|| depth_for(&gas.bounds, gas.radius));
+    let n = gas.len();
+    let mut times = Vec::with_capacity(args.steps);
+    let mut pair_count = 0;
+    let mut time = |run: &mut dyn FnMut() -> usize| {
+        for i in 0..WARMUP + args.steps {
+            let t = Instant::now();
+            pair_count = black_box(measured_step(run));
+            if i >= WARMUP {
+                times.push(t.elapsed().as_nanos() as f64 / n as f64);
+            }
+        }
+    };
+    let mut stats = None;
+    match args.what.as_str() {
+        "octree" => {
+            let mut tree = Octree::new(gas.bounds, depth).expect("scene bounds are valid");
+            let keys: Vec<ProxyKey> = gas
+                .centers
+                .iter()
+                .map(|&c| tree.insert(c, gas.radius).expect("valid sphere"))
+                .collect();
+            let mut pairs: Vec<Pair> = Vec::new();
+            time(&mut || {
+                gas.step(DT);
+                for (&k, &c) in keys.iter().zip(&gas.centers) {
+                    tree.update(k, c, gas.radius).expect("live key");
+                }
+                pairs.clear();
+                tree.pairs_into(&mut pairs);
+                pairs.len()
+            });
+            stats = Some(tree.stats());
+        }
+        "broadphase" => {
+            let mut bp = BroadPhase::new(Config {
+                bounds: gas.bounds,
+                octree_depth: depth,
+                ..Config::default()
+            });
+            let keys: Vec<ProxyKey> = gas
+                .centers
+                .iter()
+                .map(|&c| bp.insert_sphere(c, gas.radius).expect("valid sphere"))
+                .collect();
+            time(&mut || {
+                gas.step(DT);
+                for (&k, &c) in keys.iter().zip(&gas.centers) {
+                    bp.update_sphere(k, c, gas.radius).expect("live key");
+                }
+                let s = bp.step();
+                black_box((s.added.len(), s.removed.len()));
+                s.pairs.len()
+            });
+        }
+        other => panic!("unknown --what {other}"),
+    }
+    times.sort_by(f64::total_cmp);
+    let median = times.get(times.len() / 2).copied().unwrap_or(f64::NAN);
+    println!(
+        "scene={} n={n} depth={depth} what={} steps={} median_ns_per_object_step={median:.1} pairs={pair_count}",
+        args.scene, args.what, args.steps
+    );
+    if let Some(s) = stats {
+        println!(
+            "aabb_tests_per_object={:.2} nodes_visited={} per_level={:?} overflow={}",
+            s.aabb_tests as f64 / n as f64,
+            s.nodes_visited,
+            s.per_level,
+            s.overflow
+        );
+    }
+}
