@@ -214,3 +214,126 @@ fn errors_name_the_bad_value() {
     assert!(e.to_string().contains("inverted"), "{e}");
     let _: &dyn std::error::Error = &e;
 }
+
+mod structures {
+    //! The same refusals on `Octree` and `Bvh` used on their own.
+
+    use super::{INF, NAN, bad_boxes, bad_points};
+    use broadleaf::{Aabb, Bvh, BvhConfig, Error, Octree, Pair, ProxyKey, Vec3};
+
+    fn octree_snapshot(t: &mut Octree, keys: &[ProxyKey]) -> (usize, Vec<Option<Aabb>>, Vec<Pair>) {
+        t.validate();
+        let mut pairs = Vec::new();
+        t.pairs_into(&mut pairs);
+        pairs.sort_unstable();
+        (t.len(), keys.iter().map(|&k| t.aabb(k)).collect(), pairs)
+    }
+
+    fn bvh_snapshot(t: &mut Bvh, keys: &[ProxyKey]) -> (usize, Vec<Option<Aabb>>, Vec<Pair>) {
+        t.validate();
+        let mut pairs = Vec::new();
+        t.for_each_pair(|a, b| pairs.push(Pair::new(a, b)));
+        pairs.sort_unstable();
+        (t.len(), keys.iter().map(|&k| t.aabb(k)).collect(), pairs)
+    }
+
+    #[test]
+    fn octree_refuses_bad_input_and_changes_nothing() {
+        let bounds = Aabb::new(Vec3::splat(-4.0), Vec3::splat(4.0));
+        assert_eq!(
+            Octree::new(bounds, 11).unwrap_err(),
+            Error::DepthOutOfRange(11)
+        );
+        let flat = Aabb::new(Vec3::ZERO, Vec3::new(1.0, 0.0, 1.0));
+        assert!(matches!(
+            Octree::new(flat, 3),
+            Err(Error::InvalidBounds { .. })
+        ));
+        let mut t = Octree::new(bounds, 3).unwrap();
+        let mut keys: Vec<ProxyKey> = (0..20)
+            .map(|i| {
+                t.insert(Vec3::new(i as f32 * 0.4 - 4.0, 0.0, 0.0), 0.3)
+                    .unwrap()
+            })
+            .collect();
+        let gone = keys.pop().unwrap();
+        t.remove(gone).unwrap();
+        let before = octree_snapshot(&mut t, &keys);
+        for p in bad_points() {
+            assert!(matches!(
+                t.insert(p, 1.0),
+                Err(Error::NonFinite { what: "center", .. })
+            ));
+            assert!(matches!(
+                t.update(keys[0], p, 1.0),
+                Err(Error::NonFinite { .. })
+            ));
+            let mut hits = 0;
+            t.query_sphere(p, 1.0, |_| hits += 1);
+            assert_eq!(t.cast_ray(p, Vec3::X, 10.0), None);
+            assert_eq!(t.cast_ray(Vec3::ZERO, p, 10.0), None);
+            assert_eq!(hits, 0);
+        }
+        for r in [NAN, INF, -1.0] {
+            assert!(t.insert(Vec3::ZERO, r).is_err());
+            assert!(t.update(keys[0], Vec3::ZERO, r).is_err());
+        }
+        for (aabb, what) in bad_boxes() {
+            let mut hits = 0;
+            t.query_aabb(&aabb, |_| hits += 1);
+            assert_eq!(hits, 0, "{what}");
+        }
+        assert_eq!(t.remove(gone), Err(Error::UnknownProxy));
+        assert_eq!(t.update(gone, Vec3::ZERO, 1.0), Err(Error::UnknownProxy));
+        assert_eq!(t.remove(ProxyKey::default()), Err(Error::UnknownProxy));
+        assert_eq!(t.aabb(gone), None);
+        assert_eq!(octree_snapshot(&mut t, &keys), before);
+    }
+
+    #[test]
+    fn bvh_refuses_bad_input_and_changes_nothing() {
+        assert!(matches!(
+            Bvh::new(BvhConfig {
+                max_leaf_size: 0,
+                ..BvhConfig::default()
+            }),
+            Err(Error::InvalidConfig {
+                what: "max_leaf_size",
+                ..
+            })
+        ));
+        let mut t = Bvh::new(BvhConfig::default()).unwrap();
+        let mut keys: Vec<ProxyKey> = (0..40)
+            .map(|i| {
+                let min = Vec3::new(i as f32 * 0.5, 0.0, 0.0);
+                t.insert(Aabb::new(min, min + Vec3::ONE)).unwrap()
+            })
+            .collect();
+        t.refit();
+        let gone = keys.pop().unwrap();
+        t.remove(gone).unwrap();
+        let before = bvh_snapshot(&mut t, &keys);
+        for (aabb, what) in bad_boxes() {
+            let e = t.insert(aabb).unwrap_err();
+            assert!(
+                matches!(e, Error::NonFinite { .. } | Error::InvertedAabb { .. }),
+                "{what}: {e}"
+            );
+            assert!(t.update(keys[0], aabb).is_err(), "{what}");
+            let mut hits = 0;
+            t.query_aabb(&aabb, |_| hits += 1);
+            assert_eq!(hits, 0, "{what}");
+        }
+        for p in bad_points() {
+            assert_eq!(t.cast_ray(p, Vec3::X, 10.0), None);
+            assert_eq!(t.cast_ray(Vec3::ZERO, p, 10.0), None);
+        }
+        assert_eq!(t.cast_ray(Vec3::ZERO, Vec3::X, -1.0), None);
+        assert_eq!(t.remove(gone), Err(Error::UnknownProxy));
+        assert_eq!(t.update(gone, Aabb::default()), Err(Error::UnknownProxy));
+        assert_eq!(t.aabb(gone), None);
+        assert_eq!(bvh_snapshot(&mut t, &keys), before);
+        t.refit();
+        assert_eq!(bvh_snapshot(&mut t, &keys), before);
+    }
+}

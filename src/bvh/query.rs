@@ -4,14 +4,18 @@
 
 use super::Bvh;
 use super::node::{INLINE_STACK, SmallStack};
-use crate::geom::{inverse_dir, ray_is_valid};
+use crate::geom::{check_aabb, inverse_dir, ray_is_valid};
 use crate::{Aabb, ProxyKey, Vec3};
 use slotmap::Key;
 
 impl Bvh {
     /// Calls `f` with the key of every live box that overlaps `aabb` (closed: touching
-    /// counts), each once, in no particular order. A NaN box matches nothing.
+    /// counts), each once, in no particular order. A non-finite or inverted query box matches
+    /// nothing, as in `Octree::query_aabb` and `BroadPhase::query_aabb`.
     pub fn query_aabb(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
+        if check_aabb(aabb).is_err() {
+            return;
+        }
         self.query_tree(aabb, |i| f(self.keys[i]));
         for (b, &key) in self.pending_boxes().iter().zip(self.pending_keys()) {
             if b.overlaps(aabb) {
