@@ -17,6 +17,23 @@ pub struct Proxy {
 }
 
 impl Proxy {
+    /// A proxy of a `BroadPhase` shape: the box the broadphase pairs
+    /// ([`Shape::grown_aabb`](crate::Shape::grown_aabb)) and whether it is a static body.
+    #[must_use]
+    pub fn of(key: ProxyKey, shape: &crate::Shape, margin: f32) -> Self {
+        Self {
+            key,
+            aabb: shape.grown_aabb(margin),
+            is_static: matches!(
+                shape,
+                crate::Shape::Body {
+                    kind: crate::BodyKind::Static,
+                    ..
+                }
+            ),
+        }
+    }
+
     /// A non-static proxy.
     #[must_use]
     pub fn new(key: ProxyKey, aabb: Aabb) -> Self {
@@ -73,17 +90,7 @@ pub fn broadphase_pairs(bp: &crate::BroadPhase) -> Vec<Pair> {
     let margin = bp.config().margin;
     let proxies: Vec<Proxy> = bp
         .iter()
-        .map(|(key, shape)| Proxy {
-            key,
-            aabb: shape.grown_aabb(margin),
-            is_static: matches!(
-                shape,
-                crate::Shape::Body {
-                    kind: crate::BodyKind::Static,
-                    ..
-                }
-            ),
-        })
+        .map(|(key, shape)| Proxy::of(key, &shape, margin))
         .collect();
     sweep_pairs(&proxies)
 }

@@ -277,28 +277,7 @@ impl Mirror {
     /// broadphase's margin; the exact set with margin 0), by [`brute::sweep_pairs`].
     #[must_use]
     pub fn exact_pairs(&self) -> Vec<Pair> {
-        brute::sweep_pairs(&self.brute_proxies())
-    }
-
-    fn brute_proxies(&self) -> Vec<brute::Proxy> {
-        let margin = self.broadphase.config().margin;
-        self.handles
-            .keys()
-            .filter_map(|key| {
-                let shape = self.broadphase.shape(key)?;
-                Some(brute::Proxy {
-                    key,
-                    aabb: shape.grown_aabb(margin),
-                    is_static: matches!(
-                        shape,
-                        Shape::Body {
-                            kind: BodyKind::Static,
-                            ..
-                        }
-                    ),
-                })
-            })
-            .collect()
+        brute::broadphase_pairs(&self.broadphase)
     }
 
     /// Steps the broadphase and compares its pairs with rapier's current pairs and with brute

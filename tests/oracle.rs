@@ -63,17 +63,7 @@ fn check_step(bp: &mut BroadPhase, model: &[(ProxyKey, Shape)], prev: &[Pair]) -
     let margin = bp.config().margin;
     let proxies: Vec<brute::Proxy> = model
         .iter()
-        .map(|&(key, shape)| brute::Proxy {
-            key,
-            aabb: shape.grown_aabb(margin),
-            is_static: matches!(
-                shape,
-                Shape::Body {
-                    kind: BodyKind::Static,
-                    ..
-                }
-            ),
-        })
+        .map(|(key, shape)| brute::Proxy::of(*key, shape, margin))
         .collect();
     let expected = brute::pairs(&proxies);
     let step = bp.step();

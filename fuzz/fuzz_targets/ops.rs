@@ -147,11 +147,7 @@ fuzz_target!(|input: Input| {
 fn check(bp: &mut BroadPhase, model: &[(ProxyKey, Shape)], prev: &[Pair], margin: f32) -> Vec<Pair> {
     let proxies: Vec<brute::Proxy> = model
         .iter()
-        .map(|&(key, shape)| brute::Proxy {
-            key,
-            aabb: shape.grown_aabb(margin),
-            is_static: matches!(shape, Shape::Body { kind: BodyKind::Static, .. }),
-        })
+        .map(|(key, shape)| brute::Proxy::of(*key, shape, margin))
         .collect();
     let expected = brute::pairs(&proxies);
     let out = bp.step();
