@@ -293,7 +293,12 @@ fn split(
     }
     match config.split {
         SplitMethod::Sah if n <= nb => sweep_split(config, work, refs, ids, bounds, axis),
-        SplitMethod::Sah => sah_split(config, work, refs, ids, bounds, axis),
+        // One copy per axis, so the hot loops read the coordinate straight from memory.
+        SplitMethod::Sah => match axis {
+            0 => sah_split::<0>(config, work, refs, ids, bounds),
+            1 => sah_split::<1>(config, work, refs, ids, bounds),
+            _ => sah_split::<2>(config, work, refs, ids, bounds),
+        },
         _ if small => None,
         SplitMethod::Middle => {
             let mid_point = 0.5 * (bounds.cmin[axis] + bounds.cmax[axis]);
@@ -322,19 +327,20 @@ fn split(
 // candidate has two non-empty sides. The bucket unions are the children's exact bounds, so
 // the children need no pass of their own before they are split in turn: each tree level costs
 // one binning pass and one partition pass over its primitives.
-fn sah_split(
+fn sah_split<const AXIS: usize>(
     config: &BvhConfig,
     work: &mut Work,
     refs: &mut [Ref],
     ids: &mut [u32],
     bounds: &Bounds,
-    axis: usize,
 ) -> Option<Split> {
     let n = refs.len();
     let nb = config.sah_buckets as usize;
-    let lo = bounds.cmin[axis];
-    let scale = nb as f32 / (bounds.cmax[axis] - lo);
-    let bucket_of = |r: &Ref| (((r.c2()[axis] - lo) * scale) as usize).min(nb - 1);
+    let lo = bounds.cmin[AXIS];
+    let scale = nb as f32 / (bounds.cmax[AXIS] - lo);
+    // The same sum as `Ref::c2`'s lane, so the bins and the partition agree with the bounds.
+    let bucket_of =
+        |r: &Ref| (((r.min[AXIS] + r.max[AXIS] - lo) * scale) as u32).min(nb as u32 - 1) as usize;
 
     let Work { buckets, right, .. } = work;
     buckets.fill(Bucket::EMPTY);
