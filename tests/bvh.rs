@@ -148,14 +148,19 @@ proptest! {
     #[test]
     fn random_operations_match_brute_force(
         method in 0usize..3,
-        max_leaf in 1u32..6,
+        max_leaf in 1u32..10,
+        trav in prop_oneof![Just(0.0f32), Just(1.0), Just(4.0), Just(9.0)],
         changes in prop_oneof![Just(0.0f32), Just(0.1), Just(0.5), Just(f32::INFINITY)],
         seed in any::<u64>(),
         n0 in 0usize..40,
         ops in prop::collection::vec(op(), 1..40),
     ) {
         let mut rng = Rng::new(seed);
-        let cfg = BvhConfig { rebuild_after_changes: changes, ..config(METHODS[method], max_leaf) };
+        let cfg = BvhConfig {
+            rebuild_after_changes: changes,
+            traversal_cost: trav,
+            ..config(METHODS[method], max_leaf)
+        };
         let initial: Vec<Aabb> = (0..n0).map(|_| random_box(&mut rng, 10.0)).collect();
         let (mut bvh, keys) = Bvh::from_aabbs(cfg, &initial).unwrap();
         let mut model: Vec<(ProxyKey, Aabb)> = keys.into_iter().zip(initial).collect();
@@ -368,6 +373,27 @@ fn config_ranges_are_checked() {
         ),
         (
             BvhConfig {
+                traversal_cost: -0.5,
+                ..ok
+            },
+            "traversal_cost",
+        ),
+        (
+            BvhConfig {
+                traversal_cost: 64.5,
+                ..ok
+            },
+            "traversal_cost",
+        ),
+        (
+            BvhConfig {
+                traversal_cost: f32::NAN,
+                ..ok
+            },
+            "traversal_cost",
+        ),
+        (
+            BvhConfig {
                 rebuild_threshold: 0.5,
                 ..ok
             },
@@ -402,6 +428,7 @@ fn config_ranges_are_checked() {
         Bvh::new(BvhConfig {
             max_leaf_size: 255,
             sah_buckets: 64,
+            traversal_cost: 64.0,
             ..ok
         })
         .is_ok()

@@ -1,113 +1,167 @@
-//! Full (re)build: binned SAH, `Middle` or `EqualCounts` top-down splits over an index array
-//! partitioned in place, with an explicit work stack.
+//! Full (re)build: binned SAH, `Middle` or `EqualCounts` top-down splits over a flat array of
+//! boxes partitioned in place, with an explicit work stack and buffers reused across builds.
 
 use super::node::Node;
 use super::{Bvh, BvhConfig, NONE, SplitMethod};
 use crate::{Aabb, ProxyKey};
+use glam::Vec3A;
 use slotmap::Key;
 
 /// The most SAH buckets a node may use (`BvhConfig::sah_buckets`).
 pub(crate) const MAX_BUCKETS: usize = 64;
 
-/// A primitive as the build sees it: its box and its index before the build. 28 bytes, so
-/// the partition passes stream contiguous memory instead of chasing indices.
+/// A primitive's box as the build sees it, in SIMD lanes: 32 bytes, so the binning and
+/// partition passes stream contiguous memory. Its index before the build travels in the
+/// parallel `ids` array, swapped with it.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct BuildRef {
-    aabb: Aabb, // 24 bytes
-    id: u32,    // 4 bytes
+struct Ref {
+    min: Vec3A, // 16 bytes
+    max: Vec3A, // 16 bytes
+}
+
+impl Ref {
+    /// Twice the centroid, `min + max`: the build bins and splits on doubled centroids, which
+    /// orders and buckets them exactly as the centroids would be.
+    #[inline]
+    fn c2(&self) -> Vec3A {
+        self.min + self.max
+    }
+}
+
+/// The union of a set of boxes and the bounds of their doubled centroids. 64 bytes.
+#[derive(Clone, Copy, Debug)]
+struct Bounds {
+    min: Vec3A,
+    max: Vec3A,
+    cmin: Vec3A,
+    cmax: Vec3A,
+}
+
+impl Bounds {
+    const EMPTY: Bounds = Bounds {
+        min: Vec3A::INFINITY,
+        max: Vec3A::NEG_INFINITY,
+        cmin: Vec3A::INFINITY,
+        cmax: Vec3A::NEG_INFINITY,
+    };
+
+    #[inline]
+    fn add(&mut self, r: &Ref) {
+        let c = r.c2();
+        self.min = self.min.min(r.min);
+        self.max = self.max.max(r.max);
+        self.cmin = self.cmin.min(c);
+        self.cmax = self.cmax.max(c);
+    }
+
+    #[inline]
+    fn union(&self, o: &Bounds) -> Bounds {
+        Bounds {
+            min: self.min.min(o.min),
+            max: self.max.max(o.max),
+            cmin: self.cmin.min(o.cmin),
+            cmax: self.cmax.max(o.cmax),
+        }
+    }
+
+    /// Surface area of the box union; 0 when empty (as [`Aabb::surface_area`]).
+    #[inline]
+    fn area(&self) -> f32 {
+        let d = (self.max - self.min).max(Vec3A::ZERO);
+        2.0 * (d.x * d.y + d.y * d.z + d.z * d.x)
+    }
+
+    fn aabb(&self) -> Aabb {
+        Aabb::new(self.min.into(), self.max.into())
+    }
+
+    fn of(refs: &[Ref]) -> Bounds {
+        let mut b = Bounds::EMPTY;
+        refs.iter().for_each(|r| b.add(r));
+        b
+    }
 }
 
 /// A node still to be made: the primitive range `start..end`, the parent to link it to, and
-/// the bounds of its boxes and of their centroids (computed by whoever split the parent).
+/// the bounds of its boxes and centroids (computed by whoever split the parent).
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Task {
+struct Task {
     start: u32,
     end: u32,
     parent: u32,
     /// True for a second child: its index must be written into the parent's `first`.
     second: bool,
-    bounds: Aabb,
-    centroids: Aabb,
-}
-
-/// Buffers every build reuses, so a rebuild allocates only when the tree grew.
-#[derive(Clone, Debug, Default)]
-pub(crate) struct BuildScratch {
-    refs: Vec<BuildRef>,
-    tasks: Vec<Task>,
-    keys: Vec<ProxyKey>,
-    bins: Bins,
-}
-
-/// SAH bins, sized to `sah_buckets` once per build and reset per node (only the used ones:
-/// resetting a fixed 64-entry array per node dominated small nodes).
-#[derive(Clone, Debug, Default)]
-struct Bins {
-    buckets: Vec<Bucket>,
-    /// The union of the buckets right of each plane.
-    right: Vec<Bucket>,
-}
-
-/// A chosen split: `refs[..mid]` go left; the bounds and centroid bounds of both halves.
-struct Split {
-    mid: usize,
-    left: (Aabb, Aabb),
-    right: (Aabb, Aabb),
+    bounds: Bounds,
 }
 
 #[derive(Clone, Copy, Debug)]
 struct Bucket {
     count: u32,
-    bounds: Aabb,
-    centroids: Aabb,
+    bounds: Bounds,
 }
 
 impl Bucket {
     const EMPTY: Bucket = Bucket {
         count: 0,
-        bounds: Aabb::EMPTY,
-        centroids: Aabb::EMPTY,
+        bounds: Bounds::EMPTY,
     };
+}
 
-    fn merge(&self, other: &Bucket) -> Bucket {
-        Bucket {
-            count: self.count + other.count,
-            bounds: self.bounds.union(&other.bounds),
-            centroids: self.centroids.union(&other.centroids),
-        }
-    }
+/// Buffers every build reuses, so a rebuild allocates only when the tree grew.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct BuildScratch {
+    refs: Vec<Ref>,
+    /// `ids[i]`: the primitive index (before the build) of `refs[i]`.
+    ids: Vec<u32>,
+    tasks: Vec<Task>,
+    keys: Vec<ProxyKey>,
+    work: Work,
+}
+
+/// Per-node scratch of [`split`]: SAH buckets and the gather buffers of the sorting splits.
+#[derive(Clone, Debug, Default)]
+struct Work {
+    buckets: Vec<Bucket>,
+    /// `right[i]`: the union of the buckets (or sorted boxes) right of plane `i`.
+    right: Vec<Bucket>,
+    order: Vec<(f32, u32)>,
+    tmp_refs: Vec<Ref>,
+    tmp_ids: Vec<u32>,
+}
+
+/// A chosen split: `refs[..mid]` go left; the bounds of both halves.
+struct Split {
+    mid: usize,
+    left: Bounds,
+    right: Bounds,
 }
 
 impl Bvh {
     /// Rebuilds the whole tree from the current boxes with [`BvhConfig::split`]: pending
     /// inserts join the tree, tombstones are dropped, and the SAH cost is remembered as the
-    /// reference for [`Bvh::refit`]'s quality check. Keys stay valid. O(n log n).
+    /// reference for [`Bvh::refit`]'s quality check. Keys stay valid. O(n log n); allocates
+    /// only when the tree grew past its largest size so far.
     pub fn rebuild(&mut self) {
         let mut s = core::mem::take(&mut self.scratch);
         s.refs.clear();
-        s.refs.extend(
-            self.boxes
-                .iter()
-                .zip(&self.keys)
-                .enumerate()
-                .filter(|(_, (_, key))| !key.is_null())
-                .map(|(i, (aabb, _))| BuildRef {
-                    aabb: *aabb,
-                    id: i as u32,
-                }),
-        );
+        s.ids.clear();
+        for (i, (aabb, key)) in self.boxes.iter().zip(&self.keys).enumerate() {
+            if !key.is_null() {
+                s.refs.push(Ref {
+                    min: aabb.min.into(),
+                    max: aabb.max.into(),
+                });
+                s.ids.push(i as u32);
+            }
+        }
         let n = s.refs.len();
         self.nodes.clear();
         self.parent.clear();
         self.leaf_of.clear();
         self.leaf_of.resize(n, NONE);
-        self.nodes.reserve(2 * n);
-        self.parent.reserve(2 * n);
         build_nodes(
             &self.config,
-            &mut s.refs,
-            &mut s.tasks,
-            &mut s.bins,
+            &mut s,
             &mut self.nodes,
             &mut self.parent,
             &mut self.leaf_of,
@@ -115,11 +169,11 @@ impl Bvh {
         // Renumber: primitive index = position in tree order, so a leaf's range indexes
         // `boxes` and `keys` directly and traversals read contiguous memory.
         s.keys.clear();
+        s.keys
+            .extend(s.ids.iter().map(|&id| self.keys[id as usize]));
         self.boxes.clear();
-        for r in &s.refs {
-            self.boxes.push(r.aabb);
-            s.keys.push(self.keys[r.id as usize]);
-        }
+        self.boxes
+            .extend(s.refs.iter().map(|r| Aabb::new(r.min.into(), r.max.into())));
         core::mem::swap(&mut self.keys, &mut s.keys);
         for (i, &key) in self.keys.iter().enumerate() {
             self.ids[key] = i as u32;
@@ -132,7 +186,7 @@ impl Bvh {
     }
 }
 
-/// Builds the depth-first array over `refs`, reordering `refs` into tree order.
+/// Builds the depth-first array over `s.refs`, reordering `s.refs` and `s.ids` into tree order.
 ///
 /// Depth-first order with an explicit stack: a task's node gets the next free index when it
 /// is popped; a split pushes the second child, then the first, so the first child is popped
@@ -140,28 +194,31 @@ impl Bvh {
 /// placed, and writes its index into the parent's `first`.
 fn build_nodes(
     config: &BvhConfig,
-    refs: &mut [BuildRef],
-    tasks: &mut Vec<Task>,
-    bins: &mut Bins,
+    s: &mut BuildScratch,
     nodes: &mut Vec<Node>,
     parent: &mut Vec<u32>,
     leaf_of: &mut [u32],
 ) {
+    let BuildScratch {
+        refs,
+        ids,
+        tasks,
+        work,
+        ..
+    } = s;
     if refs.is_empty() {
         return;
     }
-    let (bounds, centroids) = bounds_of(refs);
     let nb = config.sah_buckets as usize;
-    bins.buckets.resize(nb, Bucket::EMPTY);
-    bins.right.resize(nb, Bucket::EMPTY);
+    work.buckets.resize(nb, Bucket::EMPTY);
+    work.right.resize(nb.max(MAX_BUCKETS), Bucket::EMPTY);
     tasks.clear();
     tasks.push(Task {
         start: 0,
         end: refs.len() as u32,
         parent: NONE,
         second: false,
-        bounds,
-        centroids,
+        bounds: Bounds::of(refs),
     });
     while let Some(t) = tasks.pop() {
         let index = nodes.len() as u32;
@@ -170,56 +227,60 @@ fn build_nodes(
         }
         parent.push(t.parent);
         let range = t.start as usize..t.end as usize;
+        let aabb = t.bounds.aabb();
         match split(
             config,
-            bins,
+            work,
             &mut refs[range.clone()],
+            &mut ids[range.clone()],
             &t.bounds,
-            &t.centroids,
         ) {
             None => {
-                nodes.push(Node::leaf(&t.bounds, t.start, t.end - t.start));
+                nodes.push(Node::leaf(&aabb, t.start, t.end - t.start));
                 leaf_of[range].fill(index);
             }
-            Some(s) => {
-                nodes.push(Node::interior(&t.bounds));
-                let mid = t.start + s.mid as u32;
+            Some(sp) => {
+                nodes.push(Node::interior(&aabb));
+                let mid = t.start + sp.mid as u32;
                 tasks.push(Task {
                     start: mid,
                     end: t.end,
                     parent: index,
                     second: true,
-                    bounds: s.right.0,
-                    centroids: s.right.1,
+                    bounds: sp.right,
                 });
                 tasks.push(Task {
                     start: t.start,
                     end: mid,
                     parent: index,
                     second: false,
-                    bounds: s.left.0,
-                    centroids: s.left.1,
+                    bounds: sp.left,
                 });
             }
         }
     }
 }
 
-/// How to split `refs` (a node's primitives), or `None` for a leaf. Every `Some` has both
-/// halves non-empty, so the build always terminates.
+/// How to split a node's primitives (`refs`, with `ids` alongside), or `None` for a leaf.
+/// Every `Some` has both halves non-empty, so the build always terminates.
 fn split(
     config: &BvhConfig,
-    bins: &mut Bins,
-    refs: &mut [BuildRef],
-    bounds: &Aabb,
-    centroids: &Aabb,
+    work: &mut Work,
+    refs: &mut [Ref],
+    ids: &mut [u32],
+    bounds: &Bounds,
 ) -> Option<Split> {
     let n = refs.len();
-    let small = n <= config.max_leaf_size as usize;
     if n == 1 {
         return None;
     }
-    let extent = centroids.extent();
+    let small = n <= config.max_leaf_size as usize;
+    // SAH: a split costs at least the traversal step, so a node of at most that many
+    // primitives is a leaf without looking for a plane.
+    if small && config.split == SplitMethod::Sah && n as f32 <= config.traversal_cost {
+        return None;
+    }
+    let extent = bounds.cmax - bounds.cmin;
     let axis = extent.max_position();
     let nb = config.sah_buckets as usize;
     if !(extent[axis] > 0.0 && (nb as f32 / extent[axis]).is_finite()) {
@@ -231,88 +292,107 @@ fn split(
         };
     }
     match config.split {
-        SplitMethod::Sah => sah_split(config, bins, refs, bounds, centroids, axis),
+        SplitMethod::Sah if n <= nb => sweep_split(config, work, refs, ids, bounds, axis),
+        // One copy per axis, so the hot loops read the coordinate straight from memory.
+        SplitMethod::Sah => match axis {
+            0 => sah_split::<0>(config, work, refs, ids, bounds),
+            1 => sah_split::<1>(config, work, refs, ids, bounds),
+            _ => sah_split::<2>(config, work, refs, ids, bounds),
+        },
         _ if small => None,
         SplitMethod::Middle => {
-            let mid_point = centroids.center()[axis];
-            let mid = partition(refs, |r| r.aabb.center()[axis] < mid_point);
+            let mid_point = 0.5 * (bounds.cmin[axis] + bounds.cmax[axis]);
+            let mid = partition(refs, ids, |r| r.c2()[axis] < mid_point);
             if mid == 0 || mid == n {
-                Some(median_split(refs, axis))
+                Some(median_split(work, refs, ids, axis))
             } else {
                 Some(halves(refs, mid))
             }
         }
-        SplitMethod::EqualCounts => Some(median_split(refs, axis)),
+        SplitMethod::EqualCounts => Some(median_split(work, refs, ids, axis)),
     }
 }
 
-// Binned SAH (pbrt 4.3.2). Splitting a node of area S into children A and B costs one
-// traversal step plus, for a ray that hits the node, the expected primitive tests of the
-// children it also hits: P(hit A | hit node) = S_A / S for convex boxes, so
-//     cost(split) = 1 + (N_A·S_A + N_B·S_B) / S,      cost(leaf) = N.
-// Only planes between `nb` equal-width buckets of the centroid bounds' longest axis are
-// tried: one pass bins every primitive (count and box union per bucket), a suffix pass and a
-// prefix pass give the children's areas for all nb − 1 planes in O(nb). The costs are
-// compared multiplied by S, which keeps zero-area nodes finite. Both end buckets hold a
-// centroid (the extremes of the centroid bounds), so every candidate has two non-empty sides.
-fn sah_split(
+// Binned SAH (pbrt 4.3.2), with the traversal cost as a parameter. Splitting a node of area S
+// into children A and B costs one traversal step C_t (in units of one box-vs-box test) plus,
+// for a query that reaches the node, the expected tests of the children it also reaches:
+// P(reach A | reach node) = S_A / S for convex boxes, so
+//     cost(split) = C_t + (N_A·S_A + N_B·S_B) / S,      cost(leaf) = N.
+// A leaf is made when it is no dearer than the best split (and holds at most
+// `max_leaf_size`). Only planes between `nb` equal-width buckets of the centroid bounds'
+// longest axis are tried: one pass bins every primitive (count, box union and centroid
+// bounds per bucket), a suffix pass and a prefix pass give the children's areas for all
+// nb − 1 planes in O(nb). The costs are compared multiplied by S, which keeps zero-area nodes
+// finite. Both end buckets hold a centroid (the extremes of the centroid bounds), so every
+// candidate has two non-empty sides. The bucket unions are the children's exact bounds, so
+// the children need no pass of their own before they are split in turn: each tree level costs
+// one binning pass and one partition pass over its primitives.
+fn sah_split<const AXIS: usize>(
     config: &BvhConfig,
-    bins: &mut Bins,
-    refs: &mut [BuildRef],
-    bounds: &Aabb,
-    centroids: &Aabb,
-    axis: usize,
+    work: &mut Work,
+    refs: &mut [Ref],
+    ids: &mut [u32],
+    bounds: &Bounds,
 ) -> Option<Split> {
     let n = refs.len();
     let nb = config.sah_buckets as usize;
-    if n <= nb {
-        return sweep_split(config, bins, refs, bounds, axis);
-    }
-    let lo = centroids.min[axis];
-    let scale = nb as f32 / (centroids.max[axis] - lo);
-    let bucket_of = |r: &BuildRef| (((r.aabb.center()[axis] - lo) * scale) as usize).min(nb - 1);
+    let lo = bounds.cmin[AXIS];
+    let scale = nb as f32 / (bounds.cmax[AXIS] - lo);
+    // The same sum as `Ref::c2`'s lane, so the bins and the partition agree with the bounds.
+    let bucket_of =
+        |r: &Ref| (((r.min[AXIS] + r.max[AXIS] - lo) * scale) as u32).min(nb as u32 - 1) as usize;
 
-    let Bins { buckets, right } = bins;
+    let Work { buckets, right, .. } = work;
     buckets.fill(Bucket::EMPTY);
     for r in refs.iter() {
         let b = &mut buckets[bucket_of(r)];
-        let c = r.aabb.center();
         b.count += 1;
-        b.bounds = b.bounds.union(&r.aabb);
-        b.centroids = Aabb::new(b.centroids.min.min(c), b.centroids.max.max(c));
+        b.bounds.add(r);
     }
     // right[i]: the union of buckets i+1.. (the right side of plane i).
     let mut acc = Bucket::EMPTY;
     for i in (1..nb).rev() {
-        acc = acc.merge(&buckets[i]);
+        acc = merge(&acc, &buckets[i]);
         right[i - 1] = acc;
     }
     let (mut best_cost, mut best_plane, mut best_left) = (f32::INFINITY, 0, Bucket::EMPTY);
     let mut acc = Bucket::EMPTY;
     for i in 0..nb - 1 {
-        acc = acc.merge(&buckets[i]);
-        let cost = acc.count as f32 * acc.bounds.surface_area()
-            + right[i].count as f32 * right[i].bounds.surface_area();
+        acc = merge(&acc, &buckets[i]);
+        let cost =
+            acc.count as f32 * acc.bounds.area() + right[i].count as f32 * right[i].bounds.area();
         // `i == 0`: areas overflow to ∞ for huge boxes, and the best must still be a plane.
         if i == 0 || cost < best_cost {
             (best_cost, best_plane, best_left) = (cost, i, acc);
         }
     }
-    let area = bounds.surface_area();
-    if n <= config.max_leaf_size as usize && n as f32 * area <= area + best_cost {
+    if leaf_is_cheaper(config, n, bounds, best_cost) {
         return None;
     }
-    let mid = partition(refs, |r| bucket_of(r) <= best_plane);
+    let mid = partition(refs, ids, |r| bucket_of(r) <= best_plane);
     if mid == 0 || mid == n {
         debug_assert!(false, "SAH split left a side empty");
         return Some(halves(refs, n / 2));
     }
-    let best_right = right[best_plane];
     Some(Split {
         mid,
-        left: (best_left.bounds, best_left.centroids),
-        right: (best_right.bounds, best_right.centroids),
+        left: best_left.bounds,
+        right: right[best_plane].bounds,
     })
+}
+
+/// True if a leaf of `n` primitives costs no more than the best split (of cost `best` × S)
+/// and may hold them.
+fn leaf_is_cheaper(config: &BvhConfig, n: usize, bounds: &Bounds, best: f32) -> bool {
+    let area = bounds.area();
+    n <= config.max_leaf_size as usize && n as f32 * area <= config.traversal_cost * area + best
+}
+
+fn merge(a: &Bucket, b: &Bucket) -> Bucket {
+    Bucket {
+        count: a.count + b.count,
+        bounds: a.bounds.union(&b.bounds),
+    }
 }
 
 /// SAH for a node with no more primitives than buckets: sort them by centroid along `axis`
@@ -320,69 +400,105 @@ fn sah_split(
 /// rule as the binned version, which would spend more time on its buckets than on the node).
 fn sweep_split(
     config: &BvhConfig,
-    bins: &mut Bins,
-    refs: &mut [BuildRef],
-    bounds: &Aabb,
+    work: &mut Work,
+    refs: &mut [Ref],
+    ids: &mut [u32],
+    bounds: &Bounds,
     axis: usize,
 ) -> Option<Split> {
     let n = refs.len();
-    refs.sort_unstable_by(|a, b| a.aabb.center()[axis].total_cmp(&b.aabb.center()[axis]));
-    let right = &mut bins.right;
-    let mut acc = Aabb::EMPTY;
+    sort_by_axis(work, refs, ids, axis);
+    let right = &mut work.right;
+    let mut acc = Bounds::EMPTY;
     for i in (1..n).rev() {
-        acc = acc.union(&refs[i].aabb);
+        acc.add(&refs[i]);
         right[i - 1].bounds = acc;
     }
-    let (mut best_cost, mut best_mid) = (f32::INFINITY, 1);
-    let mut acc = Aabb::EMPTY;
+    let (mut best_cost, mut best_mid, mut best_left) = (f32::INFINITY, 1, Bounds::EMPTY);
+    let mut acc = Bounds::EMPTY;
     for i in 0..n - 1 {
-        acc = acc.union(&refs[i].aabb);
-        let cost = (i + 1) as f32 * acc.surface_area()
-            + (n - i - 1) as f32 * right[i].bounds.surface_area();
-        if cost < best_cost {
-            (best_cost, best_mid) = (cost, i + 1);
+        acc.add(&refs[i]);
+        let cost = (i + 1) as f32 * acc.area() + (n - i - 1) as f32 * right[i].bounds.area();
+        if i == 0 || cost < best_cost {
+            (best_cost, best_mid, best_left) = (cost, i + 1, acc);
         }
     }
-    let area = bounds.surface_area();
-    if n <= config.max_leaf_size as usize && n as f32 * area <= area + best_cost {
+    if leaf_is_cheaper(config, n, bounds, best_cost) {
         return None;
     }
-    Some(halves(refs, best_mid))
+    Some(Split {
+        mid: best_mid,
+        left: best_left,
+        right: right[best_mid - 1].bounds,
+    })
+}
+
+/// Sorts `refs` (and `ids` alongside) by centroid along `axis`, through the gather buffers.
+fn sort_by_axis(work: &mut Work, refs: &mut [Ref], ids: &mut [u32], axis: usize) {
+    let Work {
+        order,
+        tmp_refs,
+        tmp_ids,
+        ..
+    } = work;
+    order.clear();
+    order.extend(
+        refs.iter()
+            .enumerate()
+            .map(|(i, r)| (r.c2()[axis], i as u32)),
+    );
+    order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    gather(order, tmp_refs, tmp_ids, refs, ids);
+}
+
+/// Reorders `refs` and `ids` so that position `k` holds what was at `order[k].1`.
+fn gather(
+    order: &[(f32, u32)],
+    tmp_refs: &mut Vec<Ref>,
+    tmp_ids: &mut Vec<u32>,
+    refs: &mut [Ref],
+    ids: &mut [u32],
+) {
+    tmp_refs.clear();
+    tmp_ids.clear();
+    tmp_refs.extend(order.iter().map(|&(_, i)| refs[i as usize]));
+    tmp_ids.extend(order.iter().map(|&(_, i)| ids[i as usize]));
+    refs.copy_from_slice(tmp_refs);
+    ids.copy_from_slice(tmp_ids);
 }
 
 /// Splits at the median centroid along `axis` (`select_nth_unstable_by`, O(n)).
-fn median_split(refs: &mut [BuildRef], axis: usize) -> Split {
+fn median_split(work: &mut Work, refs: &mut [Ref], ids: &mut [u32], axis: usize) -> Split {
     let mid = refs.len() / 2;
-    refs.select_nth_unstable_by(mid, |a, b| {
-        a.aabb.center()[axis].total_cmp(&b.aabb.center()[axis])
-    });
+    let Work {
+        order,
+        tmp_refs,
+        tmp_ids,
+        ..
+    } = work;
+    order.clear();
+    order.extend(
+        refs.iter()
+            .enumerate()
+            .map(|(i, r)| (r.c2()[axis], i as u32)),
+    );
+    order.select_nth_unstable_by(mid, |a, b| a.0.total_cmp(&b.0));
+    gather(order, tmp_refs, tmp_ids, refs, ids);
     halves(refs, mid)
 }
 
 /// The split `refs[..mid]` / `refs[mid..]` as they lie, with bounds computed by one pass.
-fn halves(refs: &[BuildRef], mid: usize) -> Split {
+fn halves(refs: &[Ref], mid: usize) -> Split {
     Split {
         mid,
-        left: bounds_of(&refs[..mid]),
-        right: bounds_of(&refs[mid..]),
+        left: Bounds::of(&refs[..mid]),
+        right: Bounds::of(&refs[mid..]),
     }
 }
 
-/// The union of the boxes, and the bounds of their centroids.
-fn bounds_of(refs: &[BuildRef]) -> (Aabb, Aabb) {
-    refs.iter()
-        .fold((Aabb::EMPTY, Aabb::EMPTY), |(bounds, centroids), r| {
-            let c = r.aabb.center();
-            (
-                bounds.union(&r.aabb),
-                Aabb::new(centroids.min.min(c), centroids.max.max(c)),
-            )
-        })
-}
-
-/// Moves the refs satisfying `left` to the front (Hoare's scheme: each misplaced pair is
-/// swapped once) and returns how many there are.
-fn partition(refs: &mut [BuildRef], left: impl Fn(&BuildRef) -> bool) -> usize {
+/// Moves the refs satisfying `left` (and their ids) to the front (Hoare's scheme: each
+/// misplaced pair is swapped once) and returns how many there are.
+fn partition(refs: &mut [Ref], ids: &mut [u32], left: impl Fn(&Ref) -> bool) -> usize {
     let (mut i, mut j) = (0, refs.len());
     loop {
         while i < j && left(&refs[i]) {
@@ -395,6 +511,7 @@ fn partition(refs: &mut [BuildRef], left: impl Fn(&BuildRef) -> bool) -> usize {
             return i;
         }
         refs.swap(i, j - 1);
+        ids.swap(i, j - 1);
         i += 1;
         j -= 1;
     }
@@ -403,58 +520,108 @@ fn partition(refs: &mut [BuildRef], left: impl Fn(&BuildRef) -> bool) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Vec3;
 
-    fn refs(xs: &[f32]) -> Vec<BuildRef> {
-        xs.iter()
-            .enumerate()
-            .map(|(i, &x)| BuildRef {
-                aabb: Aabb::new(Vec3::new(x, 0.0, 0.0), Vec3::new(x + 1.0, 1.0, 1.0)),
-                id: i as u32,
+    /// Unit boxes with their min corner at `(x, 0, 0)`, and their ids `0..`.
+    fn refs(xs: &[f32]) -> (Vec<Ref>, Vec<u32>) {
+        let refs = xs
+            .iter()
+            .map(|&x| Ref {
+                min: Vec3A::new(x, 0.0, 0.0),
+                max: Vec3A::new(x + 1.0, 1.0, 1.0),
             })
-            .collect()
+            .collect();
+        (refs, (0..xs.len() as u32).collect())
     }
 
-    fn bins() -> Bins {
-        let nb = BvhConfig::default().sah_buckets as usize;
-        Bins {
+    fn work(config: &BvhConfig) -> Work {
+        let nb = config.sah_buckets as usize;
+        Work {
             buckets: vec![Bucket::EMPTY; nb],
-            right: vec![Bucket::EMPTY; nb],
+            right: vec![Bucket::EMPTY; MAX_BUCKETS],
+            ..Work::default()
         }
     }
 
+    fn same(a: &Bounds, b: &Bounds) -> bool {
+        a.min == b.min && a.max == b.max && a.cmin == b.cmin && a.cmax == b.cmax
+    }
+
     #[test]
-    fn partition_moves_the_left_ones_first() {
-        let mut r = refs(&[5.0, 1.0, 7.0, 2.0, 9.0, 0.0]);
-        let mid = partition(&mut r, |r| r.aabb.min.x < 4.0);
+    fn partition_moves_the_left_ones_first_with_their_ids() {
+        let (mut r, mut ids) = refs(&[5.0, 1.0, 7.0, 2.0, 9.0, 0.0]);
+        let mid = partition(&mut r, &mut ids, |r| r.min.x < 4.0);
         assert_eq!(mid, 3);
-        assert!(r[..3].iter().all(|r| r.aabb.min.x < 4.0));
-        assert!(r[3..].iter().all(|r| r.aabb.min.x >= 4.0));
+        assert!(r[..3].iter().all(|r| r.min.x < 4.0));
+        assert!(r[3..].iter().all(|r| r.min.x >= 4.0));
+        let xs = [5.0, 1.0, 7.0, 2.0, 9.0, 0.0];
+        assert!(r.iter().zip(&ids).all(|(r, &i)| r.min.x == xs[i as usize]));
     }
 
     #[test]
     fn sah_separates_two_clusters() {
-        let mut r = refs(&[0.0, 0.5, 1.0, 100.0, 100.5, 101.0, 0.2, 100.2, 0.7]);
-        let (b, c) = bounds_of(&r);
-        let config = BvhConfig::default();
-        let s = split(&config, &mut bins(), &mut r, &b, &c).expect("a split");
-        assert_eq!(s.mid, 5);
-        assert!(r[..5].iter().all(|r| r.aabb.min.x < 50.0));
-        assert_eq!(s.left.0, bounds_of(&r[..5]).0);
-        assert_eq!(s.right.0, bounds_of(&r[5..]).0);
-        assert_eq!(s.right.1, bounds_of(&r[5..]).1);
+        for (nb, traversal_cost) in [(12, 1.0), (4, 1.0), (12, 0.0)] {
+            let config = BvhConfig {
+                sah_buckets: nb,
+                traversal_cost,
+                ..BvhConfig::default()
+            };
+            let (mut r, mut ids) = refs(&[0.0, 0.5, 1.0, 100.0, 100.5, 101.0, 0.2, 100.2, 0.7]);
+            let b = Bounds::of(&r);
+            let s = split(&config, &mut work(&config), &mut r, &mut ids, &b).expect("a split");
+            assert_eq!(s.mid, 5, "{nb} buckets");
+            assert!(r[..5].iter().all(|r| r.min.x < 50.0));
+            assert!(same(&s.left, &Bounds::of(&r[..5])));
+            assert!(same(&s.right, &Bounds::of(&r[5..])));
+        }
+    }
+
+    #[test]
+    fn traversal_cost_bounds_the_leaves() {
+        // Eight far-apart unit boxes: a split is cheap, so only the traversal cost keeps them
+        // together: with C_t = 8 no split can beat the leaf.
+        let xs: Vec<f32> = (0..8).map(|i| 10.0 * i as f32).collect();
+        for (traversal_cost, leaf) in [(1.0, false), (8.0, true)] {
+            let config = BvhConfig {
+                traversal_cost,
+                max_leaf_size: 8,
+                ..BvhConfig::default()
+            };
+            let (mut r, mut ids) = refs(&xs);
+            let b = Bounds::of(&r);
+            let s = split(&config, &mut work(&config), &mut r, &mut ids, &b);
+            assert_eq!(s.is_none(), leaf, "C_t = {traversal_cost}");
+        }
     }
 
     #[test]
     fn coincident_centroids_end_in_leaf_or_halves() {
-        let config = BvhConfig::default();
-        let mut r = refs(&[3.0; 4]);
-        let (b, c) = bounds_of(&r);
-        assert!(split(&config, &mut bins(), &mut r, &b, &c).is_none());
-        let mut r = refs(&[3.0; 9]);
+        let config = BvhConfig {
+            max_leaf_size: 4,
+            ..BvhConfig::default()
+        };
+        let (mut r, mut ids) = refs(&[3.0; 4]);
+        let b = Bounds::of(&r);
+        assert!(split(&config, &mut work(&config), &mut r, &mut ids, &b).is_none());
+        let (mut r, mut ids) = refs(&[3.0; 9]);
+        let b = Bounds::of(&r);
         assert_eq!(
-            split(&config, &mut bins(), &mut r, &b, &c).map(|s| s.mid),
+            split(&config, &mut work(&config), &mut r, &mut ids, &b).map(|s| s.mid),
             Some(4)
         );
+    }
+
+    #[test]
+    fn median_split_keeps_ids_with_their_boxes() {
+        let xs = [9.0, 3.0, 7.0, 1.0, 5.0, 8.0, 2.0];
+        let (mut r, mut ids) = refs(&xs);
+        let config = BvhConfig::default();
+        let s = median_split(&mut work(&config), &mut r, &mut ids, 0);
+        assert_eq!(s.mid, 3);
+        assert!(
+            r[..3]
+                .iter()
+                .all(|a| r[3..].iter().all(|b| a.min.x <= b.min.x))
+        );
+        assert!(r.iter().zip(&ids).all(|(r, &i)| r.min.x == xs[i as usize]));
     }
 }

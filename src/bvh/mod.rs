@@ -62,10 +62,16 @@ pub enum SplitMethod {
 pub struct BvhConfig {
     /// The split method of every (re)build. Default [`SplitMethod::Sah`].
     pub split: SplitMethod,
-    /// The most primitives a leaf may hold, `1..=255`; default 4. SAH may stop earlier.
+    /// The most primitives a leaf may hold, `1..=255`; default 8. SAH may stop earlier.
     pub max_leaf_size: u32,
     /// SAH buckets per node, `2..=64`; default 12 (pbrt).
     pub sah_buckets: u32,
+    /// The SAH cost of visiting a node, in units of one box-vs-box primitive test; `0..=64`,
+    /// default 4. Larger values make fewer, fuller leaves (up to `max_leaf_size`); a node of at
+    /// most this many primitives is always a leaf. With cheap box tests a node visit (stack,
+    /// two child tests) costs several of them: on the `bodies` boxes, 4 with leaves of up to 8
+    /// runs update + refit + self pairs in 1.5× fewer instructions than 1 with leaves of 4.
+    pub traversal_cost: f32,
     /// [`Bvh::refit`] rebuilds when `sah_cost() / cost at build` exceeds this ratio; finite
     /// and `>= 1`, default 1.5.
     pub rebuild_threshold: f32,
@@ -79,8 +85,9 @@ impl Default for BvhConfig {
     fn default() -> Self {
         Self {
             split: SplitMethod::Sah,
-            max_leaf_size: 4,
+            max_leaf_size: 8,
             sah_buckets: 12,
+            traversal_cost: 4.0,
             rebuild_threshold: 1.5,
             rebuild_after_changes: 0.1,
         }
@@ -96,6 +103,9 @@ impl BvhConfig {
         }
         if !(2..=build::MAX_BUCKETS as u32).contains(&self.sah_buckets) {
             return bad("sah_buckets", self.sah_buckets as f32);
+        }
+        if !(0.0..=64.0).contains(&self.traversal_cost) {
+            return bad("traversal_cost", self.traversal_cost);
         }
         if !(self.rebuild_threshold.is_finite() && self.rebuild_threshold >= 1.0) {
             return bad("rebuild_threshold", self.rebuild_threshold);

@@ -34,8 +34,10 @@ impl Bvh {
         changes > 0 && changes as f32 > self.config.rebuild_after_changes * built as f32
     }
 
-    /// The reverse sweep; returns the SAH cost of the refitted tree.
+    /// The reverse sweep; returns the SAH cost of the refitted tree, summed in the same sweep.
     fn refit_nodes(&mut self) -> f32 {
+        let trav = self.config.traversal_cost;
+        let mut total = 0.0f64;
         for n in (0..self.nodes.len()).rev() {
             let node = self.nodes[n];
             let aabb = if node.is_leaf() {
@@ -48,31 +50,28 @@ impl Bvh {
                     .aabb()
                     .union(&self.nodes[b as usize].aabb())
             };
+            total += node_cost(&aabb, node.count, trav);
             self.nodes[n].set_aabb(&aabb);
         }
-        self.sah_cost()
+        normalise(total, &self.nodes)
     }
 
-    /// The SAH cost of the tree as it is: `Σ_interior S(n) + Σ_leaf N(n)·S(n)`, divided by the
-    /// root's area `S(root)` — the expected node visits plus primitive tests of a random ray
-    /// that hits the root (tombstones count as primitives). 0 for an empty tree and for a root
-    /// of zero area (all boxes on a line or a point), whose quality then never triggers a
+    /// The SAH cost of the tree as it is, `(C_t·Σ_interior S(n) + Σ_leaf N(n)·S(n)) / S(root)`
+    /// with `C_t` = [`BvhConfig::traversal_cost`]: the expected cost, in box tests, of a query
+    /// that reaches the root (tombstones count as primitives). 0 for an empty tree and for a
+    /// root of zero area (all boxes on a line or a point), whose quality then never triggers a
     /// rebuild. O(nodes).
+    ///
+    /// [`BvhConfig::traversal_cost`]: super::BvhConfig::traversal_cost
     #[must_use]
     pub fn sah_cost(&self) -> f32 {
-        let Some(root) = self.nodes.first() else {
-            return 0.0;
-        };
-        let root_area = f64::from(root.aabb().surface_area());
-        if root_area <= 0.0 {
-            return 0.0;
-        }
-        let total: f64 = self
+        let trav = self.config.traversal_cost;
+        let total = self
             .nodes
             .iter()
-            .map(|n: &Node| f64::from(n.aabb().surface_area()) * f64::from(n.count.max(1)))
+            .map(|n: &Node| node_cost(&n.aabb(), n.count, trav))
             .sum();
-        (total / root_area) as f32
+        normalise(total, &self.nodes)
     }
 
     /// Grows `leaf` and its ancestors until one already contains `aabb`: if the parent
@@ -90,6 +89,25 @@ impl Bvh {
             n = self.parent[n as usize];
         }
     }
+}
+
+/// A node's term of the SAH cost: `N·S` for a leaf of `N`, `C_t·S` for an interior node.
+#[inline]
+fn node_cost(aabb: &Aabb, count: u32, trav: f32) -> f64 {
+    let weight = if count > 0 { count as f32 } else { trav };
+    f64::from(aabb.surface_area()) * f64::from(weight)
+}
+
+/// `total / S(root)`, or 0 for no tree or a root of zero area.
+fn normalise(total: f64, nodes: &[Node]) -> f32 {
+    let Some(root) = nodes.first() else {
+        return 0.0;
+    };
+    let root_area = f64::from(root.aabb().surface_area());
+    if root_area <= 0.0 {
+        return 0.0;
+    }
+    (total / root_area) as f32
 }
 
 #[cfg(test)]

@@ -1,0 +1,164 @@
+//! A small driver for profiling the BVH under callgrind or a wall clock.
+//!
+//! `cargo run --release --example profile_bvh -- --what build --n 1000000 --steps 5`
+//! rebuilds a SAH tree over `n` random boxes (the `bodies` box distribution) `steps` times and
+//! prints the median build time. `--what step` runs the `bodies` scene through a
+//! `BroadPhase` (spawn, then per step `Feed::apply` + `BroadPhase::step`) and prints the
+//! median ns/object/step, the pair count and the dynamic tree's shape. `--warmup W` steps are
+//! run (and not timed) first.
+
+use broadleaf::bvh::{Bvh, BvhConfig};
+use broadleaf::scene::{Bodies, Feed, Frame, Scene};
+use broadleaf::{Aabb, BroadPhase, Config};
+use std::time::Instant;
+
+struct Args {
+    n: usize,
+    steps: usize,
+    warmup: usize,
+    what: String,
+    config: BvhConfig,
+}
+
+fn parse() -> Args {
+    let mut args = Args {
+        n: 10_000,
+        steps: 30,
+        warmup: 5,
+        what: "step".into(),
+        config: BvhConfig::default(),
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(flag) = it.next() {
+        let value = it.next().unwrap_or_else(|| panic!("{flag} needs a value"));
+        match flag.as_str() {
+            "--n" => args.n = value.parse().expect("--n N"),
+            "--steps" => args.steps = value.parse().expect("--steps S"),
+            "--warmup" => args.warmup = value.parse().expect("--warmup W"),
+            "--what" => args.what = value,
+            "--trav" => args.config.traversal_cost = value.parse().expect("--trav C"),
+            "--leaf" => args.config.max_leaf_size = value.parse().expect("--leaf L"),
+            _ => panic!(
+                "unknown flag {flag}; use --n, --steps, --warmup, --what build|step|pairs, \
+                 --trav, --leaf"
+            ),
+        }
+    }
+    args
+}
+
+fn median(mut xs: Vec<f64>) -> f64 {
+    xs.sort_by(f64::total_cmp);
+    xs.get(xs.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+fn build(args: &Args) {
+    let scene = Bodies::new(args.n, 1);
+    let boxes: Vec<Aabb> = scene.dynamic.iter().map(|o| o.aabb()).collect();
+    let (mut bvh, _) = Bvh::from_aabbs(args.config, &boxes).expect("valid boxes");
+    let mut ms = Vec::with_capacity(args.steps);
+    for _ in 0..args.steps {
+        let t = Instant::now();
+        bvh.rebuild();
+        ms.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let s = bvh.stats();
+    println!(
+        "build n={} median {:.2} ms over {} builds; nodes {} leaves {} depth {} cost {:.1}",
+        args.n,
+        median(ms),
+        args.steps,
+        s.nodes,
+        s.leaves,
+        s.depth,
+        s.cost
+    );
+}
+
+fn step(args: &Args) {
+    let mut scene = Bodies::new(args.n, 2);
+    let mut bp = BroadPhase::new(Config {
+        bounds: scene.bounds(),
+        ..Config::default()
+    });
+    let mut feed = Feed::new(false);
+    let mut spawns = Vec::new();
+    scene.spawns(&mut spawns);
+    feed.spawn(&mut bp, &spawns).expect("valid scene");
+    let mut frame = Frame::default();
+    let objects = scene.len() as f64;
+    let mut ns = Vec::with_capacity(args.steps);
+    let mut pairs = 0;
+    for i in 0..args.warmup + args.steps {
+        scene.advance(&mut frame);
+        let t = Instant::now();
+        feed.apply(&mut bp, &frame).expect("valid frame");
+        pairs = bp.step().pairs.len();
+        let dt = t.elapsed().as_secs_f64();
+        if i >= args.warmup {
+            ns.push(dt * 1e9 / objects);
+        }
+    }
+    let s = bp.dynamic_bvh().stats();
+    println!(
+        "step bodies n={} ({} objects) median {:.1} ns/object/step over {} steps; pairs {}",
+        args.n,
+        scene.len(),
+        median(ns),
+        args.steps,
+        pairs
+    );
+    println!(
+        "dynamic bvh: nodes {} leaves {} depth {} cost ratio {:.3} rebuilds {} refits {}",
+        s.nodes, s.leaves, s.depth, s.cost_ratio, s.rebuilds, s.refits
+    );
+}
+
+/// The dynamic boxes of `bodies` in a bare [`Bvh`] (with `--trav` / `--leaf`): per step,
+/// update every box, refit, collect the self pairs.
+fn pairs(args: &Args) {
+    let mut scene = Bodies::new(args.n, 2);
+    let boxes: Vec<Aabb> = scene.dynamic.iter().map(|o| o.aabb()).collect();
+    let (mut bvh, keys) = Bvh::from_aabbs(args.config, &boxes).expect("valid boxes");
+    let mut frame = Frame::default();
+    let mut out = Vec::new();
+    let mut ns = Vec::with_capacity(args.steps);
+    for i in 0..args.warmup + args.steps {
+        scene.advance(&mut frame);
+        let t = Instant::now();
+        for &(id, o) in &frame.moved {
+            bvh.update(keys[id as usize], o.aabb()).expect("live key");
+        }
+        bvh.refit();
+        out.clear();
+        bvh.for_each_pair(|a, b| out.push((a, b)));
+        let dt = t.elapsed().as_secs_f64();
+        if i >= args.warmup {
+            ns.push(dt * 1e9 / args.n as f64);
+        }
+    }
+    let s = bvh.stats();
+    println!(
+        "pairs n={} trav {} leaf {}: median {:.1} ns/object/step; pairs {}; nodes {} leaves {} \
+         depth {} rebuilds {}",
+        args.n,
+        args.config.traversal_cost,
+        args.config.max_leaf_size,
+        median(ns),
+        out.len(),
+        s.nodes,
+        s.leaves,
+        s.depth,
+        s.rebuilds
+    );
+}
+
+fn main() {
+    let args = parse();
+    match args.what.as_str() {
+        "build" => build(&args),
+        "step" => step(&args),
+        "pairs" => pairs(&args),
+        other => panic!("--what {other}: use build, step or pairs"),
+    }
+}
