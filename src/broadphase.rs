@@ -4,7 +4,7 @@
 use crate::bvh::{Bvh, BvhConfig};
 use crate::geom::{self, check_aabb, check_sphere};
 use crate::octree::Octree;
-use crate::pair::{self, Pair, ProxyKey};
+use crate::pair::{self, Pair, PairSorter, ProxyKey};
 use crate::{Aabb, Error, Vec3};
 use slotmap::SlotMap;
 
@@ -142,8 +142,8 @@ pub struct BroadPhase {
     prev: Vec<Pair>,
     added: Vec<Pair>,
     removed: Vec<Pair>,
-    /// The second buffer of [`pair::sort`].
-    sort_scratch: Vec<Pair>,
+    /// Buffers of the pair sort.
+    sorter: PairSorter,
 }
 
 impl BroadPhase {
@@ -204,7 +204,7 @@ impl BroadPhase {
             prev: Vec::new(),
             added: Vec::new(),
             removed: Vec::new(),
-            sort_scratch: Vec::new(),
+            sorter: PairSorter::new(),
         }
     }
 
@@ -389,7 +389,7 @@ impl BroadPhase {
                 }
             });
         }
-        pair::sort(pairs, &mut self.sort_scratch);
+        self.sorter.sort(pairs);
         debug_assert!(pairs.windows(2).all(|w| w[0] < w[1]), "a pair found twice");
         pair::diff(&self.prev, &self.pairs, &mut self.added, &mut self.removed);
         StepPairs {

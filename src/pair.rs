@@ -33,86 +33,90 @@ impl Pair {
     }
 }
 
-/// Bits per digit of [`sort`]'s radix passes.
-const RADIX_BITS: u32 = 11;
-/// Lists shorter than this are sorted by comparison.
-const RADIX_MIN: usize = 256;
-
 /// A key's slot index: the low 32 bits of `as_ffi()` (slotmap 1.x: `(version << 32) | idx`).
-/// Keys order by `(idx, version)`, and two live keys of one slot map never share an index, so
-/// among live keys the slot index alone orders them; `tests::slot_index_orders_live_keys`
-/// pins this down against slotmap.
+/// Keys order by `(idx, version)`, slot index first; `tests::slot_index_orders_live_keys`
+/// pins this layout down against slotmap.
 #[inline]
 fn slot(k: ProxyKey) -> u32 {
     use slotmap::Key;
     k.data().as_ffi() as u32
 }
 
-/// Sorts a pair list by `(a, b)`, exactly as `pairs.sort_unstable()` would; `scratch` is
-/// reused and never shrinks.
-///
-/// LSD radix sort on `(slot(a), slot(b))`, the key's slot indices: a few streaming passes of
-/// 11-bit digits over only the bits the largest index uses, skipping digits every pair shares.
-/// This equals the pairs' `Ord` when no two distinct keys share a slot (true for the live keys
-/// of one slot map, e.g. a step's pairs); a final O(n) check falls back to a comparison sort
-/// if that does not hold, so the result is always sorted.
-pub fn sort(pairs: &mut Vec<Pair>, scratch: &mut Vec<Pair>) {
-    let n = pairs.len();
-    let max = pairs.iter().fold(0, |m, p| m | slot(p.a) | slot(p.b));
-    let bits = 32 - max.leading_zeros();
-    if n < RADIX_MIN || bits == 0 {
-        pairs.sort_unstable();
-        return;
+/// Sorts pair lists by `(a, b)`, exactly as `sort_unstable` would, reusing its buffers: after
+/// the first few steps sorting allocates nothing.
+#[derive(Clone, Debug, Default)]
+pub struct PairSorter {
+    /// The second buffer of the scatter pass.
+    scratch: Vec<Pair>,
+    /// Per slot index of `a`: where its bucket starts, then (after the scatter) where it ends.
+    starts: Vec<u32>,
+}
+
+/// Lists shorter than this are sorted by comparison.
+const COUNTING_MIN: usize = 256;
+/// Buckets up to this long are finished by insertion sort.
+const INSERTION_MAX: usize = 16;
+
+impl PairSorter {
+    /// A sorter with empty buffers.
+    #[must_use]
+    pub fn new() -> Self {
+        Self::default()
     }
-    let per_key = bits.div_ceil(RADIX_BITS);
-    let width = bits.div_ceil(per_key);
-    let radix = 1usize << width;
-    let mask = (radix - 1) as u32;
-    // Digit `d` of the 2·per_key digits, least significant first: b's digits, then a's.
-    let digit = move |p: &Pair, d: u32| {
-        let (k, d) = if d < per_key {
-            (p.b, d)
-        } else {
-            (p.a, d - per_key)
-        };
-        ((slot(k) >> (d * width)) & mask) as usize
-    };
-    let passes = 2 * per_key;
-    // At most 3 digits per key (32 bits / 11); on the stack, so a step allocates nothing.
-    let mut counts = [[0u32; 1 << RADIX_BITS]; 6];
-    for p in pairs.iter() {
-        for d in 0..passes {
-            counts[d as usize][digit(p, d)] += 1;
+
+    /// Sorts `pairs` by `(a, b)`.
+    ///
+    /// A counting sort on `a`'s slot index, then each bucket by the full order. Keys order by
+    /// `(slot index, version)`, so grouping by `a`'s slot index is consistent with the order of
+    /// `a`, and sorting each bucket by `(a, b)` finishes the job — exact for any keys. A bucket
+    /// holds one proxy's pairs with larger keys, a handful, so the work is two streaming passes
+    /// over the pairs, one over the slot range, and tiny insertion sorts.
+    pub fn sort(&mut self, pairs: &mut Vec<Pair>) {
+        let n = pairs.len();
+        if n < COUNTING_MIN {
+            pairs.sort_unstable();
+            return;
         }
-    }
-    scratch.clear();
-    scratch.resize(
-        n,
-        Pair {
-            a: pairs[0].a,
-            b: pairs[0].b,
-        },
-    );
-    for d in 0..passes {
-        let c = &mut counts[d as usize][..radix];
-        if c.iter().any(|&k| k as usize == n) {
-            continue;
-        }
-        let mut sum = 0;
-        for k in c.iter_mut() {
-            let here = *k;
-            *k = sum;
-            sum += here;
-        }
+        let max = pairs.iter().map(|p| slot(p.a)).max().unwrap_or(0) as usize;
+        let starts = &mut self.starts;
+        starts.clear();
+        starts.resize(max + 2, 0);
         for p in pairs.iter() {
-            let b = digit(p, d);
-            scratch[c[b] as usize] = *p;
-            c[b] += 1;
+            starts[slot(p.a) as usize + 1] += 1;
         }
-        core::mem::swap(pairs, scratch);
+        for i in 1..starts.len() {
+            starts[i] += starts[i - 1];
+        }
+        self.scratch.clear();
+        self.scratch.resize(n, pairs[0]);
+        for p in pairs.iter() {
+            let s = &mut starts[slot(p.a) as usize];
+            self.scratch[*s as usize] = *p;
+            *s += 1;
+        }
+        core::mem::swap(pairs, &mut self.scratch);
+        // `starts[s]` is now the end of bucket `s`, and so the start of bucket `s + 1`.
+        let mut begin = 0;
+        for &end in &starts[..=max] {
+            let bucket = &mut pairs[begin..end as usize];
+            if bucket.len() <= INSERTION_MAX {
+                insertion_sort(bucket);
+            } else {
+                bucket.sort_unstable();
+            }
+            begin = end as usize;
+        }
+        debug_assert!(pairs.windows(2).all(|w| w[0] <= w[1]));
     }
-    if !pairs.windows(2).all(|w| w[0] <= w[1]) {
-        pairs.sort_unstable();
+}
+
+fn insertion_sort(v: &mut [Pair]) {
+    for i in 1..v.len() {
+        let mut j = i;
+        while j > 0 && v[j] < v[j - 1] {
+            v.swap(j, j - 1);
+            j -= 1;
+        }
     }
 }
 
@@ -196,7 +200,7 @@ mod tests {
     }
 
     #[test]
-    fn radix_sort_equals_sort_unstable() {
+    fn pair_sorter_equals_sort_unstable() {
         let mut sm = SlotMap::<ProxyKey, ()>::with_key();
         let keys: Vec<_> = (0..3000).map(|_| sm.insert(())).collect();
         let mut seed = 11u32;
@@ -204,8 +208,8 @@ mod tests {
             seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
             (seed >> 8) as usize
         };
-        let mut scratch = Vec::new();
-        for len in [0, 1, 255, 256, 5000] {
+        let mut sorter = PairSorter::new();
+        for len in [0, 1, 255, 256, 5000, 40_000] {
             let mut pairs: Vec<Pair> = (0..len)
                 .filter_map(|_| {
                     let (i, j) = (next() % keys.len(), next() % keys.len());
@@ -214,10 +218,10 @@ mod tests {
                 .collect();
             let mut want = pairs.clone();
             want.sort_unstable();
-            sort(&mut pairs, &mut scratch);
+            sorter.sort(&mut pairs);
             assert_eq!(pairs, want);
         }
-        // Keys of two slot maps may share a slot: the fallback still sorts by `Ord`.
+        // Keys of two slot maps may share a slot (same index, other version): still `Ord`.
         let mut other = SlotMap::<ProxyKey, ()>::with_key();
         other.insert(());
         let stale = other.insert(());
@@ -228,7 +232,7 @@ mod tests {
             .collect();
         let mut want = pairs.clone();
         want.sort_unstable();
-        sort(&mut pairs, &mut scratch);
+        sorter.sort(&mut pairs);
         assert_eq!(pairs, want);
     }
 
