@@ -164,3 +164,27 @@ fn a_static_body_covering_everything_pairs_with_every_moving_proxy() {
     let with_all = pairs.iter().filter(|p| p.a == all || p.b == all).count();
     assert_eq!(with_all, 400 - 50, "every proxy but the 50 static ones");
 }
+
+/// Regression (found by `fuzz/ops`): bodies near `f32::MAX` are finite, but their doubled
+/// centroids `min + max` overflow to infinity, so the SAH binning puts every one in one bucket.
+/// The build must still split (or make a leaf), and the pairs must still equal brute force.
+#[test]
+fn bodies_near_f32_max_whose_centroids_overflow_still_pair_exactly() {
+    let big = 3.396_151_4e38_f32;
+    for kind in [BodyKind::Dynamic, BodyKind::Static] {
+        let mut bp = broadphase(3);
+        bp.insert_sphere(Vec3::ZERO, 1.0).unwrap();
+        for i in 0..40 {
+            let lo = Vec3::new(big - i as f32 * 1.0e36, -1.7e38, big);
+            bp.insert_body(Aabb::new(lo.min(Vec3::splat(big)), Vec3::splat(big)), kind)
+                .unwrap();
+            bp.insert_body(
+                Aabb::new(Vec3::splat(-f32::MAX), Vec3::new(1.0, -1.0e38, f32::MAX)),
+                BodyKind::Dynamic,
+            )
+            .unwrap();
+        }
+        check(&mut bp);
+        check(&mut bp);
+    }
+}

@@ -371,7 +371,8 @@ fn sah_split<const AXIS: usize>(
     }
     let mid = partition(refs, ids, |r| bucket_of(r) <= best_plane);
     if mid == 0 || mid == n {
-        debug_assert!(false, "SAH split left a side empty");
+        // Reached when doubled centroids `min + max` overflow to ±∞ (boxes near `f32::MAX`):
+        // every primitive bins alike and no plane separates them. Split in halves instead.
         return Some(halves(refs, n / 2));
     }
     Some(Split {
