@@ -1,7 +1,7 @@
 //! Full (re)build: binned SAH, `Middle` or `EqualCounts` top-down splits over a flat array of
 //! boxes partitioned in place, with an explicit work stack and buffers reused across builds.
 
-use super::node::Node;
+use super::node::{Node, PrimBox};
 use super::{Bvh, BvhConfig, NONE, SplitMethod};
 use crate::{Aabb, ProxyKey};
 use glam::Vec3A;
@@ -148,8 +148,8 @@ impl Bvh {
         for (i, (aabb, key)) in self.boxes.iter().zip(&self.keys).enumerate() {
             if !key.is_null() {
                 s.refs.push(Ref {
-                    min: aabb.min.into(),
-                    max: aabb.max.into(),
+                    min: aabb.min,
+                    max: aabb.max,
                 });
                 s.ids.push(i as u32);
             }
@@ -172,8 +172,10 @@ impl Bvh {
         s.keys
             .extend(s.ids.iter().map(|&id| self.keys[id as usize]));
         self.boxes.clear();
-        self.boxes
-            .extend(s.refs.iter().map(|r| Aabb::new(r.min.into(), r.max.into())));
+        self.boxes.extend(s.refs.iter().map(|r| PrimBox {
+            min: r.min,
+            max: r.max,
+        }));
         core::mem::swap(&mut self.keys, &mut s.keys);
         for (i, &key) in self.keys.iter().enumerate() {
             self.ids[key] = i as u32;

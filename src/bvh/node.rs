@@ -1,6 +1,7 @@
 //! The 32-byte node of the depth-first array, and the inline stack of the `&self` traversals.
 
 use crate::{Aabb, Vec3};
+use glam::Vec3A;
 
 /// One node of the depth-first array (pbrt's `LinearBVHNode`): a leaf holds the primitive
 /// range `first..first + count` (`count > 0`); an interior node has `count == 0`, its first
@@ -72,14 +73,48 @@ impl Node {
         (index + 1, self.first)
     }
 
+    /// The node's box in SIMD lanes, for the overlap tests of the traversals.
     #[inline]
-    pub(crate) fn overlaps(&self, other: &Node) -> bool {
-        self.min.cmple(other.max).all() && other.min.cmple(self.max).all()
+    pub(crate) fn bounds(&self) -> PrimBox {
+        PrimBox {
+            min: self.min.into(),
+            max: self.max.into(),
+        }
+    }
+}
+
+/// A primitive's current box in SIMD lanes, 32 bytes: the pair and query loops test two of
+/// them with two 4-lane compares.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct PrimBox {
+    pub(crate) min: Vec3A,
+    pub(crate) max: Vec3A,
+}
+
+impl PrimBox {
+    /// The box of a tombstone, [`Aabb::EMPTY`]: it overlaps nothing.
+    pub(crate) const EMPTY: PrimBox = PrimBox {
+        min: Vec3A::INFINITY,
+        max: Vec3A::NEG_INFINITY,
+    };
+
+    #[inline]
+    pub(crate) fn new(aabb: &Aabb) -> Self {
+        PrimBox {
+            min: aabb.min.into(),
+            max: aabb.max.into(),
+        }
     }
 
     #[inline]
-    pub(crate) fn overlaps_aabb(&self, other: &Aabb) -> bool {
-        self.min.cmple(other.max).all() && other.min.cmple(self.max).all()
+    pub(crate) fn aabb(&self) -> Aabb {
+        Aabb::new(self.min.into(), self.max.into())
+    }
+
+    /// Closed overlap, as [`Aabb::overlaps`].
+    #[inline]
+    pub(crate) fn overlaps(&self, other: &PrimBox) -> bool {
+        (self.min.cmple(other.max) & other.min.cmple(self.max)).all()
     }
 }
 
