@@ -1,12 +1,13 @@
 //! The 32-byte node of the depth-first array, and the inline stack of the `&self` traversals.
 
 use crate::{Aabb, Vec3};
-use glam::Vec3A;
+use glam::{Vec3A, Vec4};
 
 /// One node of the depth-first array (pbrt's `LinearBVHNode`): a leaf holds the primitive
 /// range `first..first + count` (`count > 0`); an interior node has `count == 0`, its first
 /// child at the next index and its second child at `first`.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
 pub(crate) struct Node {
     /// Box corner with the smallest coordinates. 12 bytes.
     pub(crate) min: Vec3,
@@ -73,12 +74,15 @@ impl Node {
         (index + 1, self.first)
     }
 
-    /// The node's box in SIMD lanes, for the overlap tests of the traversals.
+    /// The node's box in SIMD lanes, for the overlap tests of the traversals. Each corner is
+    /// read with its neighbouring `u32` as the fourth lane (which `Vec3A` ignores), so that
+    /// the four consecutive fields load as one 16-byte vector.
     #[inline]
     pub(crate) fn bounds(&self) -> PrimBox {
+        let (min, max) = (self.min, self.max);
         PrimBox {
-            min: self.min.into(),
-            max: self.max.into(),
+            min: Vec3A::from_vec4(Vec4::new(min.x, min.y, min.z, f32::from_bits(self.first))),
+            max: Vec3A::from_vec4(Vec4::new(max.x, max.y, max.z, f32::from_bits(self.count))),
         }
     }
 }
