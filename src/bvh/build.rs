@@ -339,18 +339,18 @@ fn sah_split<const AXIS: usize>(
     let n = refs.len();
     let nb = config.sah_buckets as usize;
     // `x = (c − lo)·scale ∈ [0, nb]` for a doubled centroid `c` (the same sum as `Ref::c2`'s
-    // lane, so the bins and the partition agree with the bounds). Its bucket is `x − ½` rounded
-    // to the nearest integer by adding 1.5·2²³ (whose float spacing is 1), read back from the
-    // bits: monotone in `x`, 0 for the smallest centroid and `nb − 1` for the largest, as the
-    // SAH sweep needs, in four instructions where a saturating `as` cast takes a dozen.
+    // lane, so the bins and the partition agree with the bounds; `x >= 0` exactly, as `lo` is
+    // the least such sum). Adding 1.5·2²³, whose float spacing is 1, rounds `x` to the nearest
+    // integer, read back from the bits; clamped to `nb − 1`, that is the bucket: monotone in
+    // `x`, 0 for the smallest centroid and `nb − 1` for the largest, as the SAH sweep needs,
+    // in a few instructions where a saturating `as` cast takes a dozen. (The end buckets are
+    // half and one and a half buckets wide.)
     const MAGIC: f32 = 12_582_912.0;
     let lo = bounds.cmin[AXIS];
     let scale = nb as f32 / (bounds.cmax[AXIS] - lo);
-    let offset = MAGIC - 0.5;
-    let bucket_of = |r: &Ref| {
-        let y = (r.min[AXIS] + r.max[AXIS] - lo) * scale + offset;
-        (y.to_bits().wrapping_sub(MAGIC.to_bits()) as usize).min(nb - 1)
-    };
+    let rounded = |r: &Ref| (r.min[AXIS] + r.max[AXIS] - lo) * scale + MAGIC;
+    let bucket_of =
+        |r: &Ref| (rounded(r).to_bits().wrapping_sub(MAGIC.to_bits()) as usize).min(nb - 1);
 
     let Work { buckets, right, .. } = work;
     let buckets = &mut buckets[..nb];
@@ -380,7 +380,10 @@ fn sah_split<const AXIS: usize>(
     if leaf_is_cheaper(config, n, bounds, best_cost) {
         return None;
     }
-    let mid = partition(refs, ids, |r| bucket_of(r) <= best_plane);
+    // `bucket_of(r) <= best_plane` (< nb − 1, so the clamp never decides), compared on the
+    // integer-valued float `rounded(r)` itself.
+    let limit = MAGIC + best_plane as f32;
+    let mid = partition(refs, ids, |r| rounded(r) <= limit);
     if mid == 0 || mid == n {
         debug_assert!(false, "SAH split left a side empty");
         return Some(halves(refs, n / 2));
