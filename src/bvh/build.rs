@@ -461,8 +461,23 @@ fn sort_by_axis(work: &mut Work, refs: &mut [Ref], ids: &mut [u32], axis: usize)
             .enumerate()
             .map(|(i, r)| (r.c2()[axis], i as u32)),
     );
-    order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    insertion_sort(order);
     gather(order, tmp_refs, tmp_ids, refs, ids);
+}
+
+/// Sorts by the key (stable). For the few entries of a node that `sweep_split` takes (at most
+/// `sah_buckets`) this beats the general sort; keys are sums of checked finite coordinates,
+/// so `<` orders them totally.
+fn insertion_sort(order: &mut [(f32, u32)]) {
+    for i in 1..order.len() {
+        let x = order[i];
+        let mut j = i;
+        while j > 0 && x.0 < order[j - 1].0 {
+            order[j] = order[j - 1];
+            j -= 1;
+        }
+        order[j] = x;
+    }
 }
 
 /// Reorders `refs` and `ids` so that position `k` holds what was at `order[k].1`.
