@@ -1,7 +1,7 @@
 //! Full (re)build: binned SAH, `Middle` or `EqualCounts` top-down splits over a flat array of
 //! boxes partitioned in place, with an explicit work stack and buffers reused across builds.
 
-use super::node::Node;
+use super::node::{Node, PrimBox};
 use super::{Bvh, BvhConfig, NONE, SplitMethod};
 use crate::{Aabb, ProxyKey};
 use glam::Vec3A;
@@ -148,8 +148,8 @@ impl Bvh {
         for (i, (aabb, key)) in self.boxes.iter().zip(&self.keys).enumerate() {
             if !key.is_null() {
                 s.refs.push(Ref {
-                    min: aabb.min.into(),
-                    max: aabb.max.into(),
+                    min: aabb.min,
+                    max: aabb.max,
                 });
                 s.ids.push(i as u32);
             }
@@ -172,8 +172,10 @@ impl Bvh {
         s.keys
             .extend(s.ids.iter().map(|&id| self.keys[id as usize]));
         self.boxes.clear();
-        self.boxes
-            .extend(s.refs.iter().map(|r| Aabb::new(r.min.into(), r.max.into())));
+        self.boxes.extend(s.refs.iter().map(|r| PrimBox {
+            min: r.min,
+            max: r.max,
+        }));
         core::mem::swap(&mut self.keys, &mut s.keys);
         for (i, &key) in self.keys.iter().enumerate() {
             self.ids[key] = i as u32;
@@ -336,13 +338,22 @@ fn sah_split<const AXIS: usize>(
 ) -> Option<Split> {
     let n = refs.len();
     let nb = config.sah_buckets as usize;
+    // `x = (c − lo)·scale ∈ [0, nb]` for a doubled centroid `c` (the same sum as `Ref::c2`'s
+    // lane, so the bins and the partition agree with the bounds; `x >= 0` exactly, as `lo` is
+    // the least such sum). Adding 1.5·2²³, whose float spacing is 1, rounds `x` to the nearest
+    // integer, read back from the bits; clamped to `nb − 1`, that is the bucket: monotone in
+    // `x`, 0 for the smallest centroid and `nb − 1` for the largest, as the SAH sweep needs,
+    // in a few instructions where a saturating `as` cast takes a dozen. (The end buckets are
+    // half and one and a half buckets wide.)
+    const MAGIC: f32 = 12_582_912.0;
     let lo = bounds.cmin[AXIS];
     let scale = nb as f32 / (bounds.cmax[AXIS] - lo);
-    // The same sum as `Ref::c2`'s lane, so the bins and the partition agree with the bounds.
+    let rounded = |r: &Ref| (r.min[AXIS] + r.max[AXIS] - lo) * scale + MAGIC;
     let bucket_of =
-        |r: &Ref| (((r.min[AXIS] + r.max[AXIS] - lo) * scale) as u32).min(nb as u32 - 1) as usize;
+        |r: &Ref| (rounded(r).to_bits().wrapping_sub(MAGIC.to_bits()) as usize).min(nb - 1);
 
     let Work { buckets, right, .. } = work;
+    let buckets = &mut buckets[..nb];
     buckets.fill(Bucket::EMPTY);
     for r in refs.iter() {
         let b = &mut buckets[bucket_of(r)];
@@ -369,7 +380,10 @@ fn sah_split<const AXIS: usize>(
     if leaf_is_cheaper(config, n, bounds, best_cost) {
         return None;
     }
-    let mid = partition(refs, ids, |r| bucket_of(r) <= best_plane);
+    // `bucket_of(r) <= best_plane` (< nb − 1, so the clamp never decides), compared on the
+    // integer-valued float `rounded(r)` itself.
+    let limit = MAGIC + best_plane as f32;
+    let mid = partition(refs, ids, |r| rounded(r) <= limit);
     if mid == 0 || mid == n {
         // Reached when doubled centroids `min + max` overflow to ±∞ (boxes near `f32::MAX`):
         // every primitive bins alike and no plane separates them. Split in halves instead.
@@ -448,8 +462,23 @@ fn sort_by_axis(work: &mut Work, refs: &mut [Ref], ids: &mut [u32], axis: usize)
             .enumerate()
             .map(|(i, r)| (r.c2()[axis], i as u32)),
     );
-    order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    insertion_sort(order);
     gather(order, tmp_refs, tmp_ids, refs, ids);
+}
+
+/// Sorts by the key (stable). For the few entries of a node that `sweep_split` takes (at most
+/// `sah_buckets`) this beats the general sort; keys are sums of checked finite coordinates,
+/// so `<` orders them totally.
+fn insertion_sort(order: &mut [(f32, u32)]) {
+    for i in 1..order.len() {
+        let x = order[i];
+        let mut j = i;
+        while j > 0 && x.0 < order[j - 1].0 {
+            order[j] = order[j - 1];
+            j -= 1;
+        }
+        order[j] = x;
+    }
 }
 
 /// Reorders `refs` and `ids` so that position `k` holds what was at `order[k].1`.

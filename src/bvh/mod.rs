@@ -35,7 +35,7 @@ mod validate;
 
 use crate::geom::check_aabb;
 use crate::{Aabb, Error, ProxyKey};
-use node::Node;
+use node::{Node, PrimBox};
 use slotmap::{Key, SecondaryMap, SlotMap};
 
 pub(crate) use build::BuildScratch;
@@ -156,7 +156,7 @@ pub struct Bvh {
     /// (a leaf's range indexes them directly), the rest are pending.
     keys: Vec<ProxyKey>,
     /// Primitive index → current box; [`Aabb::EMPTY`] for a tombstone.
-    boxes: Vec<Aabb>,
+    boxes: Vec<PrimBox>,
     /// Primitives covered by the node array (live or tombstones).
     tree_len: usize,
     /// Tombstones among the first `tree_len` primitives.
@@ -257,18 +257,22 @@ impl Bvh {
     fn push_pending(&mut self, key: ProxyKey, aabb: Aabb) {
         self.ids.insert(key, self.boxes.len() as u32);
         self.keys.push(key);
-        self.boxes.push(aabb);
+        self.boxes.push(PrimBox::new(&aabb));
     }
 
     /// Replaces the box of `key`. Queries and pairs see the new box at once; node boxes are
     /// only enlarged here and tightened by [`Bvh::refit`]. `Err` (tree unchanged) for a bad
     /// box or a stale key.
     pub fn update(&mut self, key: ProxyKey, aabb: Aabb) -> Result<(), Error> {
-        check_aabb(&aabb)?;
+        let b = PrimBox::new(&aabb);
+        // `check_aabb` in three 4-lane tests; it only runs (to name the error) on failure.
+        if !(b.min.is_finite_mask() & b.max.is_finite_mask() & b.min.cmple(b.max)).all() {
+            check_aabb(&aabb)?;
+        }
         let id = *self.ids.get(key).ok_or(Error::UnknownProxy)? as usize;
-        self.boxes[id] = aabb;
+        self.boxes[id] = b;
         if id < self.tree_len {
-            self.enlarge_ancestors(self.leaf_of[id], &aabb);
+            self.enlarge_ancestors(self.leaf_of[id], &b);
         }
         Ok(())
     }
@@ -280,7 +284,7 @@ impl Bvh {
         self.slots.remove(key);
         if id < self.tree_len {
             self.keys[id] = ProxyKey::null();
-            self.boxes[id] = Aabb::EMPTY;
+            self.boxes[id] = PrimBox::EMPTY;
             self.tombstones += 1;
         } else {
             // Pending: keep the pending region dense by moving the last one into the hole.
@@ -314,7 +318,7 @@ impl Bvh {
     /// The current box of `key` (as last given), or `None` for a stale or unknown key.
     #[must_use]
     pub fn aabb(&self, key: ProxyKey) -> Option<Aabb> {
-        self.ids.get(key).map(|&id| self.boxes[id as usize])
+        self.ids.get(key).map(|&id| self.boxes[id as usize].aabb())
     }
 
     /// Primitives inserted since the last build.
@@ -326,7 +330,7 @@ impl Bvh {
     pub fn for_each(&self, mut f: impl FnMut(ProxyKey, Aabb)) {
         for (key, aabb) in self.keys.iter().zip(&self.boxes) {
             if !key.is_null() {
-                f(*key, *aabb);
+                f(*key, aabb.aabb());
             }
         }
     }

@@ -1,11 +1,13 @@
 //! The 32-byte node of the depth-first array, and the inline stack of the `&self` traversals.
 
 use crate::{Aabb, Vec3};
+use glam::{Vec3A, Vec4};
 
 /// One node of the depth-first array (pbrt's `LinearBVHNode`): a leaf holds the primitive
 /// range `first..first + count` (`count > 0`); an interior node has `count == 0`, its first
 /// child at the next index and its second child at `first`.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
 pub(crate) struct Node {
     /// Box corner with the smallest coordinates. 12 bytes.
     pub(crate) min: Vec3,
@@ -72,14 +74,51 @@ impl Node {
         (index + 1, self.first)
     }
 
+    /// The node's box in SIMD lanes, for the overlap tests of the traversals. Each corner is
+    /// read with its neighbouring `u32` as the fourth lane (which `Vec3A` ignores), so that
+    /// the four consecutive fields load as one 16-byte vector.
     #[inline]
-    pub(crate) fn overlaps(&self, other: &Node) -> bool {
-        self.min.cmple(other.max).all() && other.min.cmple(self.max).all()
+    pub(crate) fn bounds(&self) -> PrimBox {
+        let (min, max) = (self.min, self.max);
+        PrimBox {
+            min: Vec3A::from_vec4(Vec4::new(min.x, min.y, min.z, f32::from_bits(self.first))),
+            max: Vec3A::from_vec4(Vec4::new(max.x, max.y, max.z, f32::from_bits(self.count))),
+        }
+    }
+}
+
+/// A primitive's current box in SIMD lanes, 32 bytes: the pair and query loops test two of
+/// them with two 4-lane compares.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct PrimBox {
+    pub(crate) min: Vec3A,
+    pub(crate) max: Vec3A,
+}
+
+impl PrimBox {
+    /// The box of a tombstone, [`Aabb::EMPTY`]: it overlaps nothing.
+    pub(crate) const EMPTY: PrimBox = PrimBox {
+        min: Vec3A::INFINITY,
+        max: Vec3A::NEG_INFINITY,
+    };
+
+    #[inline]
+    pub(crate) fn new(aabb: &Aabb) -> Self {
+        PrimBox {
+            min: aabb.min.into(),
+            max: aabb.max.into(),
+        }
     }
 
     #[inline]
-    pub(crate) fn overlaps_aabb(&self, other: &Aabb) -> bool {
-        self.min.cmple(other.max).all() && other.min.cmple(self.max).all()
+    pub(crate) fn aabb(&self) -> Aabb {
+        Aabb::new(self.min.into(), self.max.into())
+    }
+
+    /// Closed overlap, as [`Aabb::overlaps`].
+    #[inline]
+    pub(crate) fn overlaps(&self, other: &PrimBox) -> bool {
+        (self.min.cmple(other.max) & other.min.cmple(self.max)).all()
     }
 }
 

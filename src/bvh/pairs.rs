@@ -2,8 +2,8 @@
 //! lists against both (tree queries and sort-and-sweep on x).
 
 use super::Bvh;
-use super::node::Node;
-use crate::{Aabb, ProxyKey};
+use super::node::{Node, PrimBox};
+use crate::ProxyKey;
 
 impl Bvh {
     /// Calls `f(a, b)` once for every unordered pair of live primitives whose current boxes
@@ -15,33 +15,39 @@ impl Bvh {
         // into the pairs within its first child l, within its second child r, and across
         // l × r: so (n, n) is replaced by (l, l), (r, r), (l, r), and a leaf (n, n) tests its
         // own range i < j. A cross item (a, b) names two disjoint subtrees; its pairs are
-        // those of (child, b) for both children of a (or of b), so descending one side
+        // those of the child pairs of a × b (a leaf standing for itself), so descending
         // partitions them again, and a cross item whose node boxes do not overlap holds no
         // pair because node boxes contain their primitives'. Every pair is thus produced by
         // exactly one leaf-level item, once.
         let mut stack = core::mem::take(&mut self.pair_stack);
         stack.clear();
-        if !self.nodes.is_empty() {
+        let t = Tree::of(self);
+        if !t.nodes.is_empty() {
             stack.push((0, 0));
         }
         while let Some((a, b)) = stack.pop() {
             if a != b {
-                cross_step(self, self, a, b, &mut stack, &mut f);
+                cross_step(&t, &t, a, b, &mut stack, &mut f);
                 continue;
             }
-            let node = &self.nodes[a as usize];
+            let node = &t.nodes[a as usize];
             if node.is_leaf() {
                 let range = node.range();
-                for i in range.clone() {
-                    for j in i + 1..range.end {
-                        if self.boxes[i].overlaps(&self.boxes[j]) {
-                            f(self.keys[i], self.keys[j]);
+                let boxes = &t.boxes[range.clone()];
+                let keys = &t.keys[range];
+                for (i, (bi, &ki)) in boxes.iter().zip(keys).enumerate() {
+                    for (bj, &kj) in boxes[i + 1..].iter().zip(&keys[i + 1..]) {
+                        if bi.overlaps(bj) {
+                            f(ki, kj);
                         }
                     }
                 }
             } else {
                 let (l, r) = node.children(a);
-                if self.nodes[l as usize].overlaps(&self.nodes[r as usize]) {
+                if t.nodes[l as usize]
+                    .bounds()
+                    .overlaps(&t.nodes[r as usize].bounds())
+                {
                     stack.push((l, r));
                 }
                 stack.extend_from_slice(&[(r, r), (l, l)]);
@@ -76,13 +82,14 @@ impl Bvh {
     pub fn for_each_pair_with(&mut self, other: &Bvh, mut f: impl FnMut(ProxyKey, ProxyKey)) {
         let mut stack = core::mem::take(&mut self.pair_stack);
         stack.clear();
-        if let (Some(a), Some(b)) = (self.nodes.first(), other.nodes.first())
-            && a.overlaps(b)
+        let (ta, tb) = (Tree::of(self), Tree::of(other));
+        if let (Some(a), Some(b)) = (ta.nodes.first(), tb.nodes.first())
+            && a.bounds().overlaps(&b.bounds())
         {
             stack.push((0, 0));
         }
         while let Some((a, b)) = stack.pop() {
-            cross_step(self, other, a, b, &mut stack, &mut f);
+            cross_step(&ta, &tb, a, b, &mut stack, &mut f);
         }
         self.pair_stack = stack;
 
@@ -104,14 +111,31 @@ impl Bvh {
     }
 }
 
+/// The slices of a tree that the descents read (tree primitives only, not the pending ones).
+struct Tree<'a> {
+    nodes: &'a [Node],
+    boxes: &'a [PrimBox],
+    keys: &'a [ProxyKey],
+}
+
+impl<'a> Tree<'a> {
+    fn of(bvh: &'a Bvh) -> Self {
+        Tree {
+            nodes: &bvh.nodes,
+            boxes: &bvh.boxes[..bvh.tree_len],
+            keys: &bvh.keys[..bvh.tree_len],
+        }
+    }
+}
+
 /// One item `(a, b)` of a descent over two disjoint subtrees with overlapping boxes, `a` in
 /// `ta` and `b` in `tb`: every overlapping primitive pair if both are leaves, else the items
-/// of the larger interior node's children against the other, for the children whose box
-/// overlaps the other's (pruned before the push, not after the pop).
+/// of the children of both interior nodes (a leaf standing in for itself) whose boxes
+/// overlap (pruned before the push, not after the pop).
 #[inline]
 fn cross_step(
-    ta: &Bvh,
-    tb: &Bvh,
+    ta: &Tree,
+    tb: &Tree,
     a: u32,
     b: u32,
     stack: &mut Vec<(u32, u32)>,
@@ -119,58 +143,67 @@ fn cross_step(
 ) {
     let na = &ta.nodes[a as usize];
     let nb = &tb.nodes[b as usize];
-    debug_assert!(na.overlaps(nb));
     match (na.is_leaf(), nb.is_leaf()) {
-        (true, true) => {
-            let b_box = nb.aabb();
-            for i in na.range() {
-                let bi = &ta.boxes[i];
-                if !bi.overlaps(&b_box) {
-                    continue;
-                }
-                for j in nb.range() {
-                    if bi.overlaps(&tb.boxes[j]) {
-                        f(ta.keys[i], tb.keys[j]);
-                    }
+        (true, true) => leaf_pairs(ta, na, tb, nb, f),
+        (false, true) => {
+            let bb = nb.bounds();
+            let (l, r) = na.children(a);
+            for c in [r, l] {
+                if ta.nodes[c as usize].bounds().overlaps(&bb) {
+                    stack.push((c, b));
                 }
             }
         }
-        (false, true) => push_children_a(ta, na, a, nb, b, stack),
-        (true, false) => push_children_b(na, a, tb, nb, b, stack),
+        (true, false) => {
+            let ab = na.bounds();
+            let (l, r) = nb.children(b);
+            for c in [r, l] {
+                if tb.nodes[c as usize].bounds().overlaps(&ab) {
+                    stack.push((a, c));
+                }
+            }
+        }
         (false, false) => {
-            if na.aabb().surface_area() >= nb.aabb().surface_area() {
-                push_children_a(ta, na, a, nb, b, stack);
-            } else {
-                push_children_b(na, a, tb, nb, b, stack);
+            let (al, ar) = na.children(a);
+            let (bl, br) = nb.children(b);
+            let (bl_box, br_box) = (
+                tb.nodes[bl as usize].bounds(),
+                tb.nodes[br as usize].bounds(),
+            );
+            for c in [ar, al] {
+                let cb = ta.nodes[c as usize].bounds();
+                if cb.overlaps(&br_box) {
+                    stack.push((c, br));
+                }
+                if cb.overlaps(&bl_box) {
+                    stack.push((c, bl));
+                }
             }
         }
     }
 }
 
-/// Pushes `(child, b)` for the children of `a` whose box overlaps `b`'s.
+/// Every overlapping pair of the primitives of leaf `na` (in `ta`) × leaf `nb` (in `tb`); a
+/// box of `na` that misses `nb`'s box pairs with nothing there and is skipped.
 #[inline]
-fn push_children_a(ta: &Bvh, na: &Node, a: u32, nb: &Node, b: u32, stack: &mut Vec<(u32, u32)>) {
-    let (l, r) = na.children(a);
-    for c in [r, l] {
-        if ta.nodes[c as usize].overlaps(nb) {
-            stack.push((c, b));
+fn leaf_pairs(ta: &Tree, na: &Node, tb: &Tree, nb: &Node, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
+    let b_box = nb.bounds();
+    let (ra, rb) = (na.range(), nb.range());
+    let (boxes_b, keys_b) = (&tb.boxes[rb.clone()], &tb.keys[rb]);
+    for (bi, &ki) in ta.boxes[ra.clone()].iter().zip(&ta.keys[ra]) {
+        if !bi.overlaps(&b_box) {
+            continue;
         }
-    }
-}
-
-/// Pushes `(a, child)` for the children of `b` whose box overlaps `a`'s.
-#[inline]
-fn push_children_b(na: &Node, a: u32, tb: &Bvh, nb: &Node, b: u32, stack: &mut Vec<(u32, u32)>) {
-    let (l, r) = nb.children(b);
-    for c in [r, l] {
-        if tb.nodes[c as usize].overlaps(na) {
-            stack.push((a, c));
+        for (bj, &kj) in boxes_b.iter().zip(keys_b) {
+            if bi.overlaps(bj) {
+                f(ki, kj);
+            }
         }
     }
 }
 
 /// Fills `order` with the indices `range`, sorted by `boxes[i].min.x`.
-fn sort_by_min_x(order: &mut Vec<u32>, range: core::ops::Range<usize>, boxes: &[Aabb]) {
+fn sort_by_min_x(order: &mut Vec<u32>, range: core::ops::Range<usize>, boxes: &[PrimBox]) {
     order.clear();
     order.extend(range.map(|i| i as u32));
     order.sort_unstable_by(|&i, &j| boxes[i as usize].min.x.total_cmp(&boxes[j as usize].min.x));
@@ -182,7 +215,13 @@ fn sort_by_min_x(order: &mut Vec<u32>, range: core::ops::Range<usize>, boxes: &[
 /// other list it overlaps and that comes later in the merge lies at or after the other list's
 /// cursor and has `min.x <= its max.x`, so scanning from the cursor until `min.x` passes its
 /// `max.x` finds them all; a pair is found from whichever of its two boxes is taken first.
-fn sweep_cross(xs: &[u32], bx: &[Aabb], ys: &[u32], by: &[Aabb], mut f: impl FnMut(usize, usize)) {
+fn sweep_cross(
+    xs: &[u32],
+    bx: &[PrimBox],
+    ys: &[u32],
+    by: &[PrimBox],
+    mut f: impl FnMut(usize, usize),
+) {
     let (mut i, mut j) = (0, 0);
     while i < xs.len() && j < ys.len() {
         let x = xs[i] as usize;

@@ -3,7 +3,7 @@
 //! [`INLINE_STACK`].
 
 use super::Bvh;
-use super::node::{INLINE_STACK, SmallStack};
+use super::node::{INLINE_STACK, PrimBox, SmallStack};
 use crate::geom::{check_aabb, inverse_dir, ray_is_valid};
 use crate::{Aabb, ProxyKey, Vec3};
 use slotmap::Key;
@@ -16,9 +16,10 @@ impl Bvh {
         if check_aabb(aabb).is_err() {
             return;
         }
-        self.query_tree(aabb, |i| f(self.keys[i]));
+        let q = PrimBox::new(aabb);
+        self.query_tree(&q, |i| f(self.keys[i]));
         for (b, &key) in self.pending_boxes().iter().zip(self.pending_keys()) {
-            if b.overlaps(aabb) {
+            if b.overlaps(&q) {
                 f(key);
             }
         }
@@ -26,7 +27,7 @@ impl Bvh {
 
     /// The index of every tree primitive (tombstones excluded: their box is empty) whose
     /// box overlaps `aabb`.
-    pub(super) fn query_tree(&self, aabb: &Aabb, mut f: impl FnMut(usize)) {
+    pub(super) fn query_tree(&self, aabb: &PrimBox, mut f: impl FnMut(usize)) {
         if self.nodes.is_empty() {
             return;
         }
@@ -34,7 +35,7 @@ impl Bvh {
         stack.push(0);
         while let Some(n) = stack.pop() {
             let node = &self.nodes[n as usize];
-            if !node.overlaps_aabb(aabb) {
+            if !node.bounds().overlaps(aabb) {
                 continue;
             }
             if node.is_leaf() {
@@ -81,7 +82,7 @@ impl Bvh {
             }
         };
         for (b, &key) in self.pending_boxes().iter().zip(self.pending_keys()) {
-            consider(key, b, &mut limit);
+            consider(key, &b.aabb(), &mut limit);
         }
         let Some(root) = self.nodes.first() else {
             return best;
@@ -98,7 +99,7 @@ impl Bvh {
             let node = &self.nodes[n as usize];
             if node.is_leaf() {
                 for i in node.range() {
-                    consider(self.keys[i], &self.boxes[i], &mut limit);
+                    consider(self.keys[i], &self.boxes[i].aabb(), &mut limit);
                 }
                 continue;
             }
@@ -137,7 +138,7 @@ impl Bvh {
         }
         let inv = inverse_dir(dir);
         for (b, &key) in self.pending_boxes().iter().zip(self.pending_keys()) {
-            if let Some(t) = b.ray_entry(origin, inv, max_t) {
+            if let Some(t) = b.aabb().ray_entry(origin, inv, max_t) {
                 f(key, t);
             }
         }
@@ -157,7 +158,7 @@ impl Bvh {
                     if key.is_null() {
                         continue;
                     }
-                    if let Some(t) = self.boxes[i].ray_entry(origin, inv, max_t) {
+                    if let Some(t) = self.boxes[i].aabb().ray_entry(origin, inv, max_t) {
                         f(key, t);
                     }
                 }
@@ -169,7 +170,7 @@ impl Bvh {
         }
     }
 
-    pub(super) fn pending_boxes(&self) -> &[Aabb] {
+    pub(super) fn pending_boxes(&self) -> &[PrimBox] {
         &self.boxes[self.tree_len..]
     }
 

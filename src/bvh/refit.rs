@@ -1,7 +1,7 @@
 //! Keeping node boxes valid after updates: enlarging on `update`, tightening in one reverse
 //! sweep on `refit`, and the quality measure that decides when to rebuild instead.
 
-use super::node::Node;
+use super::node::{Node, PrimBox};
 use super::{Bvh, NONE};
 use crate::Aabb;
 
@@ -41,9 +41,13 @@ impl Bvh {
         for n in (0..self.nodes.len()).rev() {
             let node = self.nodes[n];
             let aabb = if node.is_leaf() {
-                self.boxes[node.range()]
+                let b = self.boxes[node.range()]
                     .iter()
-                    .fold(Aabb::EMPTY, |acc, b| acc.union(b))
+                    .fold(PrimBox::EMPTY, |acc, b| PrimBox {
+                        min: acc.min.min(b.min),
+                        max: acc.max.max(b.max),
+                    });
+                b.aabb()
             } else {
                 let (a, b) = node.children(n as u32);
                 self.nodes[a as usize]
@@ -77,15 +81,16 @@ impl Bvh {
     /// Grows `leaf` and its ancestors until one already contains `aabb`: if the parent
     /// contains its child's old box and `aabb`, it contains their union, and so does every
     /// further ancestor.
-    pub(super) fn enlarge_ancestors(&mut self, leaf: u32, aabb: &Aabb) {
+    pub(super) fn enlarge_ancestors(&mut self, leaf: u32, b: &PrimBox) {
         let mut n = leaf;
         while n != NONE {
             let node = &mut self.nodes[n as usize];
-            let old = node.aabb();
-            if old.contains(aabb) {
+            let old = node.bounds();
+            if (old.min.cmple(b.min) & b.max.cmple(old.max)).all() {
                 return;
             }
-            node.set_aabb(&old.union(aabb));
+            node.min = old.min.min(b.min).into();
+            node.max = old.max.max(b.max).into();
             n = self.parent[n as usize];
         }
     }

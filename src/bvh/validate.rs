@@ -1,7 +1,7 @@
 //! The whole-tree invariant check tests run after every mutation.
 
+use super::node::PrimBox;
 use super::{Bvh, NONE};
-use crate::Aabb;
 use slotmap::Key;
 
 impl Bvh {
@@ -63,7 +63,7 @@ impl Bvh {
                     prim_seen[i] = true;
                     assert_eq!(self.leaf_of[i], n, "leaf_of[{i}] does not name leaf {n}");
                     assert!(
-                        aabb.contains(&self.boxes[i]),
+                        aabb.contains(&self.boxes[i].aabb()),
                         "leaf {n} box {aabb:?} does not contain primitive {i} box {:?}",
                         self.boxes[i]
                     );
@@ -97,7 +97,7 @@ impl Bvh {
         for (i, (key, aabb)) in self.keys.iter().zip(&self.boxes).enumerate() {
             if key.is_null() {
                 assert!(i < self.tree_len, "pending primitive {i} is a tombstone");
-                assert_eq!(*aabb, Aabb::EMPTY, "tombstone {i} has a box");
+                assert_eq!(*aabb, PrimBox::EMPTY, "tombstone {i} has a box");
                 tombstones += 1;
                 continue;
             }
@@ -108,7 +108,7 @@ impl Bvh {
                 "key map disagrees at {i}"
             );
             assert!(
-                crate::geom::check_aabb(aabb).is_ok(),
+                crate::geom::check_aabb(&aabb.aabb()).is_ok(),
                 "live primitive {i} has a bad box {aabb:?}"
             );
         }
