@@ -92,13 +92,19 @@ struct Level {
     cands: (u32, u32),
 }
 
-/// A sphere's extent along a sweep axis.
-#[derive(Clone, Copy, Debug)]
-struct Entry {
-    lo: f32,
-    hi: f32,
-    /// Index in the swept list.
-    i: u32,
+/// A float's bits mapped so that unsigned order is float order, with `-0.0` taken as `0.0`
+/// (so `ord(x) <= ord(y)` iff `x <= y` for non-NaN floats).
+#[inline]
+fn ord(f: f32) -> u32 {
+    let b = (f + 0.0).to_bits();
+    if b >> 31 == 1 { !b } else { b | 1 << 31 }
+}
+
+/// A sweep entry: `ord(lo) << 32 | index in the swept list`, so a plain `u64` sort orders by
+/// `lo`.
+#[inline]
+fn entry(lo: f32, i: usize) -> u64 {
+    u64::from(ord(lo)) << 32 | i as u64
 }
 
 /// A part of a node's cell in the subdivision of a long own list: its integer corner, its
@@ -117,8 +123,8 @@ struct Work {
     parts: Vec<Part>,
     buf: Vec<Hot>,
     octs: Vec<u8>,
-    sweep: Vec<Entry>,
-    sweep_own: Vec<Entry>,
+    sweep: Vec<u64>,
+    sweep_own: Vec<u64>,
 }
 
 /// Buffers of the pair pass, reused by every pass; they never shrink.
@@ -246,16 +252,13 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
                     // A crowd in one deepest cell: sweep along x.
                     let e = &mut w.sweep;
                     e.clear();
-                    e.extend(l.iter().enumerate().map(|(i, h)| Entry {
-                        lo: h.min.x,
-                        hi: h.max.x,
-                        i: i as u32,
-                    }));
-                    e.sort_unstable_by(|x, y| x.lo.total_cmp(&y.lo));
-                    for (k, x) in e.iter().enumerate() {
-                        let a = &l[x.i as usize];
-                        for y in e[k + 1..].iter().take_while(|y| y.lo <= x.hi) {
-                            let b = &l[y.i as usize];
+                    e.extend(l.iter().enumerate().map(|(i, h)| entry(h.min.x, i)));
+                    e.sort_unstable();
+                    for (k, &x) in e.iter().enumerate() {
+                        let a = &l[x as u32 as usize];
+                        let hi = u64::from(ord(a.max.x)) << 32 | u64::from(u32::MAX);
+                        for &y in e[k + 1..].iter().take_while(|&&y| y <= hi) {
+                            let b = &l[y as u32 as usize];
                             if here(a, b) {
                                 self.test(a, b);
                             }
@@ -327,38 +330,33 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
                     .iter()
                     .enumerate()
                     .filter(|(_, h)| usize::from(group[h.pos as usize]) == axis)
-                    .map(|(i, h)| Entry {
-                        lo: h.min[axis],
-                        hi: h.max[axis],
-                        i: i as u32,
-                    }),
+                    .map(|(i, h)| entry(h.min[axis], i)),
             );
             if ea.is_empty() {
                 continue;
             }
-            ea.sort_unstable_by(|x, y| x.lo.total_cmp(&y.lo));
+            ea.sort_unstable();
             let eb = &mut w.sweep_own;
             eb.clear();
-            eb.extend(own.iter().enumerate().map(|(i, h)| Entry {
-                lo: h.min[axis],
-                hi: h.max[axis],
-                i: i as u32,
-            }));
-            eb.sort_unstable_by(|x, y| x.lo.total_cmp(&y.lo));
+            eb.extend(own.iter().enumerate().map(|(i, h)| entry(h.min[axis], i)));
+            eb.sort_unstable();
             // In merged order, each entry scans the other list's entries not yet passed while
-            // they start before it ends: a pair overlapping on the axis is met once.
+            // they start before it ends: a pair overlapping on the axis is met once. An entry
+            // `y` starts before `x` ends iff `y <= ord(x.hi) << 32 | u32::MAX`.
             let (mut i, mut j) = (0, 0);
             while i < ea.len() && j < eb.len() {
-                if ea[i].lo <= eb[j].lo {
-                    let x = ea[i];
-                    for y in eb[j..].iter().take_while(|y| y.lo <= x.hi) {
-                        self.test(&cands[x.i as usize], &own[y.i as usize]);
+                if ea[i] >> 32 <= eb[j] >> 32 {
+                    let x = &cands[ea[i] as u32 as usize];
+                    let hi = u64::from(ord(x.max[axis])) << 32 | u64::from(u32::MAX);
+                    for &y in eb[j..].iter().take_while(|&&y| y <= hi) {
+                        self.test(x, &own[y as u32 as usize]);
                     }
                     i += 1;
                 } else {
-                    let y = eb[j];
-                    for x in ea[i..].iter().take_while(|x| x.lo <= y.hi) {
-                        self.test(&cands[x.i as usize], &own[y.i as usize]);
+                    let y = &own[eb[j] as u32 as usize];
+                    let hi = u64::from(ord(y.max[axis])) << 32 | u64::from(u32::MAX);
+                    for &x in ea[i..].iter().take_while(|&&x| x <= hi) {
+                        self.test(&cands[x as u32 as usize], y);
                     }
                     j += 1;
                 }
