@@ -206,8 +206,31 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
     #[inline]
     fn test(&mut self, a: &Hot, b: &Hot) {
         self.tests += 1;
+        self.emit_if(a, b);
+    }
+
+    /// Emits the pair if it overlaps, without counting the test: the all-pairs loops count
+    /// theirs in one addition.
+    #[inline]
+    fn emit_if(&mut self, a: &Hot, b: &Hot) {
         if a.overlaps(b) {
-            (self.emit)(self.keys[a.pos as usize], self.keys[b.pos as usize]);
+            self.emit(a, b);
+        }
+    }
+
+    #[inline]
+    fn emit(&mut self, a: &Hot, b: &Hot) {
+        (self.emit)(self.keys[a.pos as usize], self.keys[b.pos as usize]);
+    }
+
+    /// Every pair within `list`, all against all.
+    fn all_pairs(&mut self, list: &[Hot]) {
+        let n = list.len() as u64;
+        self.tests += n * n.saturating_sub(1) / 2;
+        for (i, a) in list.iter().enumerate() {
+            for b in &list[i + 1..] {
+                self.emit_if(a, b);
+            }
         }
     }
 
@@ -215,11 +238,7 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
     /// by the virtual subdivision of the module docs.
     fn self_pairs(&mut self, list: &[Hot], lo: [u32; 3], shift: u32, w: &mut Work) {
         if list.len() <= SHORT_SELF {
-            for (i, a) in list.iter().enumerate() {
-                for b in &list[i + 1..] {
-                    self.test(a, b);
-                }
-            }
+            self.all_pairs(list);
             return;
         }
         w.buf.clear();
@@ -315,9 +334,10 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
     /// where it is thin, against all own spheres.
     fn cross_pairs(&mut self, cands: &[Hot], own: &[Hot], group: &[u8], w: &mut Work) {
         if cands.len() * own.len() <= SHORT_CROSS || cands.len().min(own.len()) <= SHORT_SIDE {
+            self.tests += (cands.len() * own.len()) as u64;
             for x in cands {
                 for y in own {
-                    self.test(x, y);
+                    self.emit_if(x, y);
                 }
             }
             return;
