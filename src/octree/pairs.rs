@@ -306,23 +306,49 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
                     }
                 }
             }
-            for c in 0..8u32 {
-                let start = w.buf.len();
-                for (i, &o) in w.octs.iter().enumerate() {
-                    if o != 0xFF && o & (1 << c) != 0 {
-                        let h = w.buf[seg.start + i];
-                        w.buf.push(h);
+            // Hand each octant copies of the spheres that reach it: count, then scatter.
+            let mut count = [0u32; 8];
+            for &o in &w.octs {
+                if o != 0xFF {
+                    let mut m = o;
+                    while m != 0 {
+                        count[m.trailing_zeros() as usize] += 1;
+                        m &= m - 1;
                     }
                 }
-                if w.buf.len() - start >= 2 {
+            }
+            let base = w.buf.len() as u32;
+            let mut at = [0u32; 8];
+            let mut sum = base;
+            for c in 0..8 {
+                at[c] = sum;
+                sum += count[c];
+            }
+            let fill = w.buf[seg.start];
+            w.buf.resize(sum as usize, fill);
+            for (i, &o) in w.octs.iter().enumerate() {
+                if o != 0xFF {
+                    let h = w.buf[seg.start + i];
+                    let mut m = o;
+                    while m != 0 {
+                        let c = m.trailing_zeros() as usize;
+                        w.buf[at[c] as usize] = h;
+                        at[c] += 1;
+                        m &= m - 1;
+                    }
+                }
+            }
+            // Octants with fewer than two spheres leave a gap; a popped part truncates the
+            // buffer to its own end, so gaps are never read.
+            for c in 0..8u32 {
+                let end = at[c as usize];
+                if count[c as usize] >= 2 {
                     w.parts.push(Part {
                         lo: [0, 1, 2].map(|a| lo[a] + ((c >> a) & 1) * half),
                         shift: p.shift - 1,
-                        start: start as u32,
-                        end: w.buf.len() as u32,
+                        start: end - count[c as usize],
+                        end,
                     });
-                } else {
-                    w.buf.truncate(start);
                 }
             }
         }
