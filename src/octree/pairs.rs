@@ -361,9 +361,18 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
     fn cross_pairs(&mut self, cands: &[Hot], own: &[Hot], group: &[u8], w: &mut Work) {
         if cands.len() * own.len() <= SHORT_CROSS || cands.len().min(own.len()) <= SHORT_SIDE {
             self.tests += (cands.len() * own.len()) as u64;
-            for x in cands {
+            // The longer list in the inner loop.
+            if own.len() >= cands.len() {
+                for x in cands {
+                    for y in own {
+                        self.emit_if(x, y);
+                    }
+                }
+            } else {
                 for y in own {
-                    self.emit_if(x, y);
+                    for x in cands {
+                        self.emit_if(x, y);
+                    }
                 }
             }
             return;
