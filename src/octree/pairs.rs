@@ -73,12 +73,6 @@ impl Hot {
     fn overlaps(&self, o: &Hot) -> bool {
         (self.min.cmple(o.max) & o.min.cmple(self.max)).all()
     }
-
-    /// True if the cell range meets the cell `lo..=hi`.
-    #[inline]
-    fn reaches(&self, lo: [u32; 3], hi: [u32; 3]) -> bool {
-        (0..3).all(|a| u32::from(self.qmin[a]) <= hi[a] && u32::from(self.qmax[a]) >= lo[a])
-    }
 }
 
 /// One level of the path from the root to the current node.
@@ -90,6 +84,10 @@ struct Level {
     own: (u32, u32),
     /// Copies of the ancestor spheres that reach this level's cell, in `Scratch::anc`.
     cands: (u32, u32),
+    /// True once `Scratch::anc_oct` (for `cands`) and `Scratch::hot_oct` (for `own`) hold
+    /// the octants of this level's cell that each sphere reaches; computed when the first
+    /// child level is entered, so each child filters by one bit test.
+    octs: bool,
 }
 
 /// A float's bits mapped so that unsigned order is float order, with `-0.0` taken as `0.0`
@@ -143,6 +141,10 @@ pub(super) struct Scratch {
     group: Vec<u8>,
     path: Vec<Level>,
     anc: Vec<Hot>,
+    /// Octant masks of the copies in `anc` and of the spheres in `hot`, relative to the cell
+    /// of the level they are read at (see `Level::octs`).
+    anc_oct: Vec<u8>,
+    hot_oct: Vec<u8>,
     work: Work,
     pub(super) tests: u64,
     pub(super) nodes_visited: u32,
@@ -448,6 +450,7 @@ impl Octree {
         self.sort_into_walk_order(s);
         let d = self.depth;
         let n = s.hot.len();
+        s.hot_oct.resize(n, 0);
         let mut t = Tester {
             keys: &s.keys,
             tests: 0,
@@ -459,6 +462,7 @@ impl Octree {
             code: 0,
             own: (0, 0),
             cands: (0, 0),
+            octs: false,
         });
         let mut visited = 0u32;
         let mut i = 0;
@@ -484,24 +488,40 @@ impl Octree {
                 visited += 1;
                 let parent = s.path[l - 1];
                 let shift = d - l as u32;
-                let lo = corner.map(|c| c >> shift << shift);
-                let hi = lo.map(|c| c + (1 << shift) - 1);
+                let (c0, c1) = (parent.cands.0 as usize, parent.cands.1 as usize);
+                let (o0, o1) = (parent.own.0 as usize, parent.own.1 as usize);
+                if !parent.octs {
+                    // Every sphere here has its range in or across the parent's cell, so the
+                    // child octants it reaches are `octants` of the parent's mid cell.
+                    let mid = corner.map(|c| (c >> (shift + 1) << (shift + 1)) + (1 << shift));
+                    s.anc_oct.resize(c1, 0);
+                    for k in c0..c1 {
+                        s.anc_oct[k] = octants(&s.anc[k], mid);
+                    }
+                    for k in o0..o1 {
+                        s.hot_oct[k] = octants(&s.hot[k], mid);
+                    }
+                    s.path[l - 1].octs = true;
+                }
+                let code = prefix >> (3 * shift);
+                let bit = 1u8 << (code & 7);
                 let start = s.anc.len() as u32;
-                for k in parent.cands.0..parent.cands.1 {
-                    let h = s.anc[k as usize];
-                    if h.reaches(lo, hi) {
+                for k in c0..c1 {
+                    if s.anc_oct[k] & bit != 0 {
+                        let h = s.anc[k];
                         s.anc.push(h);
                     }
                 }
-                for h in &s.hot[parent.own.0 as usize..parent.own.1 as usize] {
-                    if h.reaches(lo, hi) {
-                        s.anc.push(*h);
+                for k in o0..o1 {
+                    if s.hot_oct[k] & bit != 0 {
+                        s.anc.push(s.hot[k]);
                     }
                 }
                 s.path.push(Level {
-                    code: prefix >> (3 * shift),
+                    code,
                     own: (0, 0),
                     cands: (start, s.anc.len() as u32),
+                    octs: false,
                 });
             }
             if level == 0 {
@@ -509,6 +529,7 @@ impl Octree {
             }
             let here = &mut s.path[level];
             here.own = (i as u32, j as u32);
+            here.octs = false;
             let cands = &s.anc[here.cands.0 as usize..here.cands.1 as usize];
             let own = &s.hot[i..j];
             let shift = d - level as u32;
