@@ -17,7 +17,9 @@
 //! every descendant, which is quadratic in the root's straddlers. Here the path from the root
 //! to the current node is a stack of levels, and level `l` holds **copies** of the ancestor
 //! spheres whose integer range overlaps the level-`l` cell: the parent level's copies plus the
-//! parent node's own spheres, filtered by that cell. A sphere `a` that overlaps a sphere `b`
+//! parent node's own spheres, filtered by that cell. Each of those ranges meets the parent's
+//! cell, so the filter is one bit of its octant mask at the parent's mid cell, computed once
+//! per parent when its first child is entered. A sphere `a` that overlaps a sphere `b`
 //! placed in the cell's subtree has a range overlapping `b`'s (the cell map is monotone), and
 //! `b`'s range lies inside the cell, so `a` is never filtered out wrongly. Ranges are clamped
 //! to the grid, so overflow spheres in the root are filtered the same way. Levels between the
