@@ -561,31 +561,6 @@ impl Octree {
             group,
             ..
         } = s;
-        hot.clear();
-        node_key.clear();
-        keys.clear();
-        group.clear();
-        let mut gather = |key: u64, id: u32| {
-            let o = &self.objs[id as usize];
-            let shift = self.depth - (key & 15) as u32;
-            let g = if shift == 0 {
-                2
-            } else {
-                (0..3)
-                    .find(|&a| (o.qmin[a] ^ o.qmax[a]) >> (shift - 1) != 0)
-                    .unwrap_or(2) as u8
-            };
-            hot.push(Hot {
-                min: o.aabb.min.into(),
-                max: o.aabb.max.into(),
-                qmin: o.qmin,
-                qmax: o.qmax,
-                pos: keys.len() as u32,
-            });
-            node_key.push(key);
-            keys.push(self.keys[id as usize]);
-            group.push(g);
-        };
         let key_bits = 3 * self.depth + 4;
         if key_bits <= 32 {
             items.clear();
@@ -596,9 +571,12 @@ impl Octree {
                     .map(|(id, o)| (o.walk_key << 32) | id as u64),
             );
             radix_sort(items, items_tmp, counts, 32, key_bits);
-            for &x in items.iter() {
-                gather(x >> 32, x as u32);
-            }
+            self.gather(
+                items.iter().map(|&x| (x >> 32, x as u32)),
+                hot,
+                node_key,
+                keys,
+            );
         } else {
             wide.clear();
             wide.extend(
@@ -608,10 +586,46 @@ impl Octree {
                     .map(|(id, o)| (o.walk_key, id as u32)),
             );
             wide.sort_unstable();
-            for &(key, id) in wide.iter() {
-                gather(key, id);
-            }
+            self.gather(wide.iter().copied(), hot, node_key, keys);
         }
+        let d = self.depth;
+        group.clear();
+        group.extend(hot.iter().zip(node_key.iter()).map(|(h, &key)| {
+            let shift = d - (key & 15) as u32;
+            if shift == 0 {
+                2
+            } else {
+                (0..3)
+                    .find(|&a| (h.qmin[a] ^ h.qmax[a]) >> (shift - 1) != 0)
+                    .unwrap_or(2) as u8
+            }
+        }));
+    }
+
+    /// Fills the walk-ordered copies from the sorted `(walk key, id)` sequence, one streaming
+    /// pass per array.
+    fn gather(
+        &self,
+        order: impl Iterator<Item = (u64, u32)> + Clone,
+        hot: &mut Vec<Hot>,
+        node_key: &mut Vec<u64>,
+        keys: &mut Vec<ProxyKey>,
+    ) {
+        node_key.clear();
+        node_key.extend(order.clone().map(|(key, _)| key));
+        keys.clear();
+        keys.extend(order.clone().map(|(_, id)| self.keys[id as usize]));
+        hot.clear();
+        hot.extend(order.enumerate().map(|(pos, (_, id))| {
+            let o = &self.objs[id as usize];
+            Hot {
+                min: o.aabb.min.into(),
+                max: o.aabb.max.into(),
+                qmin: o.qmin,
+                qmax: o.qmax,
+                pos: pos as u32,
+            }
+        }));
     }
 }
 
