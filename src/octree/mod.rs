@@ -163,7 +163,8 @@ impl Octree {
         let i = id as usize;
         self.spheres[i] = (center, radius);
         let old = self.objs[i];
-        let was_outside = !self.bounds.contains(&old.aabb);
+        // Only root spheres can be outside: skip the box check for the rest.
+        let was_outside = old.node == 0 && !self.bounds.contains(&old.aabb);
         self.overflow = self.overflow - u32::from(was_outside) + u32::from(outside);
         let o = &mut self.objs[i];
         o.aabb = aabb;

@@ -17,7 +17,9 @@
 //! every descendant, which is quadratic in the root's straddlers. Here the path from the root
 //! to the current node is a stack of levels, and level `l` holds **copies** of the ancestor
 //! spheres whose integer range overlaps the level-`l` cell: the parent level's copies plus the
-//! parent node's own spheres, filtered by that cell. A sphere `a` that overlaps a sphere `b`
+//! parent node's own spheres, filtered by that cell. Each of those ranges meets the parent's
+//! cell, so the filter is one bit of its octant mask at the parent's mid cell, computed once
+//! per parent when its first child is entered. A sphere `a` that overlaps a sphere `b`
 //! placed in the cell's subtree has a range overlapping `b`'s (the cell map is monotone), and
 //! `b`'s range lies inside the cell, so `a` is never filtered out wrongly. Ranges are clamped
 //! to the grid, so overflow spheres in the root are filtered the same way. Levels between the
@@ -73,12 +75,6 @@ impl Hot {
     fn overlaps(&self, o: &Hot) -> bool {
         (self.min.cmple(o.max) & o.min.cmple(self.max)).all()
     }
-
-    /// True if the cell range meets the cell `lo..=hi`.
-    #[inline]
-    fn reaches(&self, lo: [u32; 3], hi: [u32; 3]) -> bool {
-        (0..3).all(|a| u32::from(self.qmin[a]) <= hi[a] && u32::from(self.qmax[a]) >= lo[a])
-    }
 }
 
 /// One level of the path from the root to the current node.
@@ -90,15 +86,25 @@ struct Level {
     own: (u32, u32),
     /// Copies of the ancestor spheres that reach this level's cell, in `Scratch::anc`.
     cands: (u32, u32),
+    /// True once `Scratch::anc_oct` (for `cands`) and `Scratch::hot_oct` (for `own`) hold
+    /// the octants of this level's cell that each sphere reaches; computed when the first
+    /// child level is entered, so each child filters by one bit test.
+    octs: bool,
 }
 
-/// A sphere's extent along a sweep axis.
-#[derive(Clone, Copy, Debug)]
-struct Entry {
-    lo: f32,
-    hi: f32,
-    /// Index in the swept list.
-    i: u32,
+/// A float's bits mapped so that unsigned order is float order, with `-0.0` taken as `0.0`
+/// (so `ord(x) <= ord(y)` iff `x <= y` for non-NaN floats).
+#[inline]
+fn ord(f: f32) -> u32 {
+    let b = (f + 0.0).to_bits();
+    if b >> 31 == 1 { !b } else { b | 1 << 31 }
+}
+
+/// A sweep entry: `ord(lo) << 32 | index in the swept list`, so a plain `u64` sort orders by
+/// `lo`.
+#[inline]
+fn entry(lo: f32, i: usize) -> u64 {
+    u64::from(ord(lo)) << 32 | i as u64
 }
 
 /// A part of a node's cell in the subdivision of a long own list: its integer corner, its
@@ -117,8 +123,8 @@ struct Work {
     parts: Vec<Part>,
     buf: Vec<Hot>,
     octs: Vec<u8>,
-    sweep: Vec<Entry>,
-    sweep_own: Vec<Entry>,
+    sweep: Vec<u64>,
+    sweep_own: Vec<u64>,
 }
 
 /// Buffers of the pair pass, reused by every pass; they never shrink.
@@ -137,6 +143,10 @@ pub(super) struct Scratch {
     group: Vec<u8>,
     path: Vec<Level>,
     anc: Vec<Hot>,
+    /// Octant masks of the copies in `anc` and of the spheres in `hot`, relative to the cell
+    /// of the level they are read at (see `Level::octs`).
+    anc_oct: Vec<u8>,
+    hot_oct: Vec<u8>,
     work: Work,
     pub(super) tests: u64,
     pub(super) nodes_visited: u32,
@@ -200,8 +210,31 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
     #[inline]
     fn test(&mut self, a: &Hot, b: &Hot) {
         self.tests += 1;
+        self.emit_if(a, b);
+    }
+
+    /// Emits the pair if it overlaps, without counting the test: the all-pairs loops count
+    /// theirs in one addition.
+    #[inline]
+    fn emit_if(&mut self, a: &Hot, b: &Hot) {
         if a.overlaps(b) {
-            (self.emit)(self.keys[a.pos as usize], self.keys[b.pos as usize]);
+            self.emit(a, b);
+        }
+    }
+
+    #[inline]
+    fn emit(&mut self, a: &Hot, b: &Hot) {
+        (self.emit)(self.keys[a.pos as usize], self.keys[b.pos as usize]);
+    }
+
+    /// Every pair within `list`, all against all.
+    fn all_pairs(&mut self, list: &[Hot]) {
+        let n = list.len() as u64;
+        self.tests += n * n.saturating_sub(1) / 2;
+        for (i, a) in list.iter().enumerate() {
+            for b in &list[i + 1..] {
+                self.emit_if(a, b);
+            }
         }
     }
 
@@ -209,11 +242,7 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
     /// by the virtual subdivision of the module docs.
     fn self_pairs(&mut self, list: &[Hot], lo: [u32; 3], shift: u32, w: &mut Work) {
         if list.len() <= SHORT_SELF {
-            for (i, a) in list.iter().enumerate() {
-                for b in &list[i + 1..] {
-                    self.test(a, b);
-                }
-            }
+            self.all_pairs(list);
             return;
         }
         w.buf.clear();
@@ -246,16 +275,13 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
                     // A crowd in one deepest cell: sweep along x.
                     let e = &mut w.sweep;
                     e.clear();
-                    e.extend(l.iter().enumerate().map(|(i, h)| Entry {
-                        lo: h.min.x,
-                        hi: h.max.x,
-                        i: i as u32,
-                    }));
-                    e.sort_unstable_by(|x, y| x.lo.total_cmp(&y.lo));
-                    for (k, x) in e.iter().enumerate() {
-                        let a = &l[x.i as usize];
-                        for y in e[k + 1..].iter().take_while(|y| y.lo <= x.hi) {
-                            let b = &l[y.i as usize];
+                    e.extend(l.iter().enumerate().map(|(i, h)| entry(h.min.x, i)));
+                    e.sort_unstable();
+                    for (k, &x) in e.iter().enumerate() {
+                        let a = &l[x as u32 as usize];
+                        let hi = u64::from(ord(a.max.x)) << 32 | u64::from(u32::MAX);
+                        for &y in e[k + 1..].iter().take_while(|&&y| y <= hi) {
+                            let b = &l[y as u32 as usize];
                             if here(a, b) {
                                 self.test(a, b);
                             }
@@ -284,23 +310,49 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
                     }
                 }
             }
-            for c in 0..8u32 {
-                let start = w.buf.len();
-                for (i, &o) in w.octs.iter().enumerate() {
-                    if o != 0xFF && o & (1 << c) != 0 {
-                        let h = w.buf[seg.start + i];
-                        w.buf.push(h);
+            // Hand each octant copies of the spheres that reach it: count, then scatter.
+            let mut count = [0u32; 8];
+            for &o in &w.octs {
+                if o != 0xFF {
+                    let mut m = o;
+                    while m != 0 {
+                        count[m.trailing_zeros() as usize] += 1;
+                        m &= m - 1;
                     }
                 }
-                if w.buf.len() - start >= 2 {
+            }
+            let base = w.buf.len() as u32;
+            let mut at = [0u32; 8];
+            let mut sum = base;
+            for c in 0..8 {
+                at[c] = sum;
+                sum += count[c];
+            }
+            let fill = w.buf[seg.start];
+            w.buf.resize(sum as usize, fill);
+            for (i, &o) in w.octs.iter().enumerate() {
+                if o != 0xFF {
+                    let h = w.buf[seg.start + i];
+                    let mut m = o;
+                    while m != 0 {
+                        let c = m.trailing_zeros() as usize;
+                        w.buf[at[c] as usize] = h;
+                        at[c] += 1;
+                        m &= m - 1;
+                    }
+                }
+            }
+            // Octants with fewer than two spheres leave a gap; a popped part truncates the
+            // buffer to its own end, so gaps are never read.
+            for c in 0..8u32 {
+                let end = at[c as usize];
+                if count[c as usize] >= 2 {
                     w.parts.push(Part {
                         lo: [0, 1, 2].map(|a| lo[a] + ((c >> a) & 1) * half),
                         shift: p.shift - 1,
-                        start: start as u32,
-                        end: w.buf.len() as u32,
+                        start: end - count[c as usize],
+                        end,
                     });
-                } else {
-                    w.buf.truncate(start);
                 }
             }
         }
@@ -312,9 +364,19 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
     /// where it is thin, against all own spheres.
     fn cross_pairs(&mut self, cands: &[Hot], own: &[Hot], group: &[u8], w: &mut Work) {
         if cands.len() * own.len() <= SHORT_CROSS || cands.len().min(own.len()) <= SHORT_SIDE {
-            for x in cands {
+            self.tests += (cands.len() * own.len()) as u64;
+            // The longer list in the inner loop.
+            if own.len() >= cands.len() {
+                for x in cands {
+                    for y in own {
+                        self.emit_if(x, y);
+                    }
+                }
+            } else {
                 for y in own {
-                    self.test(x, y);
+                    for x in cands {
+                        self.emit_if(x, y);
+                    }
                 }
             }
             return;
@@ -327,38 +389,33 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
                     .iter()
                     .enumerate()
                     .filter(|(_, h)| usize::from(group[h.pos as usize]) == axis)
-                    .map(|(i, h)| Entry {
-                        lo: h.min[axis],
-                        hi: h.max[axis],
-                        i: i as u32,
-                    }),
+                    .map(|(i, h)| entry(h.min[axis], i)),
             );
             if ea.is_empty() {
                 continue;
             }
-            ea.sort_unstable_by(|x, y| x.lo.total_cmp(&y.lo));
+            ea.sort_unstable();
             let eb = &mut w.sweep_own;
             eb.clear();
-            eb.extend(own.iter().enumerate().map(|(i, h)| Entry {
-                lo: h.min[axis],
-                hi: h.max[axis],
-                i: i as u32,
-            }));
-            eb.sort_unstable_by(|x, y| x.lo.total_cmp(&y.lo));
+            eb.extend(own.iter().enumerate().map(|(i, h)| entry(h.min[axis], i)));
+            eb.sort_unstable();
             // In merged order, each entry scans the other list's entries not yet passed while
-            // they start before it ends: a pair overlapping on the axis is met once.
+            // they start before it ends: a pair overlapping on the axis is met once. An entry
+            // `y` starts before `x` ends iff `y <= ord(x.hi) << 32 | u32::MAX`.
             let (mut i, mut j) = (0, 0);
             while i < ea.len() && j < eb.len() {
-                if ea[i].lo <= eb[j].lo {
-                    let x = ea[i];
-                    for y in eb[j..].iter().take_while(|y| y.lo <= x.hi) {
-                        self.test(&cands[x.i as usize], &own[y.i as usize]);
+                if ea[i] >> 32 <= eb[j] >> 32 {
+                    let x = &cands[ea[i] as u32 as usize];
+                    let hi = u64::from(ord(x.max[axis])) << 32 | u64::from(u32::MAX);
+                    for &y in eb[j..].iter().take_while(|&&y| y <= hi) {
+                        self.test(x, &own[y as u32 as usize]);
                     }
                     i += 1;
                 } else {
-                    let y = eb[j];
-                    for x in ea[i..].iter().take_while(|x| x.lo <= y.hi) {
-                        self.test(&cands[x.i as usize], &own[y.i as usize]);
+                    let y = &own[eb[j] as u32 as usize];
+                    let hi = u64::from(ord(y.max[axis])) << 32 | u64::from(u32::MAX);
+                    for &x in ea[i..].iter().take_while(|&&x| x <= hi) {
+                        self.test(&cands[x as u32 as usize], y);
                     }
                     j += 1;
                 }
@@ -395,6 +452,7 @@ impl Octree {
         self.sort_into_walk_order(s);
         let d = self.depth;
         let n = s.hot.len();
+        s.hot_oct.resize(n, 0);
         let mut t = Tester {
             keys: &s.keys,
             tests: 0,
@@ -406,6 +464,7 @@ impl Octree {
             code: 0,
             own: (0, 0),
             cands: (0, 0),
+            octs: false,
         });
         let mut visited = 0u32;
         let mut i = 0;
@@ -431,24 +490,40 @@ impl Octree {
                 visited += 1;
                 let parent = s.path[l - 1];
                 let shift = d - l as u32;
-                let lo = corner.map(|c| c >> shift << shift);
-                let hi = lo.map(|c| c + (1 << shift) - 1);
+                let (c0, c1) = (parent.cands.0 as usize, parent.cands.1 as usize);
+                let (o0, o1) = (parent.own.0 as usize, parent.own.1 as usize);
+                if !parent.octs {
+                    // Every sphere here has its range in or across the parent's cell, so the
+                    // child octants it reaches are `octants` of the parent's mid cell.
+                    let mid = corner.map(|c| (c >> (shift + 1) << (shift + 1)) + (1 << shift));
+                    s.anc_oct.resize(c1, 0);
+                    for k in c0..c1 {
+                        s.anc_oct[k] = octants(&s.anc[k], mid);
+                    }
+                    for k in o0..o1 {
+                        s.hot_oct[k] = octants(&s.hot[k], mid);
+                    }
+                    s.path[l - 1].octs = true;
+                }
+                let code = prefix >> (3 * shift);
+                let bit = 1u8 << (code & 7);
                 let start = s.anc.len() as u32;
-                for k in parent.cands.0..parent.cands.1 {
-                    let h = s.anc[k as usize];
-                    if h.reaches(lo, hi) {
+                for k in c0..c1 {
+                    if s.anc_oct[k] & bit != 0 {
+                        let h = s.anc[k];
                         s.anc.push(h);
                     }
                 }
-                for h in &s.hot[parent.own.0 as usize..parent.own.1 as usize] {
-                    if h.reaches(lo, hi) {
-                        s.anc.push(*h);
+                for k in o0..o1 {
+                    if s.hot_oct[k] & bit != 0 {
+                        s.anc.push(s.hot[k]);
                     }
                 }
                 s.path.push(Level {
-                    code: prefix >> (3 * shift),
+                    code,
                     own: (0, 0),
                     cands: (start, s.anc.len() as u32),
+                    octs: false,
                 });
             }
             if level == 0 {
@@ -456,6 +531,7 @@ impl Octree {
             }
             let here = &mut s.path[level];
             here.own = (i as u32, j as u32);
+            here.octs = false;
             let cands = &s.anc[here.cands.0 as usize..here.cands.1 as usize];
             let own = &s.hot[i..j];
             let shift = d - level as u32;
@@ -485,31 +561,6 @@ impl Octree {
             group,
             ..
         } = s;
-        hot.clear();
-        node_key.clear();
-        keys.clear();
-        group.clear();
-        let mut gather = |key: u64, id: u32| {
-            let o = &self.objs[id as usize];
-            let shift = self.depth - (key & 15) as u32;
-            let g = if shift == 0 {
-                2
-            } else {
-                (0..3)
-                    .find(|&a| (o.qmin[a] ^ o.qmax[a]) >> (shift - 1) != 0)
-                    .unwrap_or(2) as u8
-            };
-            hot.push(Hot {
-                min: o.aabb.min.into(),
-                max: o.aabb.max.into(),
-                qmin: o.qmin,
-                qmax: o.qmax,
-                pos: keys.len() as u32,
-            });
-            node_key.push(key);
-            keys.push(self.keys[id as usize]);
-            group.push(g);
-        };
         let key_bits = 3 * self.depth + 4;
         if key_bits <= 32 {
             items.clear();
@@ -520,9 +571,12 @@ impl Octree {
                     .map(|(id, o)| (o.walk_key << 32) | id as u64),
             );
             radix_sort(items, items_tmp, counts, 32, key_bits);
-            for &x in items.iter() {
-                gather(x >> 32, x as u32);
-            }
+            self.gather(
+                items.iter().map(|&x| (x >> 32, x as u32)),
+                hot,
+                node_key,
+                keys,
+            );
         } else {
             wide.clear();
             wide.extend(
@@ -532,10 +586,46 @@ impl Octree {
                     .map(|(id, o)| (o.walk_key, id as u32)),
             );
             wide.sort_unstable();
-            for &(key, id) in wide.iter() {
-                gather(key, id);
-            }
+            self.gather(wide.iter().copied(), hot, node_key, keys);
         }
+        let d = self.depth;
+        group.clear();
+        group.extend(hot.iter().zip(node_key.iter()).map(|(h, &key)| {
+            let shift = d - (key & 15) as u32;
+            if shift == 0 {
+                2
+            } else {
+                (0..3)
+                    .find(|&a| (h.qmin[a] ^ h.qmax[a]) >> (shift - 1) != 0)
+                    .unwrap_or(2) as u8
+            }
+        }));
+    }
+
+    /// Fills the walk-ordered copies from the sorted `(walk key, id)` sequence, one streaming
+    /// pass per array.
+    fn gather(
+        &self,
+        order: impl Iterator<Item = (u64, u32)> + Clone,
+        hot: &mut Vec<Hot>,
+        node_key: &mut Vec<u64>,
+        keys: &mut Vec<ProxyKey>,
+    ) {
+        node_key.clear();
+        node_key.extend(order.clone().map(|(key, _)| key));
+        keys.clear();
+        keys.extend(order.clone().map(|(_, id)| self.keys[id as usize]));
+        hot.clear();
+        hot.extend(order.enumerate().map(|(pos, (_, id))| {
+            let o = &self.objs[id as usize];
+            Hot {
+                min: o.aabb.min.into(),
+                max: o.aabb.max.into(),
+                qmin: o.qmin,
+                qmax: o.qmax,
+                pos: pos as u32,
+            }
+        }));
     }
 }
 
