@@ -379,13 +379,13 @@ impl BroadPhase {
             for tree in [&self.dynamic, &self.statics] {
                 tree.for_each(|body, aabb| {
                     self.octree
-                        .query_aabb(&aabb, |sphere| pairs.push(Pair::new(sphere, body)));
+                        .query_aabb_unchecked(&aabb, |sphere| pairs.push(Pair::new(sphere, body)));
                 });
             }
         } else {
             self.octree.for_each(|sphere, aabb| {
                 for tree in [&self.dynamic, &self.statics] {
-                    tree.query_aabb(&aabb, |body| pairs.push(Pair::new(sphere, body)));
+                    tree.query_aabb_unchecked(&aabb, |body| pairs.push(Pair::new(sphere, body)));
                 }
             });
         }

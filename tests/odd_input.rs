@@ -188,3 +188,44 @@ fn bodies_near_f32_max_whose_centroids_overflow_still_pair_exactly() {
         check(&mut bp);
     }
 }
+
+/// Regression (found by `fuzz/ops`): a sphere whose centre and radius are both near `f32::MAX`
+/// is finite input, but its box runs from about 0 to +∞. It lives in the octree's root (it
+/// leaves the bounds) and must pair with every box it overlaps — static bodies included, which
+/// find spheres through `Octree::query_aabb`.
+#[test]
+fn a_sphere_whose_box_overflows_to_infinity_pairs_with_the_bodies_it_overlaps() {
+    let big = 3.396_151_4e38_f32;
+    let tiny = 1.092_050_6e-5_f32;
+    let mut bp = BroadPhase::new(Config {
+        bounds: Aabb::new(Vec3::splat(-16.0), Vec3::splat(16.0)),
+        octree_depth: 3,
+        margin: 0.75,
+        ..Config::default()
+    });
+    bp.insert_sphere(Vec3::new(0.0, 0.046_875, 4.5737e-41), tiny)
+        .unwrap();
+    bp.insert_body(
+        Aabb::new(Vec3::splat(tiny), Vec3::splat(tiny)),
+        BodyKind::Static,
+    )
+    .unwrap();
+    bp.insert_body(
+        Aabb::new(
+            Vec3::new(-4.973_355_7e17, 2.367_701_2e14, 2.367_701_2e14),
+            Vec3::splat(2.367_701_2e14),
+        ),
+        BodyKind::Static,
+    )
+    .unwrap();
+    bp.insert_body(
+        Aabb::new(Vec3::splat(tiny), Vec3::new(tiny, 1.318_548_2e-5, tiny)),
+        BodyKind::Static,
+    )
+    .unwrap();
+    check(&mut bp);
+    bp.insert_sphere(Vec3::splat(big), big).unwrap();
+    check(&mut bp);
+    bp.insert_sphere(Vec3::splat(big), big).unwrap();
+    check(&mut bp);
+}

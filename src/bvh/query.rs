@@ -12,10 +12,16 @@ impl Bvh {
     /// Calls `f` with the key of every live box that overlaps `aabb` (closed: touching
     /// counts), each once, in no particular order. A non-finite or inverted query box matches
     /// nothing, as in `Octree::query_aabb` and `BroadPhase::query_aabb`.
-    pub fn query_aabb(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
-        if check_aabb(aabb).is_err() {
-            return;
+    pub fn query_aabb(&self, aabb: &Aabb, f: impl FnMut(ProxyKey)) {
+        if check_aabb(aabb).is_ok() {
+            self.query_aabb_unchecked(aabb, f);
         }
+    }
+
+    /// [`Bvh::query_aabb`] without the input check, for boxes the crate made itself: a sphere
+    /// or body near `f32::MAX` has a box that overflows to ±∞ from finite input, and it must
+    /// still find what it overlaps.
+    pub(crate) fn query_aabb_unchecked(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
         let q = PrimBox::new(aabb);
         self.query_tree(&q, |i| f(self.keys[i]));
         for (b, &key) in self.pending_boxes().iter().zip(self.pending_keys()) {

@@ -86,10 +86,16 @@ impl Octree {
 
     /// Calls `f` with the key of every sphere whose AABB overlaps `aabb` (closed), once each,
     /// in no particular order. A non-finite or inverted `aabb` finds nothing.
-    pub fn query_aabb(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
-        if geom::check_aabb(aabb).is_err() {
-            return;
+    pub fn query_aabb(&self, aabb: &Aabb, f: impl FnMut(ProxyKey)) {
+        if geom::check_aabb(aabb).is_ok() {
+            self.query_aabb_unchecked(aabb, f);
         }
+    }
+
+    /// [`Octree::query_aabb`] without the input check, for boxes the crate made itself: a
+    /// sphere or body near `f32::MAX` has a box that overflows to ±∞ from finite input, and it
+    /// must still find what it overlaps.
+    pub(crate) fn query_aabb_unchecked(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
         self.candidates(aabb, |id| {
             if self.objs[id as usize].aabb.overlaps(aabb) {
                 f(self.keys[id as usize]);
