@@ -132,10 +132,6 @@ impl Octree {
     /// Inserts a sphere under a key minted by the caller (the `BroadPhase` owns the key
     /// space). Same checks as [`Octree::insert`]; a key that is already live is updated
     /// instead. A tree fed through this function must not also mint keys with `insert`.
-    #[allow(
-        dead_code,
-        reason = "called by BroadPhase, which lands from a parallel branch"
-    )]
     pub(crate) fn insert_keyed(
         &mut self,
         key: ProxyKey,
