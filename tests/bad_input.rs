@@ -138,6 +138,28 @@ fn stale_and_wrong_kind_keys_are_refused_and_change_nothing() {
     assert_eq!(snapshot(&mut bp, &keys), before);
 }
 
+/// Keys carry no instance tag (they are plain slotmap keys): a key of another broadphase is
+/// refused when it names no live proxy here, which this checks; one whose slot and version
+/// happen to be live here cannot be told apart (documented in the crate docs).
+#[test]
+fn keys_of_another_instance_naming_no_live_proxy_are_refused() {
+    let (mut bp, keys) = world();
+    let mut other = BroadPhase::new(Config::default());
+    let foreign: Vec<ProxyKey> = (0..12)
+        .map(|i| other.insert_sphere(Vec3::splat(i as f32), 1.0).unwrap())
+        .collect();
+    let before = snapshot(&mut bp, &keys);
+    for &k in &foreign[keys.len()..] {
+        assert_eq!(bp.remove(k), Err(Error::UnknownProxy));
+        assert_eq!(
+            bp.update_sphere(k, Vec3::ZERO, 1.0),
+            Err(Error::UnknownProxy)
+        );
+        assert_eq!(bp.aabb(k), None);
+    }
+    assert_eq!(snapshot(&mut bp, &keys), before);
+}
+
 #[test]
 fn bad_queries_answer_nothing_and_do_not_panic() {
     let (bp, _) = world();
