@@ -2,7 +2,7 @@
 
 use super::{
     CHURN_PERCENT, CLUSTER_HALF_WIDTH, DT, Frame, GAS_RADIUS, GAS_SPEED, GAS_VOLUME_FRACTION,
-    Object, Rng, Scene, Spawn, cube_edge,
+    Object, Rng, Scene, Spawn, cube_edge, reflect,
 };
 use crate::{Aabb, Vec3};
 
@@ -97,18 +97,7 @@ impl Gas {
             .zip(&mut self.velocities)
             .zip(&self.walls)
         {
-            *c += *v * dt;
-            for axis in 0..3 {
-                if c[axis] < w.min[axis] {
-                    c[axis] = 2.0 * w.min[axis] - c[axis];
-                    v[axis] = v[axis].abs();
-                } else if c[axis] > w.max[axis] {
-                    c[axis] = 2.0 * w.max[axis] - c[axis];
-                    v[axis] = -v[axis].abs();
-                }
-                // A very fast sphere could still be outside after one reflection.
-                c[axis] = c[axis].clamp(w.min[axis], w.max[axis]);
-            }
+            *c = reflect(*c + *v * dt, v, w);
         }
     }
 }
