@@ -3,7 +3,7 @@
 //! [`INLINE_STACK`].
 
 use super::Bvh;
-use super::node::{INLINE_STACK, PrimBox, SmallStack};
+use super::node::{INLINE_STACK, Node, PrimBox, SmallStack};
 use crate::geom::{check_aabb, inverse_dir, ray_is_valid};
 use crate::{Aabb, ProxyKey, Vec3};
 use slotmap::Key;
@@ -34,6 +34,20 @@ impl Bvh {
     /// The index of every tree primitive (tombstones excluded: their box is empty) whose
     /// box overlaps `aabb`.
     pub(super) fn query_tree(&self, aabb: &PrimBox, mut f: impl FnMut(usize)) {
+        self.walk(
+            |node| node.bounds().overlaps(aabb),
+            |i| {
+                if self.boxes[i].overlaps(aabb) {
+                    f(i);
+                }
+            },
+        );
+    }
+
+    /// Depth-first over the tree with the inline stack: enters every node that passes
+    /// `enter` (children only through their parent) and calls `visit` with each primitive
+    /// index of the leaves entered.
+    fn walk(&self, mut enter: impl FnMut(&Node) -> bool, mut visit: impl FnMut(usize)) {
         if self.nodes.is_empty() {
             return;
         }
@@ -41,15 +55,11 @@ impl Bvh {
         stack.push(0);
         while let Some(n) = stack.pop() {
             let node = &self.nodes[n as usize];
-            if !node.bounds().overlaps(aabb) {
+            if !enter(node) {
                 continue;
             }
             if node.is_leaf() {
-                for i in node.range() {
-                    if self.boxes[i].overlaps(aabb) {
-                        f(i);
-                    }
-                }
+                node.range().for_each(&mut visit);
             } else {
                 let (a, b) = node.children(n);
                 stack.push(b);
@@ -148,32 +158,18 @@ impl Bvh {
                 f(key, t);
             }
         }
-        if self.nodes.is_empty() {
-            return;
-        }
-        let mut stack = SmallStack::<u32, INLINE_STACK>::new(0);
-        stack.push(0);
-        while let Some(n) = stack.pop() {
-            let node = &self.nodes[n as usize];
-            if node.aabb().ray_entry(origin, inv, max_t).is_none() {
-                continue;
-            }
-            if node.is_leaf() {
-                for i in node.range() {
-                    let key = self.keys[i];
-                    if key.is_null() {
-                        continue;
-                    }
-                    if let Some(t) = self.boxes[i].aabb().ray_entry(origin, inv, max_t) {
-                        f(key, t);
-                    }
+        self.walk(
+            |node| node.aabb().ray_entry(origin, inv, max_t).is_some(),
+            |i| {
+                let key = self.keys[i];
+                if key.is_null() {
+                    return;
                 }
-            } else {
-                let (a, b) = node.children(n);
-                stack.push(b);
-                stack.push(a);
-            }
-        }
+                if let Some(t) = self.boxes[i].aabb().ray_entry(origin, inv, max_t) {
+                    f(key, t);
+                }
+            },
+        );
     }
 
     pub(super) fn pending_boxes(&self) -> &[PrimBox] {
