@@ -8,8 +8,10 @@
 //! `--scene` is `gas`, `clustered`, `bodies`, `churn`, `pile` or `all` (every scene at its
 //! default N: gas, clustered and churn 100 000, bodies and pile 10 000; `--n` overrides it for
 //! all). `pile` is recorded first from a dynamic rapier run (`broadleaf::rapier::record_pile`,
-//! 240 settling steps, untimed) and then replayed like the others. Each step the scene's motion
-//! is fed to both:
+//! 240 settling steps, untimed) and then replayed like the others. The scene's frames are
+//! generated first; then broadleaf runs all of them, then rapier does (`--interleave`
+//! alternates the two per step instead, so each also pays for the other evicting its caches).
+//! Each step the scene's motion is fed to both:
 //!
 //! - broadleaf: the frame's removes, inserts and new positions/boxes, then `step()`; spheres go
 //!   in with `insert_sphere` (`--index octree` or `auto`) or as dynamic bodies by their box
@@ -57,11 +59,13 @@ struct Args {
     sizes: Vec<usize>,
     /// Where to write an SVG plot of ns/object/step against N.
     plot: Option<String>,
+    /// Alternate the two engines step by step instead of running each back to back.
+    interleave: bool,
 }
 
 const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|all] [--n N] \
                      [--steps 30] [--warmup 5] [--index octree|bvh|auto] [--seed 1] \
-                     [--sizes N1,N2,...] [--plot PATH.svg]";
+                     [--sizes N1,N2,...] [--plot PATH.svg] [--interleave]";
 
 fn parse_args() -> Result<Args, String> {
     let mut args = Args {
@@ -73,12 +77,17 @@ fn parse_args() -> Result<Args, String> {
         seed: 1,
         sizes: Vec::new(),
         plot: None,
+        interleave: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
         if flag == "--help" || flag == "-h" {
             println!("{USAGE}");
             exit(0);
+        }
+        if flag == "--interleave" {
+            args.interleave = true;
+            continue;
         }
         let value = it.next().ok_or(format!("{flag} needs a value"))?;
         let number = |v: &str| v.parse::<usize>().map_err(|e| format!("{flag} {v}: {e}"));
@@ -179,27 +188,57 @@ fn run(name: &str, n: usize, args: &Args) -> Row {
     }
     ours.bp.step();
     theirs.step();
-    let mut frame = Frame::default();
+    // The motion is generated up front, so each engine can run its steps back to back (a
+    // real program runs one broadphase, and alternating the two per step makes each pay for
+    // the other evicting its caches); `--interleave` alternates them as before.
+    let steps = args.warmup + args.steps;
+    let mut frames = Vec::with_capacity(steps);
+    let mut live = Vec::with_capacity(steps);
+    for _ in 0..steps {
+        let mut frame = Frame::default();
+        scene.advance(&mut frame);
+        frames.push(frame);
+        live.push(scene.len().max(1) as f64);
+    }
     let (mut ours_ns, mut rapier_ns) = (Vec::new(), Vec::new());
     let mut last_pairs = Vec::new();
-    for k in 0..args.warmup + args.steps {
-        scene.advance(&mut frame);
+    let mut ours_step = |frame: &Frame| {
         let t = Instant::now();
         ours.feed
-            .apply(&mut ours.bp, &frame)
+            .apply(&mut ours.bp, frame)
             .expect("scene frames are valid");
         let pairs = ours.bp.step().pairs;
         let ns = t.elapsed().as_nanos() as f64;
         last_pairs.clear();
         last_pairs.extend_from_slice(pairs);
-
-        theirs.set_targets(&frame);
-        let their_ns = theirs.step().as_nanos() as f64;
-        theirs.apply_structure(&frame);
-        if k >= args.warmup {
-            let live = scene.len().max(1) as f64;
-            ours_ns.push(ns / live);
-            rapier_ns.push(their_ns / live);
+        ns
+    };
+    let mut theirs_step = |frame: &Frame| {
+        theirs.set_targets(frame);
+        let ns = theirs.step().as_nanos() as f64;
+        theirs.apply_structure(frame);
+        ns
+    };
+    if args.interleave {
+        for (k, frame) in frames.iter().enumerate() {
+            let (a, b) = (ours_step(frame), theirs_step(frame));
+            if k >= args.warmup {
+                ours_ns.push(a / live[k]);
+                rapier_ns.push(b / live[k]);
+            }
+        }
+    } else {
+        for (k, frame) in frames.iter().enumerate() {
+            let a = ours_step(frame);
+            if k >= args.warmup {
+                ours_ns.push(a / live[k]);
+            }
+        }
+        for (k, frame) in frames.iter().enumerate() {
+            let b = theirs_step(frame);
+            if k >= args.warmup {
+                rapier_ns.push(b / live[k]);
+            }
         }
     }
     // rapier detects the last frame's poses (and holds its inserts) in one more step.
