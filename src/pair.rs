@@ -57,14 +57,12 @@ fn slot(k: ProxyKey) -> u32 {
 pub struct PairSorter {
     /// The second buffer of the scatter pass.
     scratch: Vec<Pair>,
-    /// Per slot index of `a`: where its bucket starts, then (after the scatter) where it ends.
+    /// Per slot index: where its bucket starts, then (after a scatter) where it ends.
     starts: Vec<u32>,
 }
 
 /// Lists shorter than this are sorted by comparison.
 const COUNTING_MIN: usize = 256;
-/// Buckets up to this long are finished by insertion sort.
-const INSERTION_MAX: usize = 16;
 
 impl PairSorter {
     /// A sorter with empty buffers.
@@ -75,58 +73,65 @@ impl PairSorter {
 
     /// Sorts `pairs` by `(a, b)`.
     ///
-    /// A counting sort on `a`'s slot index, then each bucket by the full order. Keys order by
-    /// `(slot index, version)`, so grouping by `a`'s slot index is consistent with the order of
-    /// `a`, and sorting each bucket by `(a, b)` finishes the job — exact for any keys. A bucket
-    /// holds one proxy's pairs with larger keys, a handful, so the work is two streaming passes
-    /// over the pairs, one over the slot range, and tiny insertion sorts.
-    pub fn sort(&mut self, pairs: &mut Vec<Pair>) {
+    /// Two stable counting sorts (LSD radix): by `b`'s slot index, then by `a`'s. Keys order
+    /// by `(slot index, version)`, and the live keys of one slot map have distinct slot
+    /// indices, so for them this is the full order: two streaming passes over the pairs and
+    /// two over the slot range, no comparisons. A last pass checks the order with one integer
+    /// compare per pair and falls back to a comparison sort when keys of one slot with
+    /// different versions left it wrong, so the result is exact for any keys.
+    pub fn sort(&mut self, pairs: &mut [Pair]) {
         let n = pairs.len();
         if n < COUNTING_MIN {
             pairs.sort_unstable();
             return;
         }
-        let max = pairs.iter().map(|p| slot(p.a)).max().unwrap_or(0) as usize;
-        let starts = &mut self.starts;
-        starts.clear();
-        starts.resize(max + 2, 0);
-        for p in pairs.iter() {
-            starts[slot(p.a) as usize + 1] += 1;
-        }
-        for i in 1..starts.len() {
-            starts[i] += starts[i - 1];
-        }
+        let max = pairs
+            .iter()
+            .map(|p| slot(p.a).max(slot(p.b)))
+            .max()
+            .unwrap_or(0) as usize;
         self.scratch.clear();
         self.scratch.resize(n, pairs[0]);
-        for p in pairs.iter() {
-            let s = &mut starts[slot(p.a) as usize];
-            self.scratch[*s as usize] = *p;
-            *s += 1;
-        }
-        core::mem::swap(pairs, &mut self.scratch);
-        // `starts[s]` is now the end of bucket `s`, and so the start of bucket `s + 1`.
-        let mut begin = 0;
-        for &end in &starts[..=max] {
-            let bucket = &mut pairs[begin..end as usize];
-            if bucket.len() <= INSERTION_MAX {
-                insertion_sort(bucket);
-            } else {
-                bucket.sort_unstable();
-            }
-            begin = end as usize;
+        counting_pass(pairs, &mut self.scratch, &mut self.starts, max, |p| {
+            slot(p.b)
+        });
+        counting_pass(&self.scratch, pairs, &mut self.starts, max, |p| slot(p.a));
+        if !pairs.windows(2).all(|w| rank(&w[0]) <= rank(&w[1])) {
+            pairs.sort_unstable();
         }
         debug_assert!(pairs.windows(2).all(|w| w[0] <= w[1]));
     }
 }
 
-fn insertion_sort(v: &mut [Pair]) {
-    for i in 1..v.len() {
-        let mut j = i;
-        while j > 0 && v[j] < v[j - 1] {
-            v.swap(j, j - 1);
-            j -= 1;
-        }
+/// One stable counting sort of `from` into `to` by `digit` (at most `max`), with `starts`
+/// as the bucket table.
+#[inline]
+fn counting_pass(
+    from: &[Pair],
+    to: &mut [Pair],
+    starts: &mut Vec<u32>,
+    max: usize,
+    digit: impl Fn(&Pair) -> u32,
+) {
+    starts.clear();
+    starts.resize(max + 2, 0);
+    for p in from {
+        starts[digit(p) as usize + 1] += 1;
     }
+    for i in 1..starts.len() {
+        starts[i] += starts[i - 1];
+    }
+    for p in from {
+        let s = &mut starts[digit(p) as usize];
+        to[*s as usize] = *p;
+        *s += 1;
+    }
+}
+
+/// The pair order `(a, b)` as one integer (see [`key_rank`]).
+#[inline]
+fn rank(p: &Pair) -> u128 {
+    (u128::from(key_rank(p.a)) << 64) | u128::from(key_rank(p.b))
 }
 
 /// Sorts a pair list by `(a, b)` and removes duplicates, in place.
