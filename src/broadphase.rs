@@ -286,11 +286,15 @@ impl BroadPhase {
         check_aabb(&aabb)?;
         match self.proxies.get_mut(key) {
             Some(Shape::Body { aabb: a, kind }) => {
-                let fat = aabb.grown(self.config.margin);
+                let margin = self.config.margin;
                 match kind {
-                    BodyKind::Dynamic => self.dynamic.update(key, fat)?,
+                    // No margin: the box just checked is the one the tree stores.
+                    BodyKind::Dynamic if margin == 0.0 => {
+                        self.dynamic.update_checked(key, &aabb)?
+                    }
+                    BodyKind::Dynamic => self.dynamic.update(key, aabb.grown(margin))?,
                     BodyKind::Static => {
-                        self.statics.update(key, fat)?;
+                        self.statics.update(key, aabb.grown(margin))?;
                         self.statics_changed = true;
                     }
                 }

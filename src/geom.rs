@@ -198,7 +198,18 @@ pub(crate) fn check_sphere(center: Vec3, radius: f32) -> Result<(), Error> {
 }
 
 /// Checks a box given by the user: finite corners, `min <= max` on every axis.
+#[inline]
 pub(crate) fn check_aabb(aabb: &Aabb) -> Result<(), Error> {
+    let (min, max) = (glam::Vec3A::from(aabb.min), glam::Vec3A::from(aabb.max));
+    if (min.is_finite_mask() & max.is_finite_mask() & min.cmple(max)).all() {
+        return Ok(());
+    }
+    name_aabb_error(aabb)
+}
+
+/// The error [`check_aabb`] reports for a box it refused.
+#[cold]
+fn name_aabb_error(aabb: &Aabb) -> Result<(), Error> {
     if !aabb.min.is_finite() {
         return Err(Error::NonFinite {
             what: "aabb.min",

@@ -260,11 +260,15 @@ impl Bvh {
     /// only enlarged here and tightened by [`Bvh::refit`]. `Err` (tree unchanged) for a bad
     /// box or a stale key.
     pub fn update(&mut self, key: ProxyKey, aabb: Aabb) -> Result<(), Error> {
-        let b = PrimBox::new(&aabb);
-        // `check_aabb` in three 4-lane tests; it only runs (to name the error) on failure.
-        if !(b.min.is_finite_mask() & b.max.is_finite_mask() & b.min.cmple(b.max)).all() {
-            check_aabb(&aabb)?;
-        }
+        check_aabb(&aabb)?;
+        self.update_checked(key, &aabb)
+    }
+
+    /// [`Bvh::update`] of a box the caller has already checked (finite, `min <= max`).
+    #[inline]
+    pub(crate) fn update_checked(&mut self, key: ProxyKey, aabb: &Aabb) -> Result<(), Error> {
+        debug_assert!(check_aabb(aabb).is_ok());
+        let b = PrimBox::new(aabb);
         let id = *self.ids.get(key).ok_or(Error::UnknownProxy)? as usize;
         self.boxes[id] = b;
         if id < self.tree_len {
