@@ -83,7 +83,7 @@ pub use bvh::{Bvh, BvhConfig, SplitMethod};
 pub use error::Error;
 pub use geom::Aabb;
 pub use glam::Vec3;
-pub use octree::Octree;
+pub use octree::{Octree, Placement};
 pub use pair::{Pair, ProxyKey};
 
 /// The README's code blocks, compiled and run as doctests.
