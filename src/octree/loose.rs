@@ -33,16 +33,17 @@ use super::{MAX_DEPTH, Octree};
 use crate::ProxyKey;
 
 /// An occupied node of a pass: its run `[start, end)` of walk-ordered spheres, its slot in the
-/// node storage, its level and its cell. 28 bytes.
+/// node storage, its level, and its cell as Morton code and coordinates. 32 bytes.
 #[derive(Clone, Copy, Debug)]
 struct Run {
     start: u32,
     end: u32,
     slot: u32,
     level: u32,
+    code: u32,
     xyz: [u32; 3],
 }
-const _: () = assert!(core::mem::size_of::<Run>() == 28);
+const _: () = assert!(core::mem::size_of::<Run>() == 32);
 
 /// Buffers of the loose pair pass, reused by every pass; they never shrink.
 #[derive(Clone, Debug, Default)]
@@ -54,22 +55,74 @@ pub(super) struct Scratch {
 }
 
 /// The 13 same-level neighbour offsets `(dx, dy, dz)` with `(dz, dy, dx)` lexicographically
-/// positive: half of the 26, one of each opposite pair.
-const FORWARD: [[i32; 3]; 13] = [
-    [1, 0, 0],
-    [-1, 1, 0],
-    [0, 1, 0],
-    [1, 1, 0],
-    [-1, -1, 1],
-    [0, -1, 1],
-    [1, -1, 1],
-    [-1, 0, 1],
-    [0, 0, 1],
-    [1, 0, 1],
-    [-1, 1, 1],
-    [0, 1, 1],
-    [1, 1, 1],
+/// positive (half of the 26, one of each opposite pair), as indices `offset + 1`.
+const FORWARD: [[usize; 3]; 13] = [
+    [2, 1, 1],
+    [0, 2, 1],
+    [1, 2, 1],
+    [2, 2, 1],
+    [0, 0, 2],
+    [1, 0, 2],
+    [2, 0, 2],
+    [0, 1, 2],
+    [1, 1, 2],
+    [2, 1, 2],
+    [0, 2, 2],
+    [1, 2, 2],
+    [2, 2, 2],
 ];
+
+/// The bits of the x coordinate in a Morton code (every third bit from bit 0); y's are these
+/// shifted by one, z's by two.
+const DILATED_X: u32 = 0x0924_9249;
+
+/// The coordinate held in the dilated bits `m` (a Morton code masked to one axis's bits
+/// `axis`) minus one, plus zero and plus one, still dilated: adding 1 to a dilated integer
+/// sets the gaps first so the carry runs through them (`(m | !axis) + 1`). Out-of-grid
+/// results wrap; the caller checks the coordinate.
+#[inline]
+fn dilated_steps(m: u32, axis: u32) -> [u32; 3] {
+    [
+        m.wrapping_sub(1) & axis,
+        m,
+        (m | !axis).wrapping_add(1) & axis,
+    ]
+}
+
+/// The Morton codes of the 13 [`FORWARD`] neighbours of the cell with code `code` (wrapped
+/// where they leave the grid).
+#[inline]
+fn forward_codes(code: u32) -> [u32; 13] {
+    let axis = [DILATED_X, DILATED_X << 1, DILATED_X << 2];
+    let [x, y, z] = [0, 1, 2].map(|a| dilated_steps(code & axis[a], axis[a]));
+    // `FORWARD` spelled out, so the compiler sees constant indices.
+    [
+        x[2] | y[1] | z[1],
+        x[0] | y[2] | z[1],
+        x[1] | y[2] | z[1],
+        x[2] | y[2] | z[1],
+        x[0] | y[0] | z[2],
+        x[1] | y[0] | z[2],
+        x[2] | y[0] | z[2],
+        x[0] | y[1] | z[2],
+        x[1] | y[1] | z[2],
+        x[2] | y[1] | z[2],
+        x[0] | y[2] | z[2],
+        x[1] | y[2] | z[2],
+        x[2] | y[2] | z[2],
+    ]
+}
+
+/// Bit `k` set iff the `k`-th [`FORWARD`] neighbour of cell `xyz` is in a grid of `top + 1`
+/// cells per axis.
+fn forward_inside(xyz: [u32; 3], top: u32) -> u16 {
+    let ok = xyz.map(|c| [c > 0, true, c < top]);
+    FORWARD
+        .iter()
+        .enumerate()
+        .filter(|(_, [dx, dy, dz])| ok[0][*dx] && ok[1][*dy] && ok[2][*dz])
+        .fold(0, |m, (k, _)| m | 1 << k)
+}
 
 /// A node on the descent stack.
 #[derive(Clone, Copy, Debug, Default)]
@@ -105,16 +158,28 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
 
     /// Every pair across the disjoint lists `a` and `b`: all against all when small, else a
     /// merged sweep along x.
+    #[inline]
     fn between(&mut self, a: &[Hot], b: &[Hot], w: &mut Work) {
-        if a.len() * b.len() <= SHORT_CROSS || a.len().min(b.len()) <= SHORT_SIDE {
-            self.tests += (a.len() * b.len()) as u64;
+        self.tests += (a.len() * b.len()) as u64;
+        if let [x] = a {
+            for y in b {
+                self.emit_if(x, y);
+            }
+        } else if a.len() * b.len() <= SHORT_CROSS || a.len().min(b.len()) <= SHORT_SIDE {
             for x in a {
                 for y in b {
                     self.emit_if(x, y);
                 }
             }
-            return;
+        } else {
+            self.tests -= (a.len() * b.len()) as u64;
+            self.sweep_between(a, b, w);
         }
+    }
+
+    /// [`Self::between`] for long lists: sort both by `min.x` and sweep them merged.
+    #[inline(never)]
+    fn sweep_between(&mut self, a: &[Hot], b: &[Hot], w: &mut Work) {
         let (ea, eb) = (&mut w.sweep, &mut w.sweep_own);
         ea.clear();
         ea.extend(a.iter().enumerate().map(|(i, h)| entry(h.min.x, i)));
@@ -186,6 +251,7 @@ impl Octree {
                 end: j as u32,
                 slot: slot as u32,
                 level,
+                code,
                 xyz: [compact3(code), compact3(code >> 1), compact3(code >> 2)],
             });
             i = j;
@@ -205,15 +271,24 @@ impl Octree {
         let mut visited = loose.runs.len() as u32;
         for r in &loose.runs {
             let own = &hot[r.start as usize..r.end as usize];
-            t.within(own, work);
-            let side = 1i32 << r.level;
-            for off in FORWARD {
-                let c = [0, 1, 2].map(|a| r.xyz[a] as i32 + off[a]);
-                if c.iter().any(|&v| v < 0 || v >= side) {
+            if own.len() > 1 {
+                t.within(own, work);
+            }
+            // The neighbours' Morton codes by dilated arithmetic, and (unless the cell is
+            // interior, the common case) which of them are in the grid.
+            let top = (1u32 << r.level) - 1;
+            let base = node_index(r.level, 0);
+            let codes = forward_codes(r.code);
+            let inside = if r.xyz.iter().all(|&c| c > 0 && c < top) {
+                u16::MAX
+            } else {
+                forward_inside(r.xyz, top)
+            };
+            for (k, &code) in codes.iter().enumerate() {
+                if inside & (1 << k) == 0 {
                     continue;
                 }
-                let node = node_index(r.level, morton(c.map(|v| v as u32)));
-                if let Some(slot) = self.nodes.slot(node) {
+                if let Some(slot) = self.nodes.slot(base + code) {
                     let [a, b] = loose.run_of[slot];
                     if a < b {
                         t.between(own, &hot[a as usize..b as usize], work);
@@ -315,5 +390,33 @@ impl Octree {
             }
         }
         visited
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn forward_codes_are_the_forward_offsets() {
+        let c = [5u32, 9, 3];
+        let codes = forward_codes(morton(c));
+        for (k, off) in FORWARD.iter().enumerate() {
+            let n = [0, 1, 2].map(|a| (c[a] as i32 + off[a] as i32 - 1) as u32);
+            assert_eq!(codes[k], morton(n), "offset {off:?}");
+        }
+        // Each unordered neighbour pair once: the offsets and their negations cover all 26.
+        let mut all: Vec<[i32; 3]> = FORWARD
+            .iter()
+            .flat_map(|o| {
+                let d = o.map(|v| v as i32 - 1);
+                [d, d.map(|v| -v)]
+            })
+            .collect();
+        all.sort_unstable();
+        all.dedup();
+        assert_eq!(all.len(), 26);
+        assert_eq!(forward_inside([0, 0, 0], 7), 0b1_1011_0000_1101);
+        assert_eq!(forward_inside([3, 3, 3], 7), 0x1FFF);
     }
 }
