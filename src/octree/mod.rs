@@ -37,6 +37,7 @@ mod validate;
 pub use place::{depth_for, depth_for_loose};
 
 use crate::{Aabb, Error, Pair, ProxyKey, Vec3, geom};
+use glam::Vec3A;
 use slotmap::{SecondaryMap, SlotMap};
 
 /// The deepest octree accepted by `Octree::new`: levels `0..=MAX_DEPTH`.
@@ -108,7 +109,10 @@ pub struct Octree {
     /// (loose: half the deepest cells, so every level's loose bounds lie on grid lines).
     grid: u32,
     /// Grid cells per unit length on each axis: `2^grid / extent`.
-    scale: Vec3,
+    scale: Vec3A,
+    /// `bounds.min`, and the last grid cell `2^grid − 1` on every axis, for `quantize`.
+    grid_min: Vec3A,
+    grid_top: Vec3A,
     /// Loose mode: the largest radius placed at level `L`, half the level's cell size on the
     /// bounds' shortest axis (`min extent / 2^(L+1)`).
     half_cell: [f32; MAX_DEPTH as usize + 1],
@@ -149,7 +153,9 @@ impl Octree {
             depth,
             placement,
             grid,
-            scale: Vec3::splat((1u32 << grid) as f32) / bounds.extent(),
+            scale: (Vec3::splat((1u32 << grid) as f32) / bounds.extent()).into(),
+            grid_min: bounds.min.into(),
+            grid_top: Vec3A::splat(((1u32 << grid) - 1) as f32),
             half_cell: core::array::from_fn(|l| shortest / (2u32 << l) as f32),
             objs: Vec::new(),
             spheres: Vec::new(),

@@ -3,6 +3,7 @@
 
 use super::{MAX_DEPTH, NONE, Obj, Octree, Placement};
 use crate::{Aabb, Vec3};
+use glam::Vec3A;
 
 /// First node index of each level: level `L` starts at `(8^L − 1)/7`; entry `MAX_DEPTH + 1` is
 /// the node count of a depth-`MAX_DEPTH` tree (1 227 133 513, fits in `u32`).
@@ -343,10 +344,10 @@ impl Octree {
     /// with the clamp to integer limits; this avoids a libm `floorf` call per coordinate.
     #[inline]
     pub(super) fn quantize(&self, p: Vec3) -> [u16; 3] {
-        let top = ((1u32 << self.grid) - 1) as f32;
-        let q = ((p - self.bounds.min) * self.scale)
-            .max(Vec3::ZERO)
-            .min(Vec3::splat(top));
+        // `Vec3A` so the four operations are one SSE instruction each; same IEEE results.
+        let q = ((Vec3A::from(p) - self.grid_min) * self.scale)
+            .max(Vec3A::ZERO)
+            .min(self.grid_top);
         [q.x as u16, q.y as u16, q.z as u16]
     }
 
