@@ -15,7 +15,7 @@
 //!   node's loose bounds wherever the centre is, so a sphere's level depends only on its radius
 //!   and nothing stays near the root for straddling a plane. Pairs are found between a node and
 //!   its 26 same-level neighbours, and across levels by descending the neighbours' occupied
-//!   subtrees ([`loose`]). Use [`depth_for_loose`] for the depth.
+//!   subtrees (`loose.rs`). Use [`depth_for_loose`] for the depth.
 //!
 //! Queries and rays follow the per-node lists through occupied subtrees, testing nodes by
 //! their cells (strict) or loose bounds (loose) ([`query`]); [`Octree::validate`] checks every
