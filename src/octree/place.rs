@@ -313,11 +313,11 @@ impl Octree {
     }
 
     /// The deepest level `L <= depth` with `radius <= half_cell[L]`, or `None` if even the root
-    /// is too small.
+    /// is too small. `radius` is finite and `>= 0` (checked on input).
     #[inline]
     pub(super) fn loose_level(&self, radius: f32) -> Option<u32> {
         let h = &self.half_cell;
-        if !(radius <= h[0]) {
+        if radius > h[0] {
             return None;
         }
         let d = self.depth;
