@@ -5,10 +5,11 @@
 //! the pair count of the last step and (for `octree`) the tree's stats. Each step advances the
 //! scene by `DT`, applies every sphere's new centre and collects the pairs; with `octree` the
 //! pairs are `Octree::pairs_into` (unsorted), with `broadphase` the whole `BroadPhase::step`
-//! (sorted list plus added / removed). Under callgrind, `--toggle-collect=*measured*` counts
+//! (sorted list plus added / removed). The depth defaults to `depth_for` (strict) or
+//! `depth_for_loose` (loose). Under callgrind, `--toggle-collect=*measured*` counts
 //! only the measured steps.
 
-use broadleaf::octree::{Octree, depth_for};
+use broadleaf::octree::{Octree, Placement, depth_for, depth_for_loose};
 use broadleaf::scene::{DT, Gas};
 use broadleaf::{BroadPhase, Config, Pair, ProxyKey};
 use std::hint::black_box;
@@ -22,6 +23,7 @@ struct Args {
     steps: usize,
     depth: Option<u32>,
     what: String,
+    placement: Placement,
 }
 
 fn parse() -> Args {
@@ -31,6 +33,7 @@ fn parse() -> Args {
         steps: 30,
         depth: None,
         what: "octree".into(),
+        placement: Placement::Strict,
     };
     let argv: Vec<String> = std::env::args().skip(1).collect();
     for kv in argv.chunks(2) {
@@ -41,6 +44,13 @@ fn parse() -> Args {
             "--steps" => a.steps = v.parse().expect("--steps takes a count"),
             "--depth" => a.depth = Some(v.parse().expect("--depth takes a level")),
             "--what" => a.what = v.into(),
+            "--placement" => {
+                a.placement = match v {
+                    "strict" => Placement::Strict,
+                    "loose" => Placement::Loose,
+                    other => panic!("--placement takes strict or loose, not {other}"),
+                }
+            }
             other => panic!("unknown argument {other}"),
         }
     }
@@ -60,9 +70,10 @@ fn main() {
         "clustered" => Gas::clustered(args.n, 1),
         other => panic!("unknown scene {other}"),
     };
-    let depth = args
-        .depth
-        .unwrap_or_else(|| depth_for(&gas.bounds, gas.radius));
+    let depth = args.depth.unwrap_or_else(|| match args.placement {
+        Placement::Strict => depth_for(&gas.bounds, gas.radius),
+        Placement::Loose => depth_for_loose(&gas.bounds, gas.radius),
+    });
     let n = gas.len();
     let mut times = Vec::with_capacity(args.steps);
     let mut pair_count = 0;
@@ -78,7 +89,8 @@ fn main() {
     let mut stats = None;
     match args.what.as_str() {
         "octree" => {
-            let mut tree = Octree::new(gas.bounds, depth).expect("scene bounds are valid");
+            let mut tree = Octree::with_placement(gas.bounds, depth, args.placement)
+                .expect("scene bounds are valid");
             let keys: Vec<ProxyKey> = gas
                 .centers
                 .iter()
@@ -100,6 +112,7 @@ fn main() {
             let mut bp = BroadPhase::new(Config {
                 bounds: gas.bounds,
                 octree_depth: depth,
+                octree_placement: args.placement,
                 ..Config::default()
             });
             let keys: Vec<ProxyKey> = gas
@@ -122,8 +135,8 @@ fn main() {
     times.sort_by(f64::total_cmp);
     let median = times.get(times.len() / 2).copied().unwrap_or(f64::NAN);
     println!(
-        "scene={} n={n} depth={depth} what={} steps={} median_ns_per_object_step={median:.1} pairs={pair_count}",
-        args.scene, args.what, args.steps
+        "scene={} n={n} placement={:?} depth={depth} what={} steps={} median_ns_per_object_step={median:.1} pairs={pair_count}",
+        args.scene, args.placement, args.what, args.steps
     );
     if let Some(s) = stats {
         println!(

@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! cargo run --release --features rapier --example vs_rapier -- --scene gas --n 100000
-//!     [--steps 30] [--warmup 5] [--index octree|bvh|auto] [--seed 1]
+//!     [--steps 30] [--warmup 5] [--index octree|bvh|auto] [--placement strict|loose] [--seed 1]
 //! ```
 //!
 //! `--scene` is `gas`, `clustered`, `bodies`, `churn`, `pile` or `all` (every scene at its
@@ -15,7 +15,9 @@
 //!
 //! - broadleaf: the frame's removes, inserts and new positions/boxes, then `step()`; spheres go
 //!   in with `insert_sphere` (`--index octree` or `auto`) or as dynamic bodies by their box
-//!   (`--index bvh`); boxes always go in as bodies. Timed with `Instant` around all of it.
+//!   (`--index bvh`); boxes always go in as bodies. The octree's placement is `--placement`
+//!   (default strict, depth `depth_for`; loose uses `depth_for_loose`). Timed with `Instant`
+//!   around all of it.
 //! - rapier: kinematic position-based bodies, ball or cuboid colliders with
 //!   `ActiveCollisionTypes::all()`, fixed bodies for static boxes; moved with
 //!   `set_next_kinematic_translation`, then `PhysicsPipeline::step`. Its broad-phase time per
@@ -34,10 +36,10 @@
 //! `ratio=<speed-up> missed=<n> extra=<n>`; for `--scene all` the ratio is the worst (smallest)
 //! speed-up of the scenes and `missed`/`extra` are summed over them.
 
-use broadleaf::octree::depth_for;
+use broadleaf::octree::{depth_for, depth_for_loose};
 use broadleaf::rapier::{Comparison, SceneWorld, record_pile};
 use broadleaf::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Scene};
-use broadleaf::{BroadPhase, Config, brute};
+use broadleaf::{BroadPhase, Config, Placement, brute};
 use std::process::exit;
 use std::time::Instant;
 
@@ -54,6 +56,7 @@ struct Args {
     steps: usize,
     warmup: usize,
     index: Index,
+    placement: Placement,
     seed: u64,
     /// Several sizes of one scene instead of `n` (`--sizes 1000,10000,100000`).
     sizes: Vec<usize>,
@@ -64,7 +67,8 @@ struct Args {
 }
 
 const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|all] [--n N] \
-                     [--steps 30] [--warmup 5] [--index octree|bvh|auto] [--seed 1] \
+                     [--steps 30] [--warmup 5] [--index octree|bvh|auto] \
+                     [--placement strict|loose] [--seed 1] \
                      [--sizes N1,N2,...] [--plot PATH.svg] [--interleave]";
 
 fn parse_args() -> Result<Args, String> {
@@ -74,6 +78,7 @@ fn parse_args() -> Result<Args, String> {
         steps: 30,
         warmup: 5,
         index: Index::Auto,
+        placement: Placement::Strict,
         seed: 1,
         sizes: Vec::new(),
         plot: None,
@@ -107,6 +112,13 @@ fn parse_args() -> Result<Args, String> {
                     "bvh" => Index::Bvh,
                     "auto" => Index::Auto,
                     other => return Err(format!("unknown index {other}")),
+                }
+            }
+            "--placement" => {
+                args.placement = match value.as_str() {
+                    "strict" => Placement::Strict,
+                    "loose" => Placement::Loose,
+                    other => return Err(format!("unknown placement {other}")),
                 }
             }
             other => return Err(format!("unknown flag {other}")),
@@ -144,11 +156,15 @@ struct Ours {
 }
 
 impl Ours {
-    fn new(bounds: broadleaf::Aabb, index: Index) -> Self {
+    fn new(bounds: broadleaf::Aabb, index: Index, placement: Placement) -> Self {
         Ours {
             bp: BroadPhase::new(Config {
                 bounds,
-                octree_depth: depth_for(&bounds, GAS_RADIUS),
+                octree_depth: match placement {
+                    Placement::Strict => depth_for(&bounds, GAS_RADIUS),
+                    Placement::Loose => depth_for_loose(&bounds, GAS_RADIUS),
+                },
+                octree_placement: placement,
                 ..Config::default()
             }),
             feed: Feed::new(index == Index::Bvh),
@@ -176,7 +192,7 @@ struct Row {
 
 fn run(name: &str, n: usize, args: &Args) -> Row {
     let mut scene = make_scene(name, n, args.seed, args.warmup + args.steps).expect("known scene");
-    let mut ours = Ours::new(scene.bounds(), args.index);
+    let mut ours = Ours::new(scene.bounds(), args.index, args.placement);
     let mut theirs = SceneWorld::new();
     let mut spawns = Vec::new();
     scene.spawns(&mut spawns);
@@ -273,8 +289,18 @@ fn main() {
         }
     };
     println!(
-        "index {:?}, {} measured steps after {} warm-up, seed {}; times: median ns/object/step",
-        args.index, args.steps, args.warmup, args.seed
+        "index {:?}, octree placement {:?}, {} measured steps after {} warm-up, seed {}, {}; \
+         times: median ns/object/step",
+        args.index,
+        args.placement,
+        args.steps,
+        args.warmup,
+        args.seed,
+        if args.interleave {
+            "engines alternating per step"
+        } else {
+            "each engine's steps back to back"
+        }
     );
     println!();
     println!(

@@ -3,7 +3,7 @@
 
 use crate::bvh::{Bvh, BvhConfig};
 use crate::geom::{self, check_aabb, check_sphere};
-use crate::octree::Octree;
+use crate::octree::{Octree, Placement};
 use crate::pair::{self, Pair, PairSorter, ProxyKey};
 use crate::{Aabb, Error, Vec3};
 use slotmap::SlotMap;
@@ -65,9 +65,15 @@ pub struct Config {
     /// The region the octree subdivides, in metres. Spheres outside it are still kept and
     /// paired correctly, only less efficiently. Must be finite with `min < max`.
     pub bounds: Aabb,
-    /// Subdivision levels of the octree below the root, `0..=octree::MAX_DEPTH`. The deepest
-    /// cells should be a few sphere diameters wide.
+    /// Subdivision levels of the octree below the root, `0..=octree::MAX_DEPTH`. With
+    /// [`Placement::Strict`] the deepest cells should be about two sphere diameters wide
+    /// ([`crate::octree::depth_for`]), with [`Placement::Loose`] about one
+    /// ([`crate::octree::depth_for_loose`]).
     pub octree_depth: u32,
+    /// How the octree places spheres: [`Placement::Strict`] (the default, RTCD 7.3) or
+    /// [`Placement::Loose`] (loose octree, looseness 2; usually faster for many similar moving
+    /// spheres).
+    pub octree_placement: Placement,
     /// Every box is grown by this many metres on each side before pairing; `>= 0`. With the
     /// default 0 the pair set equals the brute-force set exactly.
     pub margin: f32,
@@ -77,11 +83,13 @@ pub struct Config {
 }
 
 impl Default for Config {
-    /// Bounds ±512 m, octree depth 7 (deepest cells 8 m), margin 0, rebuild threshold 1.5.
+    /// Bounds ±512 m, octree depth 7 (deepest cells 8 m), strict placement, margin 0, rebuild
+    /// threshold 1.5.
     fn default() -> Self {
         Self {
             bounds: Aabb::new(Vec3::splat(-512.0), Vec3::splat(512.0)),
             octree_depth: 7,
+            octree_placement: Placement::Strict,
             margin: 0.0,
             rebuild_threshold: 1.5,
         }
@@ -160,6 +168,7 @@ impl BroadPhase {
                 d.bounds
             },
             octree_depth: config.octree_depth.min(crate::octree::MAX_DEPTH),
+            octree_placement: config.octree_placement,
             margin: if config.margin.is_finite() && config.margin >= 0.0 {
                 config.margin
             } else {
@@ -188,7 +197,8 @@ impl BroadPhase {
             rebuild_threshold: config.rebuild_threshold,
             ..BvhConfig::default()
         };
-        let octree = Octree::new(config.bounds, config.octree_depth);
+        let octree =
+            Octree::with_placement(config.bounds, config.octree_depth, config.octree_placement);
         let (dynamic, statics) = (Bvh::new(bvh_config), Bvh::new(bvh_config));
         let (Ok(octree), Ok(dynamic), Ok(statics)) = (octree, dynamic, statics) else {
             unreachable!("Config::validate checks every field the structures check");

@@ -11,8 +11,12 @@
 //!   queries. Spheres go to the octree, dynamic bodies to one BVH, static bodies to another.
 //! - **[`Octree`]** — many moving spheres of similar size in a known region (particles, gas,
 //!   piles, crowds). A top-down preallocated octree (Ericson, *Real-Time Collision Detection*
-//!   7.3): a sphere lives in the deepest node whose split planes it does not straddle, and a
-//!   move that keeps the node costs one store.
+//!   7.3), and a move that keeps the node costs one store. Two [`Placement`]s: `Strict` (the
+//!   default) keeps a sphere in the deepest node whose split planes it does not straddle, so
+//!   spheres on big planes stay near the root; `Loose` (RTCD 7.3.6, looseness 2) puts every
+//!   sphere at the level its radius fits, found with its same-level neighbours — usually the
+//!   faster choice for many similar moving spheres (pick the depth with
+//!   [`octree::depth_for_loose`]).
 //! - **[`Bvh`]** — rigid bodies of any shape and size, given by their world AABBs. A binned-SAH
 //!   bounding-volume hierarchy in a flat depth-first array, refitted bottom-up every step and
 //!   rebuilt when its quality degrades. Use it alone for static geometry queries too.
@@ -83,7 +87,7 @@ pub use bvh::{Bvh, BvhConfig, SplitMethod};
 pub use error::Error;
 pub use geom::Aabb;
 pub use glam::Vec3;
-pub use octree::Octree;
+pub use octree::{Octree, Placement};
 pub use pair::{Pair, ProxyKey};
 
 /// The README's code blocks, compiled and run as doctests.

@@ -1,8 +1,9 @@
 //! No allocation per step in steady state, and no memory growth under churn, measured with a
 //! counting global allocator (this test binary only; the library itself has no `unsafe`).
 
+use broadleaf::octree::{depth_for, depth_for_loose};
 use broadleaf::scene::{Churn, Feed, Frame, Gas, Scene};
-use broadleaf::{BroadPhase, Config, octree::depth_for};
+use broadleaf::{BroadPhase, Config, Placement};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicIsize, AtomicUsize, Ordering};
@@ -53,11 +54,15 @@ static GLOBAL: Counting = Counting;
 /// The counters are process-wide: tests that read them must not overlap.
 static SERIAL: Mutex<()> = Mutex::new(());
 
-fn setup(scene: &impl Scene) -> (BroadPhase, Feed) {
+fn setup(scene: &impl Scene, placement: Placement) -> (BroadPhase, Feed) {
     let bounds = scene.bounds();
     let mut bp = BroadPhase::new(Config {
         bounds,
-        octree_depth: depth_for(&bounds, 0.5),
+        octree_depth: match placement {
+            Placement::Strict => depth_for(&bounds, 0.5),
+            Placement::Loose => depth_for_loose(&bounds, 0.5),
+        },
+        octree_placement: placement,
         ..Config::default()
     });
     let mut feed = Feed::new(false);
@@ -69,9 +74,18 @@ fn setup(scene: &impl Scene) -> (BroadPhase, Feed) {
 
 #[test]
 fn steady_gas_steps_allocate_nothing() {
+    steady_gas(Placement::Strict);
+}
+
+#[test]
+fn steady_gas_steps_allocate_nothing_in_a_loose_octree() {
+    steady_gas(Placement::Loose);
+}
+
+fn steady_gas(placement: Placement) {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let mut gas = Gas::new(10_000, 7);
-    let (mut bp, mut feed) = setup(&gas);
+    let (mut bp, mut feed) = setup(&gas, placement);
     let mut frame = Frame::default();
     // Warm-up: buffers reach their working sizes (and the frame its capacity).
     for _ in 0..30 {
@@ -104,9 +118,18 @@ fn steady_gas_steps_allocate_nothing() {
 
 #[test]
 fn churn_does_not_grow_memory() {
+    churn_memory(Placement::Strict);
+}
+
+#[test]
+fn churn_does_not_grow_memory_in_a_loose_octree() {
+    churn_memory(Placement::Loose);
+}
+
+fn churn_memory(placement: Placement) {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let mut churn = Churn::new(10_000, 3);
-    let (mut bp, mut feed) = setup(&churn);
+    let (mut bp, mut feed) = setup(&churn, placement);
     let mut frame = Frame::default();
     let mut live_at = Vec::new();
     for step in 0..200 {

@@ -2,7 +2,7 @@
 //! leaves the structure exactly as it was: same `len`, same `aabb(key)` for every live key,
 //! same pairs at the next step.
 
-use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Error, Pair, ProxyKey, Vec3};
+use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Error, Pair, Placement, ProxyKey, Vec3};
 
 const NAN: f32 = f32::NAN;
 const INF: f32 = f32::INFINITY;
@@ -34,11 +34,14 @@ fn bad_boxes() -> Vec<(Aabb, &'static str)> {
     v
 }
 
+const BOTH: [Placement; 2] = [Placement::Strict, Placement::Loose];
+
 /// A small world with one of each kind, stepped once.
-fn world() -> (BroadPhase, Vec<ProxyKey>) {
+fn world(placement: Placement) -> (BroadPhase, Vec<ProxyKey>) {
     let mut bp = BroadPhase::new(Config {
         bounds: Aabb::new(Vec3::splat(-4.0), Vec3::splat(4.0)),
         octree_depth: 3,
+        octree_placement: placement,
         ..Config::default()
     });
     let keys = vec![
@@ -74,68 +77,72 @@ fn snapshot(bp: &mut BroadPhase, keys: &[ProxyKey]) -> Snapshot {
 
 #[test]
 fn bad_geometry_is_refused_and_changes_nothing() {
-    let (mut bp, keys) = world();
-    let before = snapshot(&mut bp, &keys);
-    let (sphere, body) = (keys[0], keys[3]);
-    for p in bad_points() {
-        let e = bp.insert_sphere(p, 1.0).unwrap_err();
-        assert!(matches!(e, Error::NonFinite { what: "center", .. }), "{e}");
-        let e = bp.update_sphere(sphere, p, 1.0).unwrap_err();
-        assert!(matches!(e, Error::NonFinite { what: "center", .. }), "{e}");
-    }
-    for r in [NAN, INF, -INF] {
-        let e = bp.insert_sphere(Vec3::ZERO, r).unwrap_err();
-        assert!(matches!(e, Error::NonFinite { what: "radius", .. }), "{e}");
-        assert!(bp.update_sphere(sphere, Vec3::ZERO, r).is_err());
-    }
-    for r in [-1.0, -f32::MIN_POSITIVE] {
-        assert_eq!(
-            bp.insert_sphere(Vec3::ZERO, r),
-            Err(Error::NegativeRadius(r))
-        );
-        assert_eq!(
-            bp.update_sphere(sphere, Vec3::ZERO, r),
-            Err(Error::NegativeRadius(r))
-        );
-    }
-    for (aabb, what) in bad_boxes() {
-        for kind in [BodyKind::Dynamic, BodyKind::Static] {
-            let e = bp.insert_body(aabb, kind).unwrap_err();
-            assert!(
-                matches!(e, Error::NonFinite { .. } | Error::InvertedAabb { .. }),
-                "{what}: {e}"
+    for p in BOTH {
+        let (mut bp, keys) = world(p);
+        let before = snapshot(&mut bp, &keys);
+        let (sphere, body) = (keys[0], keys[3]);
+        for p in bad_points() {
+            let e = bp.insert_sphere(p, 1.0).unwrap_err();
+            assert!(matches!(e, Error::NonFinite { what: "center", .. }), "{e}");
+            let e = bp.update_sphere(sphere, p, 1.0).unwrap_err();
+            assert!(matches!(e, Error::NonFinite { what: "center", .. }), "{e}");
+        }
+        for r in [NAN, INF, -INF] {
+            let e = bp.insert_sphere(Vec3::ZERO, r).unwrap_err();
+            assert!(matches!(e, Error::NonFinite { what: "radius", .. }), "{e}");
+            assert!(bp.update_sphere(sphere, Vec3::ZERO, r).is_err());
+        }
+        for r in [-1.0, -f32::MIN_POSITIVE] {
+            assert_eq!(
+                bp.insert_sphere(Vec3::ZERO, r),
+                Err(Error::NegativeRadius(r))
+            );
+            assert_eq!(
+                bp.update_sphere(sphere, Vec3::ZERO, r),
+                Err(Error::NegativeRadius(r))
             );
         }
-        assert!(bp.update_body(body, aabb).is_err(), "{what}");
+        for (aabb, what) in bad_boxes() {
+            for kind in [BodyKind::Dynamic, BodyKind::Static] {
+                let e = bp.insert_body(aabb, kind).unwrap_err();
+                assert!(
+                    matches!(e, Error::NonFinite { .. } | Error::InvertedAabb { .. }),
+                    "{what}: {e}"
+                );
+            }
+            assert!(bp.update_body(body, aabb).is_err(), "{what}");
+        }
+        assert_eq!(snapshot(&mut bp, &keys), before);
     }
-    assert_eq!(snapshot(&mut bp, &keys), before);
 }
 
 #[test]
 fn stale_and_wrong_kind_keys_are_refused_and_change_nothing() {
-    let (mut bp, keys) = world();
-    let doomed = bp.insert_sphere(Vec3::ZERO, 0.25).unwrap();
-    bp.remove(doomed).unwrap();
-    bp.step();
-    let before = snapshot(&mut bp, &keys);
-    let good = Aabb::new(Vec3::ZERO, Vec3::ONE);
-    assert_eq!(bp.remove(doomed), Err(Error::UnknownProxy));
-    assert_eq!(
-        bp.update_sphere(doomed, Vec3::ZERO, 1.0),
-        Err(Error::UnknownProxy)
-    );
-    assert_eq!(bp.update_body(doomed, good), Err(Error::UnknownProxy));
-    assert_eq!(
-        bp.update_body(ProxyKey::default(), good),
-        Err(Error::UnknownProxy)
-    );
-    assert_eq!(bp.aabb(doomed), None);
-    assert_eq!(
-        bp.update_sphere(keys[3], Vec3::ZERO, 1.0),
-        Err(Error::WrongKind)
-    );
-    assert_eq!(bp.update_body(keys[0], good), Err(Error::WrongKind));
-    assert_eq!(snapshot(&mut bp, &keys), before);
+    for p in BOTH {
+        let (mut bp, keys) = world(p);
+        let doomed = bp.insert_sphere(Vec3::ZERO, 0.25).unwrap();
+        bp.remove(doomed).unwrap();
+        bp.step();
+        let before = snapshot(&mut bp, &keys);
+        let good = Aabb::new(Vec3::ZERO, Vec3::ONE);
+        assert_eq!(bp.remove(doomed), Err(Error::UnknownProxy));
+        assert_eq!(
+            bp.update_sphere(doomed, Vec3::ZERO, 1.0),
+            Err(Error::UnknownProxy)
+        );
+        assert_eq!(bp.update_body(doomed, good), Err(Error::UnknownProxy));
+        assert_eq!(
+            bp.update_body(ProxyKey::default(), good),
+            Err(Error::UnknownProxy)
+        );
+        assert_eq!(bp.aabb(doomed), None);
+        assert_eq!(
+            bp.update_sphere(keys[3], Vec3::ZERO, 1.0),
+            Err(Error::WrongKind)
+        );
+        assert_eq!(bp.update_body(keys[0], good), Err(Error::WrongKind));
+        assert_eq!(snapshot(&mut bp, &keys), before);
+    }
 }
 
 /// Keys carry no instance tag (they are plain slotmap keys): a key of another broadphase is
@@ -143,36 +150,40 @@ fn stale_and_wrong_kind_keys_are_refused_and_change_nothing() {
 /// happen to be live here cannot be told apart (documented in the crate docs).
 #[test]
 fn keys_of_another_instance_naming_no_live_proxy_are_refused() {
-    let (mut bp, keys) = world();
-    let mut other = BroadPhase::new(Config::default());
-    let foreign: Vec<ProxyKey> = (0..12)
-        .map(|i| other.insert_sphere(Vec3::splat(i as f32), 1.0).unwrap())
-        .collect();
-    let before = snapshot(&mut bp, &keys);
-    for &k in &foreign[keys.len()..] {
-        assert_eq!(bp.remove(k), Err(Error::UnknownProxy));
-        assert_eq!(
-            bp.update_sphere(k, Vec3::ZERO, 1.0),
-            Err(Error::UnknownProxy)
-        );
-        assert_eq!(bp.aabb(k), None);
+    for p in BOTH {
+        let (mut bp, keys) = world(p);
+        let mut other = BroadPhase::new(Config::default());
+        let foreign: Vec<ProxyKey> = (0..12)
+            .map(|i| other.insert_sphere(Vec3::splat(i as f32), 1.0).unwrap())
+            .collect();
+        let before = snapshot(&mut bp, &keys);
+        for &k in &foreign[keys.len()..] {
+            assert_eq!(bp.remove(k), Err(Error::UnknownProxy));
+            assert_eq!(
+                bp.update_sphere(k, Vec3::ZERO, 1.0),
+                Err(Error::UnknownProxy)
+            );
+            assert_eq!(bp.aabb(k), None);
+        }
+        assert_eq!(snapshot(&mut bp, &keys), before);
     }
-    assert_eq!(snapshot(&mut bp, &keys), before);
 }
 
 #[test]
 fn bad_queries_answer_nothing_and_do_not_panic() {
-    let (bp, _) = world();
-    for p in bad_points() {
-        assert_eq!(bp.cast_ray(p, Vec3::X, 10.0), None);
-        assert_eq!(bp.cast_ray(Vec3::ZERO, p, 10.0), None);
-    }
-    assert_eq!(bp.cast_ray(Vec3::ZERO, Vec3::X, NAN), None);
-    assert_eq!(bp.cast_ray(Vec3::ZERO, Vec3::X, -1.0), None);
-    for (aabb, what) in bad_boxes() {
-        let mut n = 0;
-        bp.query_aabb(&aabb, |_| n += 1);
-        assert_eq!(n, 0, "{what}");
+    for p in BOTH {
+        let (bp, _) = world(p);
+        for p in bad_points() {
+            assert_eq!(bp.cast_ray(p, Vec3::X, 10.0), None);
+            assert_eq!(bp.cast_ray(Vec3::ZERO, p, 10.0), None);
+        }
+        assert_eq!(bp.cast_ray(Vec3::ZERO, Vec3::X, NAN), None);
+        assert_eq!(bp.cast_ray(Vec3::ZERO, Vec3::X, -1.0), None);
+        for (aabb, what) in bad_boxes() {
+            let mut n = 0;
+            bp.query_aabb(&aabb, |_| n += 1);
+            assert_eq!(n, 0, "{what}");
+        }
     }
 }
 
@@ -241,7 +252,7 @@ mod structures {
     //! The same refusals on `Octree` and `Bvh` used on their own.
 
     use super::{INF, NAN, bad_boxes, bad_points};
-    use broadleaf::{Aabb, Bvh, BvhConfig, Error, Octree, Pair, ProxyKey, Vec3};
+    use broadleaf::{Aabb, Bvh, BvhConfig, Error, Octree, Pair, Placement, ProxyKey, Vec3};
 
     fn octree_snapshot(t: &mut Octree, keys: &[ProxyKey]) -> (usize, Vec<Option<Aabb>>, Vec<Pair>) {
         t.validate();
@@ -271,45 +282,47 @@ mod structures {
             Octree::new(flat, 3),
             Err(Error::InvalidBounds { .. })
         ));
-        let mut t = Octree::new(bounds, 3).unwrap();
-        let mut keys: Vec<ProxyKey> = (0..20)
-            .map(|i| {
-                t.insert(Vec3::new(i as f32 * 0.4 - 4.0, 0.0, 0.0), 0.3)
-                    .unwrap()
-            })
-            .collect();
-        let gone = keys.pop().unwrap();
-        t.remove(gone).unwrap();
-        let before = octree_snapshot(&mut t, &keys);
-        for p in bad_points() {
-            assert!(matches!(
-                t.insert(p, 1.0),
-                Err(Error::NonFinite { what: "center", .. })
-            ));
-            assert!(matches!(
-                t.update(keys[0], p, 1.0),
-                Err(Error::NonFinite { .. })
-            ));
-            let mut hits = 0;
-            t.query_sphere(p, 1.0, |_| hits += 1);
-            assert_eq!(t.cast_ray(p, Vec3::X, 10.0), None);
-            assert_eq!(t.cast_ray(Vec3::ZERO, p, 10.0), None);
-            assert_eq!(hits, 0);
+        for p in [Placement::Strict, Placement::Loose] {
+            let mut t = Octree::with_placement(bounds, 3, p).unwrap();
+            let mut keys: Vec<ProxyKey> = (0..20)
+                .map(|i| {
+                    t.insert(Vec3::new(i as f32 * 0.4 - 4.0, 0.0, 0.0), 0.3)
+                        .unwrap()
+                })
+                .collect();
+            let gone = keys.pop().unwrap();
+            t.remove(gone).unwrap();
+            let before = octree_snapshot(&mut t, &keys);
+            for p in bad_points() {
+                assert!(matches!(
+                    t.insert(p, 1.0),
+                    Err(Error::NonFinite { what: "center", .. })
+                ));
+                assert!(matches!(
+                    t.update(keys[0], p, 1.0),
+                    Err(Error::NonFinite { .. })
+                ));
+                let mut hits = 0;
+                t.query_sphere(p, 1.0, |_| hits += 1);
+                assert_eq!(t.cast_ray(p, Vec3::X, 10.0), None);
+                assert_eq!(t.cast_ray(Vec3::ZERO, p, 10.0), None);
+                assert_eq!(hits, 0);
+            }
+            for r in [NAN, INF, -1.0] {
+                assert!(t.insert(Vec3::ZERO, r).is_err());
+                assert!(t.update(keys[0], Vec3::ZERO, r).is_err());
+            }
+            for (aabb, what) in bad_boxes() {
+                let mut hits = 0;
+                t.query_aabb(&aabb, |_| hits += 1);
+                assert_eq!(hits, 0, "{what}");
+            }
+            assert_eq!(t.remove(gone), Err(Error::UnknownProxy));
+            assert_eq!(t.update(gone, Vec3::ZERO, 1.0), Err(Error::UnknownProxy));
+            assert_eq!(t.remove(ProxyKey::default()), Err(Error::UnknownProxy));
+            assert_eq!(t.aabb(gone), None);
+            assert_eq!(octree_snapshot(&mut t, &keys), before);
         }
-        for r in [NAN, INF, -1.0] {
-            assert!(t.insert(Vec3::ZERO, r).is_err());
-            assert!(t.update(keys[0], Vec3::ZERO, r).is_err());
-        }
-        for (aabb, what) in bad_boxes() {
-            let mut hits = 0;
-            t.query_aabb(&aabb, |_| hits += 1);
-            assert_eq!(hits, 0, "{what}");
-        }
-        assert_eq!(t.remove(gone), Err(Error::UnknownProxy));
-        assert_eq!(t.update(gone, Vec3::ZERO, 1.0), Err(Error::UnknownProxy));
-        assert_eq!(t.remove(ProxyKey::default()), Err(Error::UnknownProxy));
-        assert_eq!(t.aabb(gone), None);
-        assert_eq!(octree_snapshot(&mut t, &keys), before);
     }
 
     #[test]

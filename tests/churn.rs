@@ -1,10 +1,14 @@
 //! Churn and teleports at scale: 10k proxies (spheres, dynamic and static bodies), 200 steps,
 //! each step 1 % removed, 1 % inserted, 1 % teleported anywhere, 1 % resized and the rest
 //! moved. After every step the pairs equal the sweep reference over the current boxes, the
-//! events equal the set difference with the previous step, and `validate()` holds.
+//! events equal the set difference with the previous step, and `validate()` holds. Both octree
+//! placements.
 
+use broadleaf::octree::depth_for_loose;
 use broadleaf::scene::{DT, Gas, Rng};
-use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Pair, ProxyKey, Shape, Vec3, brute, pair};
+use broadleaf::{
+    Aabb, BodyKind, BroadPhase, Config, Pair, Placement, ProxyKey, Shape, Vec3, brute, pair,
+};
 
 const N: usize = 10_000;
 const STEPS: usize = 200;
@@ -50,11 +54,12 @@ fn apply(bp: &mut BroadPhase, key: ProxyKey, shape: Shape) {
     .expect("live key, finite shape");
 }
 
-fn run(margin: f32, depth: u32, steps: usize) {
+fn run(margin: f32, depth: u32, placement: Placement, steps: usize) {
     let bounds = Gas::new(N, 1).bounds;
     let mut bp = BroadPhase::new(Config {
         bounds,
         octree_depth: depth,
+        octree_placement: placement,
         margin,
         ..Config::default()
     });
@@ -122,10 +127,17 @@ fn run(margin: f32, depth: u32, steps: usize) {
 
 #[test]
 fn churn_of_ten_thousand_proxies_matches_the_reference_every_step() {
-    run(0.0, 5, STEPS);
+    run(0.0, 5, Placement::Strict, STEPS);
+}
+
+#[test]
+fn churn_in_a_loose_octree_matches_the_reference_every_step() {
+    let depth = depth_for_loose(&Gas::new(N, 1).bounds, 0.5);
+    run(0.0, depth, Placement::Loose, STEPS);
 }
 
 #[test]
 fn churn_with_a_margin_and_a_shallow_tree() {
-    run(0.1, 2, STEPS / 2);
+    run(0.1, 2, Placement::Strict, STEPS / 2);
+    run(0.1, 2, Placement::Loose, STEPS / 2);
 }

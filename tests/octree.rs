@@ -1,10 +1,10 @@
-//! The octree against the brute-force oracle: random operation sequences on random depths and
-//! bounds, with spheres outside the bounds, zero radii, coincident centres, exactly touching
+//! The octree against the brute-force oracle, in both placements: random operation sequences
+//! on random depths and bounds, with spheres outside the bounds, zero radii, coincident centres, exactly touching
 //! boxes and spheres larger than the world; after every pair pass the sorted pair set, the
 //! queries and the rays equal brute force, and `validate()` holds.
 
 use broadleaf::brute::{self, Proxy};
-use broadleaf::octree::Octree;
+use broadleaf::octree::{Octree, Placement};
 use broadleaf::{Aabb, Error, Pair, ProxyKey, Vec3, pair};
 use proptest::prelude::*;
 use std::collections::BTreeMap;
@@ -50,6 +50,10 @@ fn op() -> impl Strategy<Value = Op> {
         1 => (any::<usize>(), 0u8..6).prop_map(|(i, k)| Op::Bad(i, k)),
         2 => Just(Op::Pass),
     ]
+}
+
+fn placement() -> impl Strategy<Value = Placement> {
+    prop_oneof![Just(Placement::Strict), Just(Placement::Loose)]
 }
 
 fn bounds() -> impl Strategy<Value = Aabb> {
@@ -142,12 +146,14 @@ proptest! {
     #[test]
     fn octree_equals_brute_force(
         depth in 0u32..=6,
+        placement in placement(),
         b in bounds(),
         ops in prop::collection::vec(op(), 1..120),
         q in (point(), 0.0f32..4.0),
         ray in (point(), point(), prop_oneof![Just(f32::INFINITY), 0.0f32..3.0]),
     ) {
-        let mut t = Octree::new(b, depth).unwrap();
+        let mut t = Octree::with_placement(b, depth, placement).unwrap();
+        prop_assert_eq!(t.placement(), placement);
         let mut model = Model::new();
         let mut removed = Vec::new();
         let pick = |model: &Model, i: usize| model.keys().nth(i % model.len().max(1)).copied();
@@ -210,34 +216,92 @@ proptest! {
     }
 }
 
+const BOTH: [Placement; 2] = [Placement::Strict, Placement::Loose];
+
 #[test]
 fn coincident_and_huge_spheres_pair_with_everything() {
-    let mut t = Octree::new(Aabb::new(Vec3::splat(-1.0), Vec3::ONE), 4).unwrap();
-    let mut model = Model::new();
-    for _ in 0..40 {
-        let k = t.insert(Vec3::splat(0.3), 0.0).unwrap();
-        model.insert(k, (Vec3::splat(0.3), 0.0));
+    for p in BOTH {
+        let mut t = Octree::with_placement(Aabb::new(Vec3::splat(-1.0), Vec3::ONE), 4, p).unwrap();
+        let mut model = Model::new();
+        for _ in 0..40 {
+            let k = t.insert(Vec3::splat(0.3), 0.0).unwrap();
+            model.insert(k, (Vec3::splat(0.3), 0.0));
+        }
+        let huge = t.insert(Vec3::ZERO, 50.0).unwrap();
+        model.insert(huge, (Vec3::ZERO, 50.0));
+        check_all(&mut t, &model, &[]);
+        assert_eq!(t.level_of(huge), Some(0));
     }
-    let huge = t.insert(Vec3::ZERO, 50.0).unwrap();
-    model.insert(huge, (Vec3::ZERO, 50.0));
-    check_all(&mut t, &model, &[]);
-    assert_eq!(t.level_of(huge), Some(0));
+}
+
+/// Loose trees with mixed radii (so pairs cross levels), crowds, touching boxes on a lattice
+/// and overflow spheres, moved for several passes: every pass equals brute force.
+#[test]
+fn loose_mixed_radii_cross_levels_exactly() {
+    let b = Aabb::new(Vec3::splat(-4.0), Vec3::splat(4.0));
+    let mut rng = broadleaf::scene::Rng::new(5);
+    for depth in [2, 4, 6] {
+        let mut t = Octree::with_placement(b, depth, Placement::Loose).unwrap();
+        let mut model = Model::new();
+        for i in 0..400 {
+            let (c, r) = match i % 5 {
+                0 => (
+                    rng.vec3_in(Vec3::splat(-4.5), Vec3::splat(4.5)),
+                    rng.range(0.0, 2.5),
+                ),
+                1 => (
+                    (rng.vec3_in(Vec3::splat(-8.0), Vec3::splat(8.0)) * 2.0).round() * 0.25,
+                    0.25,
+                ),
+                2 => (rng.vec3_in(Vec3::splat(-0.1), Vec3::splat(0.1)), 0.01),
+                _ => (
+                    rng.vec3_in(Vec3::splat(-4.0), Vec3::splat(4.0)),
+                    rng.log_range(0.001, 1.0),
+                ),
+            };
+            let k = t.insert(c, r).unwrap();
+            model.insert(k, (c, r));
+        }
+        let levels = t.stats().per_level;
+        assert!(
+            levels.iter().filter(|&&n| n > 0).count() >= 3,
+            "levels {levels:?}"
+        );
+        for _ in 0..4 {
+            check_all(&mut t, &model, &[]);
+            for (k, (c, r)) in model.iter_mut() {
+                *c += rng.vec3_in(Vec3::splat(-0.3), Vec3::splat(0.3));
+                t.update(*k, *c, *r).unwrap();
+            }
+        }
+        let q = Aabb::new(Vec3::new(-1.0, -2.0, -0.5), Vec3::new(0.5, 1.0, 3.0));
+        check_queries(
+            &t,
+            &model,
+            q,
+            Vec3::new(-5.0, -0.3, 0.2),
+            Vec3::new(1.0, 0.1, 0.05),
+            20.0,
+        );
+    }
 }
 
 #[test]
 fn empty_and_single_trees_answer_nothing() {
-    let mut t = Octree::new(Aabb::new(Vec3::ZERO, Vec3::ONE), 3).unwrap();
-    check_all(&mut t, &Model::new(), &[]);
-    assert_eq!(t.cast_ray(Vec3::ZERO, Vec3::X, 10.0), None);
-    let k = t.insert(Vec3::splat(0.5), 0.1).unwrap();
-    assert_eq!(
-        t.cast_ray(Vec3::new(-1.0, 0.5, 0.5), Vec3::X, 10.0)
-            .map(|h| h.0),
-        Some(k)
-    );
-    assert_eq!(t.cast_ray(Vec3::ZERO, Vec3::X, f32::NAN), None);
-    assert_eq!(t.cast_ray(Vec3::ZERO, Vec3::X, -1.0), None);
-    let mut model = Model::new();
-    model.insert(k, (Vec3::splat(0.5), 0.1));
-    check_all(&mut t, &model, &[]);
+    for p in BOTH {
+        let mut t = Octree::with_placement(Aabb::new(Vec3::ZERO, Vec3::ONE), 3, p).unwrap();
+        check_all(&mut t, &Model::new(), &[]);
+        assert_eq!(t.cast_ray(Vec3::ZERO, Vec3::X, 10.0), None);
+        let k = t.insert(Vec3::splat(0.5), 0.1).unwrap();
+        assert_eq!(
+            t.cast_ray(Vec3::new(-1.0, 0.5, 0.5), Vec3::X, 10.0)
+                .map(|h| h.0),
+            Some(k)
+        );
+        assert_eq!(t.cast_ray(Vec3::ZERO, Vec3::X, f32::NAN), None);
+        assert_eq!(t.cast_ray(Vec3::ZERO, Vec3::X, -1.0), None);
+        let mut model = Model::new();
+        model.insert(k, (Vec3::splat(0.5), 0.1));
+        check_all(&mut t, &model, &[]);
+    }
 }

@@ -1,17 +1,23 @@
 //! Odd but valid input is kept and paired exactly: spheres a million metres outside the
 //! bounds, a sphere larger than the world, zero radii, ten thousand spheres at one point,
 //! boxes that exactly touch, a static body covering everything. Each case compares the sorted
-//! pair set with brute force (or, for the crowd, with the complete set it must be).
+//! pair set with brute force (or, for the crowd, with the complete set it must be), with the
+//! octree in both placements.
 
 use broadleaf::scene::Rng;
-use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Pair, ProxyKey, Vec3, brute};
+use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Pair, Placement, ProxyKey, Vec3, brute};
 
-fn broadphase(depth: u32) -> BroadPhase {
-    BroadPhase::new(Config {
+const BOTH: [Placement; 2] = [Placement::Strict, Placement::Loose];
+
+fn broadphase(depth: u32, placement: Placement) -> BroadPhase {
+    let bp = BroadPhase::new(Config {
         bounds: Aabb::new(Vec3::splat(-10.0), Vec3::splat(10.0)),
         octree_depth: depth,
+        octree_placement: placement,
         ..Config::default()
-    })
+    });
+    assert_eq!(bp.octree().placement(), placement);
+    bp
 }
 
 fn check(bp: &mut BroadPhase) -> Vec<Pair> {
@@ -27,142 +33,154 @@ fn check(bp: &mut BroadPhase) -> Vec<Pair> {
 
 #[test]
 fn far_away_spheres_are_kept_and_paired() {
-    for depth in [0, 3, 6] {
-        let mut bp = broadphase(depth);
-        let mut rng = Rng::new(depth.into());
-        for _ in 0..200 {
-            let c = rng.vec3_in(Vec3::splat(-12.0), Vec3::splat(12.0));
-            bp.insert_sphere(c, rng.range(0.0, 1.0)).unwrap();
+    for p in BOTH {
+        for depth in [0, 3, 6] {
+            let mut bp = broadphase(depth, p);
+            let mut rng = Rng::new(depth.into());
+            for _ in 0..200 {
+                let c = rng.vec3_in(Vec3::splat(-12.0), Vec3::splat(12.0));
+                bp.insert_sphere(c, rng.range(0.0, 1.0)).unwrap();
+            }
+            // A cluster a million metres away, and spheres straddling the bounds' faces.
+            let far = Vec3::new(1.0e6, -1.0e6, 3.0e5);
+            let a = bp.insert_sphere(far, 1.0).unwrap();
+            let b = bp.insert_sphere(far + Vec3::X * 2.0, 1.0).unwrap();
+            bp.insert_sphere(Vec3::new(10.0, 0.0, 0.0), 0.5).unwrap();
+            bp.insert_sphere(Vec3::new(-10.2, 9.9, 0.0), 0.5).unwrap();
+            let pairs = check(&mut bp);
+            assert!(
+                pairs.contains(&Pair::new(a, b)),
+                "touching far spheres pair"
+            );
+            assert!(bp.octree().stats().overflow >= 4);
+            // Moving between far away and inside keeps them paired correctly.
+            bp.update_sphere(a, Vec3::ZERO, 1.0).unwrap();
+            bp.update_sphere(b, Vec3::new(0.0, 2.0, 0.0), 1.0).unwrap();
+            assert!(check(&mut bp).contains(&Pair::new(a, b)));
+            bp.update_sphere(b, -far, 1.0).unwrap();
+            assert!(!check(&mut bp).contains(&Pair::new(a, b)));
         }
-        // A cluster a million metres away, and spheres straddling the bounds' faces.
-        let far = Vec3::new(1.0e6, -1.0e6, 3.0e5);
-        let a = bp.insert_sphere(far, 1.0).unwrap();
-        let b = bp.insert_sphere(far + Vec3::X * 2.0, 1.0).unwrap();
-        bp.insert_sphere(Vec3::new(10.0, 0.0, 0.0), 0.5).unwrap();
-        bp.insert_sphere(Vec3::new(-10.2, 9.9, 0.0), 0.5).unwrap();
-        let pairs = check(&mut bp);
-        assert!(
-            pairs.contains(&Pair::new(a, b)),
-            "touching far spheres pair"
-        );
-        assert!(bp.octree().stats().overflow >= 4);
-        // Moving between far away and inside keeps them paired correctly.
-        bp.update_sphere(a, Vec3::ZERO, 1.0).unwrap();
-        bp.update_sphere(b, Vec3::new(0.0, 2.0, 0.0), 1.0).unwrap();
-        assert!(check(&mut bp).contains(&Pair::new(a, b)));
-        bp.update_sphere(b, -far, 1.0).unwrap();
-        assert!(!check(&mut bp).contains(&Pair::new(a, b)));
     }
 }
 
 #[test]
 fn a_sphere_larger_than_the_world_pairs_with_everything() {
-    let mut bp = broadphase(4);
-    let mut rng = Rng::new(9);
-    let small: Vec<ProxyKey> = (0..300)
-        .map(|_| {
-            let c = rng.vec3_in(Vec3::splat(-10.0), Vec3::splat(10.0));
-            bp.insert_sphere(c, 0.2).unwrap()
-        })
-        .collect();
-    let huge = bp.insert_sphere(Vec3::ZERO, 1.0e4).unwrap();
-    let pairs = check(&mut bp);
-    for &k in &small {
-        assert!(pairs.contains(&Pair::new(k, huge)));
+    for p in BOTH {
+        let mut bp = broadphase(4, p);
+        let mut rng = Rng::new(9);
+        let small: Vec<ProxyKey> = (0..300)
+            .map(|_| {
+                let c = rng.vec3_in(Vec3::splat(-10.0), Vec3::splat(10.0));
+                bp.insert_sphere(c, 0.2).unwrap()
+            })
+            .collect();
+        let huge = bp.insert_sphere(Vec3::ZERO, 1.0e4).unwrap();
+        let pairs = check(&mut bp);
+        for &k in &small {
+            assert!(pairs.contains(&Pair::new(k, huge)));
+        }
     }
 }
 
 #[test]
 fn zero_radius_spheres_pair_only_when_they_touch() {
-    let mut bp = broadphase(5);
-    let p = Vec3::new(1.25, -3.5, 0.75);
-    let a = bp.insert_sphere(p, 0.0).unwrap();
-    let b = bp.insert_sphere(p, 0.0).unwrap();
-    let c = bp.insert_sphere(p + Vec3::X, 0.0).unwrap();
-    let d = bp.insert_sphere(p + Vec3::X * 0.5, 0.5).unwrap();
-    let pairs = check(&mut bp);
-    assert!(pairs.contains(&Pair::new(a, b)));
-    assert!(!pairs.contains(&Pair::new(a, c)));
-    assert!(pairs.contains(&Pair::new(c, d)) && pairs.contains(&Pair::new(a, d)));
+    for p in BOTH {
+        let mut bp = broadphase(5, p);
+        let p = Vec3::new(1.25, -3.5, 0.75);
+        let a = bp.insert_sphere(p, 0.0).unwrap();
+        let b = bp.insert_sphere(p, 0.0).unwrap();
+        let c = bp.insert_sphere(p + Vec3::X, 0.0).unwrap();
+        let d = bp.insert_sphere(p + Vec3::X * 0.5, 0.5).unwrap();
+        let pairs = check(&mut bp);
+        assert!(pairs.contains(&Pair::new(a, b)));
+        assert!(!pairs.contains(&Pair::new(a, c)));
+        assert!(pairs.contains(&Pair::new(c, d)) && pairs.contains(&Pair::new(a, d)));
+    }
 }
 
 #[test]
 fn ten_thousand_spheres_at_one_point_report_every_pair() {
-    const N: usize = 10_000;
-    let mut bp = broadphase(6);
-    let p = Vec3::new(3.3, 3.3, 3.3);
-    let keys: Vec<ProxyKey> = (0..N).map(|_| bp.insert_sphere(p, 0.1).unwrap()).collect();
-    let out = bp.step();
-    // A strictly increasing list of N(N−1)/2 pairs of these N keys is the complete set.
-    assert_eq!(out.pairs.len(), N * (N - 1) / 2);
-    assert_eq!(out.added.len(), out.pairs.len());
-    assert!(out.pairs.windows(2).all(|w| w[0] < w[1]));
-    let mut sorted = keys.clone();
-    sorted.sort_unstable();
-    assert!(
-        out.pairs
-            .iter()
-            .all(|p| sorted.binary_search(&p.a).is_ok() && sorted.binary_search(&p.b).is_ok())
-    );
-    // The pass tests each pair about once: no blow-up beyond the pairs themselves.
-    let tests = bp.octree().stats().aabb_tests;
-    assert!(tests <= 2 * (N * N) as u64, "{tests} AABB tests");
+    for p in BOTH {
+        const N: usize = 10_000;
+        let mut bp = broadphase(6, p);
+        let p = Vec3::new(3.3, 3.3, 3.3);
+        let keys: Vec<ProxyKey> = (0..N).map(|_| bp.insert_sphere(p, 0.1).unwrap()).collect();
+        let out = bp.step();
+        // A strictly increasing list of N(N−1)/2 pairs of these N keys is the complete set.
+        assert_eq!(out.pairs.len(), N * (N - 1) / 2);
+        assert_eq!(out.added.len(), out.pairs.len());
+        assert!(out.pairs.windows(2).all(|w| w[0] < w[1]));
+        let mut sorted = keys.clone();
+        sorted.sort_unstable();
+        assert!(
+            out.pairs
+                .iter()
+                .all(|p| sorted.binary_search(&p.a).is_ok() && sorted.binary_search(&p.b).is_ok())
+        );
+        // The pass tests each pair about once: no blow-up beyond the pairs themselves.
+        let tests = bp.octree().stats().aabb_tests;
+        assert!(tests <= 2 * (N * N) as u64, "{tests} AABB tests");
+    }
 }
 
 #[test]
 fn exactly_touching_boxes_and_spheres_pair() {
-    let mut bp = broadphase(3);
-    // A lattice of unit boxes that touch their neighbours on faces, edges and corners.
-    for x in -3..3 {
-        for y in -3..3 {
-            for z in -1..1 {
-                let min = Vec3::new(x as f32, y as f32, z as f32);
-                let kind = if (x + y + z) % 3 == 0 {
-                    BodyKind::Static
-                } else {
-                    BodyKind::Dynamic
-                };
-                bp.insert_body(Aabb::new(min, min + Vec3::ONE), kind)
-                    .unwrap();
+    for p in BOTH {
+        let mut bp = broadphase(3, p);
+        // A lattice of unit boxes that touch their neighbours on faces, edges and corners.
+        for x in -3..3 {
+            for y in -3..3 {
+                for z in -1..1 {
+                    let min = Vec3::new(x as f32, y as f32, z as f32);
+                    let kind = if (x + y + z) % 3 == 0 {
+                        BodyKind::Static
+                    } else {
+                        BodyKind::Dynamic
+                    };
+                    bp.insert_body(Aabb::new(min, min + Vec3::ONE), kind)
+                        .unwrap();
+                }
             }
         }
+        // Spheres whose boxes touch the lattice's faces from outside, and one another.
+        for i in -3..3 {
+            bp.insert_sphere(Vec3::new(i as f32 + 0.5, 3.5, 0.0), 0.5)
+                .unwrap();
+            bp.insert_sphere(Vec3::new(3.25, i as f32 + 0.5, 0.0), 0.25)
+                .unwrap();
+        }
+        let pairs = check(&mut bp);
+        // A 6×6×2 lattice has ((3·6−2)²(3·2−2) − 72)/2 = 476 adjacent pairs (face, edge or
+        // corner); static×static ones drop out and the spheres add theirs.
+        assert!(pairs.len() > 400, "{}", pairs.len());
     }
-    // Spheres whose boxes touch the lattice's faces from outside, and one another.
-    for i in -3..3 {
-        bp.insert_sphere(Vec3::new(i as f32 + 0.5, 3.5, 0.0), 0.5)
-            .unwrap();
-        bp.insert_sphere(Vec3::new(3.25, i as f32 + 0.5, 0.0), 0.25)
-            .unwrap();
-    }
-    let pairs = check(&mut bp);
-    // A 6×6×2 lattice has ((3·6−2)²(3·2−2) − 72)/2 = 476 adjacent pairs (face, edge or
-    // corner); static×static ones drop out and the spheres add theirs.
-    assert!(pairs.len() > 400, "{}", pairs.len());
 }
 
 #[test]
 fn a_static_body_covering_everything_pairs_with_every_moving_proxy() {
-    let mut bp = broadphase(4);
-    let mut rng = Rng::new(4);
-    for i in 0..400 {
-        let c = rng.vec3_in(Vec3::splat(-30.0), Vec3::splat(30.0));
-        if i % 4 == 0 {
-            let aabb = Aabb::from_center_half_extents(c, Vec3::splat(rng.range(0.0, 3.0)));
-            let kind = if i % 8 == 0 {
-                BodyKind::Static
+    for p in BOTH {
+        let mut bp = broadphase(4, p);
+        let mut rng = Rng::new(4);
+        for i in 0..400 {
+            let c = rng.vec3_in(Vec3::splat(-30.0), Vec3::splat(30.0));
+            if i % 4 == 0 {
+                let aabb = Aabb::from_center_half_extents(c, Vec3::splat(rng.range(0.0, 3.0)));
+                let kind = if i % 8 == 0 {
+                    BodyKind::Static
+                } else {
+                    BodyKind::Dynamic
+                };
+                bp.insert_body(aabb, kind).unwrap();
             } else {
-                BodyKind::Dynamic
-            };
-            bp.insert_body(aabb, kind).unwrap();
-        } else {
-            bp.insert_sphere(c, rng.range(0.0, 2.0)).unwrap();
+                bp.insert_sphere(c, rng.range(0.0, 2.0)).unwrap();
+            }
         }
+        let world = Aabb::new(Vec3::splat(-1.0e5), Vec3::splat(1.0e5));
+        let all = bp.insert_body(world, BodyKind::Static).unwrap();
+        let pairs = check(&mut bp);
+        let with_all = pairs.iter().filter(|p| p.a == all || p.b == all).count();
+        assert_eq!(with_all, 400 - 50, "every proxy but the 50 static ones");
     }
-    let world = Aabb::new(Vec3::splat(-1.0e5), Vec3::splat(1.0e5));
-    let all = bp.insert_body(world, BodyKind::Static).unwrap();
-    let pairs = check(&mut bp);
-    let with_all = pairs.iter().filter(|p| p.a == all || p.b == all).count();
-    assert_eq!(with_all, 400 - 50, "every proxy but the 50 static ones");
 }
 
 /// Regression (found by `fuzz/ops`): bodies near `f32::MAX` are finite, but their doubled
@@ -170,22 +188,24 @@ fn a_static_body_covering_everything_pairs_with_every_moving_proxy() {
 /// The build must still split (or make a leaf), and the pairs must still equal brute force.
 #[test]
 fn bodies_near_f32_max_whose_centroids_overflow_still_pair_exactly() {
-    let big = 3.396_151_4e38_f32;
-    for kind in [BodyKind::Dynamic, BodyKind::Static] {
-        let mut bp = broadphase(3);
-        bp.insert_sphere(Vec3::ZERO, 1.0).unwrap();
-        for i in 0..40 {
-            let lo = Vec3::new(big - i as f32 * 1.0e36, -1.7e38, big);
-            bp.insert_body(Aabb::new(lo.min(Vec3::splat(big)), Vec3::splat(big)), kind)
+    for p in BOTH {
+        let big = 3.396_151_4e38_f32;
+        for kind in [BodyKind::Dynamic, BodyKind::Static] {
+            let mut bp = broadphase(3, p);
+            bp.insert_sphere(Vec3::ZERO, 1.0).unwrap();
+            for i in 0..40 {
+                let lo = Vec3::new(big - i as f32 * 1.0e36, -1.7e38, big);
+                bp.insert_body(Aabb::new(lo.min(Vec3::splat(big)), Vec3::splat(big)), kind)
+                    .unwrap();
+                bp.insert_body(
+                    Aabb::new(Vec3::splat(-f32::MAX), Vec3::new(1.0, -1.0e38, f32::MAX)),
+                    BodyKind::Dynamic,
+                )
                 .unwrap();
-            bp.insert_body(
-                Aabb::new(Vec3::splat(-f32::MAX), Vec3::new(1.0, -1.0e38, f32::MAX)),
-                BodyKind::Dynamic,
-            )
-            .unwrap();
+            }
+            check(&mut bp);
+            check(&mut bp);
         }
-        check(&mut bp);
-        check(&mut bp);
     }
 }
 
@@ -195,37 +215,40 @@ fn bodies_near_f32_max_whose_centroids_overflow_still_pair_exactly() {
 /// find spheres through `Octree::query_aabb`.
 #[test]
 fn a_sphere_whose_box_overflows_to_infinity_pairs_with_the_bodies_it_overlaps() {
-    let big = 3.396_151_4e38_f32;
-    let tiny = 1.092_050_6e-5_f32;
-    let mut bp = BroadPhase::new(Config {
-        bounds: Aabb::new(Vec3::splat(-16.0), Vec3::splat(16.0)),
-        octree_depth: 3,
-        margin: 0.75,
-        ..Config::default()
-    });
-    bp.insert_sphere(Vec3::new(0.0, 0.046_875, 4.5737e-41), tiny)
+    for p in BOTH {
+        let big = 3.396_151_4e38_f32;
+        let tiny = 1.092_050_6e-5_f32;
+        let mut bp = BroadPhase::new(Config {
+            bounds: Aabb::new(Vec3::splat(-16.0), Vec3::splat(16.0)),
+            octree_depth: 3,
+            octree_placement: p,
+            margin: 0.75,
+            ..Config::default()
+        });
+        bp.insert_sphere(Vec3::new(0.0, 0.046_875, 4.5737e-41), tiny)
+            .unwrap();
+        bp.insert_body(
+            Aabb::new(Vec3::splat(tiny), Vec3::splat(tiny)),
+            BodyKind::Static,
+        )
         .unwrap();
-    bp.insert_body(
-        Aabb::new(Vec3::splat(tiny), Vec3::splat(tiny)),
-        BodyKind::Static,
-    )
-    .unwrap();
-    bp.insert_body(
-        Aabb::new(
-            Vec3::new(-4.973_355_7e17, 2.367_701_2e14, 2.367_701_2e14),
-            Vec3::splat(2.367_701_2e14),
-        ),
-        BodyKind::Static,
-    )
-    .unwrap();
-    bp.insert_body(
-        Aabb::new(Vec3::splat(tiny), Vec3::new(tiny, 1.318_548_2e-5, tiny)),
-        BodyKind::Static,
-    )
-    .unwrap();
-    check(&mut bp);
-    bp.insert_sphere(Vec3::splat(big), big).unwrap();
-    check(&mut bp);
-    bp.insert_sphere(Vec3::splat(big), big).unwrap();
-    check(&mut bp);
+        bp.insert_body(
+            Aabb::new(
+                Vec3::new(-4.973_355_7e17, 2.367_701_2e14, 2.367_701_2e14),
+                Vec3::splat(2.367_701_2e14),
+            ),
+            BodyKind::Static,
+        )
+        .unwrap();
+        bp.insert_body(
+            Aabb::new(Vec3::splat(tiny), Vec3::new(tiny, 1.318_548_2e-5, tiny)),
+            BodyKind::Static,
+        )
+        .unwrap();
+        check(&mut bp);
+        bp.insert_sphere(Vec3::splat(big), big).unwrap();
+        check(&mut bp);
+        bp.insert_sphere(Vec3::splat(big), big).unwrap();
+        check(&mut bp);
+    }
 }

@@ -1,8 +1,11 @@
 //! `BroadPhase` against the brute-force reference: after every `step()` of a random operation
 //! sequence, `pairs` equals `brute::pairs` over the (margin-grown) boxes, and `added` /
-//! `removed` equal the set differences with the previous step's pairs.
+//! `removed` equal the set differences with the previous step's pairs; the octree runs in both
+//! placements.
 
-use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Pair, ProxyKey, Shape, Vec3, brute};
+use broadleaf::{
+    Aabb, BodyKind, BroadPhase, Config, Pair, Placement, ProxyKey, Shape, Vec3, brute,
+};
 use proptest::prelude::*;
 use std::collections::BTreeSet;
 
@@ -49,10 +52,11 @@ fn op() -> impl Strategy<Value = Op> {
     ]
 }
 
-fn config(depth: u32, margin: f32) -> Config {
+fn config(depth: u32, margin: f32, placement: Placement) -> Config {
     Config {
         bounds: Aabb::new(Vec3::splat(-8.0), Vec3::splat(8.0)),
         octree_depth: depth,
+        octree_placement: placement,
         margin,
         ..Config::default()
     }
@@ -83,8 +87,9 @@ fn check_step(bp: &mut BroadPhase, model: &[(ProxyKey, Shape)], prev: &[Pair]) -
     expected
 }
 
-fn run(depth: u32, margin: f32, ops: &[Op]) {
-    let mut bp = BroadPhase::try_new(config(depth, margin)).unwrap();
+fn run(depth: u32, margin: f32, placement: Placement, ops: &[Op]) {
+    let mut bp = BroadPhase::try_new(config(depth, margin, placement)).unwrap();
+    assert_eq!(bp.octree().placement(), placement);
     let mut model: Vec<(ProxyKey, Shape)> = Vec::new();
     let mut prev = Vec::new();
     for op in ops {
@@ -158,9 +163,10 @@ proptest! {
     fn pairs_and_events_equal_brute_force(
         depth in 0u32..=5,
         margin in prop_oneof![3 => Just(0.0f32), 1 => Just(0.25f32), 1 => Just(0.1f32)],
+        placement in prop_oneof![Just(Placement::Strict), Just(Placement::Loose)],
         ops in prop::collection::vec(op(), 0..160),
     ) {
-        run(depth, margin, &ops);
+        run(depth, margin, placement, &ops);
     }
 }
 
@@ -224,30 +230,32 @@ fn cast_ray_hits_spheres_as_spheres_and_bodies_as_boxes() {
 
 #[test]
 fn query_aabb_equals_brute_force() {
-    let mut bp = BroadPhase::new(config(3, 0.0));
-    let mut rng = broadleaf::scene::Rng::new(11);
-    let mut proxies = Vec::new();
-    for i in 0..300 {
-        let c = rng.vec3_in(Vec3::splat(-10.0), Vec3::splat(10.0));
-        let (key, aabb) = if i % 3 == 0 {
-            let aabb = Aabb::from_center_half_extents(c, Vec3::splat(rng.range(0.0, 2.0)));
-            (bp.insert_body(aabb, BodyKind::Dynamic).unwrap(), aabb)
-        } else {
-            let r = rng.range(0.0, 1.0);
-            (
-                bp.insert_sphere(c, r).unwrap(),
-                Aabb::from_center_radius(c, r),
-            )
-        };
-        proxies.push(brute::Proxy::new(key, aabb));
-    }
-    bp.step();
-    for _ in 0..100 {
-        let c = rng.vec3_in(Vec3::splat(-10.0), Vec3::splat(10.0));
-        let q = Aabb::from_center_half_extents(c, Vec3::splat(rng.range(0.0, 4.0)));
-        let mut got = Vec::new();
-        bp.query_aabb(&q, |k| got.push(k));
-        got.sort_unstable();
-        assert_eq!(got, brute::query_aabb(&proxies, &q));
+    for placement in [Placement::Strict, Placement::Loose] {
+        let mut bp = BroadPhase::new(config(3, 0.0, placement));
+        let mut rng = broadleaf::scene::Rng::new(11);
+        let mut proxies = Vec::new();
+        for i in 0..300 {
+            let c = rng.vec3_in(Vec3::splat(-10.0), Vec3::splat(10.0));
+            let (key, aabb) = if i % 3 == 0 {
+                let aabb = Aabb::from_center_half_extents(c, Vec3::splat(rng.range(0.0, 2.0)));
+                (bp.insert_body(aabb, BodyKind::Dynamic).unwrap(), aabb)
+            } else {
+                let r = rng.range(0.0, 1.0);
+                (
+                    bp.insert_sphere(c, r).unwrap(),
+                    Aabb::from_center_radius(c, r),
+                )
+            };
+            proxies.push(brute::Proxy::new(key, aabb));
+        }
+        bp.step();
+        for _ in 0..100 {
+            let c = rng.vec3_in(Vec3::splat(-10.0), Vec3::splat(10.0));
+            let q = Aabb::from_center_half_extents(c, Vec3::splat(rng.range(0.0, 4.0)));
+            let mut got = Vec::new();
+            bp.query_aabb(&q, |k| got.push(k));
+            got.sort_unstable();
+            assert_eq!(got, brute::query_aabb(&proxies, &q));
+        }
     }
 }

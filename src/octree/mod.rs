@@ -1,12 +1,25 @@
 //! The top-down preallocated octree for moving spheres (Ericson, *Real-Time Collision
 //! Detection* 7.3).
 //!
-//! Every sphere lives in the deepest node whose split planes its AABB does not straddle
-//! ([`place`]); the placement is computed in O(1) from integer cell coordinates, and a move that
-//! keeps the node only stores the new sphere. Pairs come from a pass that radix-sorts the
-//! spheres into depth-first node order and streams over the node runs with a filtered ancestor
-//! stack ([`pairs`]); queries and rays follow the per-node lists through occupied subtrees
-//! ([`query`]); [`Octree::validate`] checks every invariant ([`validate`]).
+//! Two placements ([`Placement`]), both computed in O(1) from integer cell coordinates; a move
+//! that keeps the node only stores the new sphere.
+//!
+//! - [`Placement::Strict`] (the default, RTCD 7.3): every sphere lives in the deepest node
+//!   whose split planes its AABB does not straddle. Spheres on the root's planes stay near the
+//!   root, so a sphere is tested against the filtered straddlers of all its ancestors. Pairs
+//!   come from a pass that radix-sorts the spheres into depth-first node order and streams over
+//!   the node runs with a filtered ancestor stack ([`pairs`]).
+//! - [`Placement::Loose`] (RTCD 7.3.6, looseness 2): a node's *loose bounds* are its cell grown
+//!   by half the cell size on every side, and a sphere lives at the deepest level whose cells
+//!   are at least its diameter, in the cell holding its centre; its box is then inside the
+//!   node's loose bounds wherever the centre is, so a sphere's level depends only on its radius
+//!   and nothing stays near the root for straddling a plane. Pairs are found between a node and
+//!   its 26 same-level neighbours, and across levels by descending the neighbours' occupied
+//!   subtrees (`loose.rs`). Use [`depth_for_loose`] for the depth.
+//!
+//! Queries and rays follow the per-node lists through occupied subtrees, testing nodes by
+//! their cells (strict) or loose bounds (loose) ([`query`]); [`Octree::validate`] checks every
+//! invariant ([`validate`]).
 //!
 //! Memory: the tree is "preallocated" in the sense of implicit indexing (level `L` starts at
 //! node `(8^L − 1)/7`, a node's index within its level is its Morton code), but the per-node
@@ -15,14 +28,16 @@
 //! 1.2 MB page table plus the pages its spheres touch, and a scene of 100k spheres at depth 5
 //! costs ten pages.
 
+mod loose;
 mod pairs;
 mod place;
 mod query;
 mod validate;
 
-pub use place::depth_for;
+pub use place::{depth_for, depth_for_loose};
 
 use crate::{Aabb, Error, Pair, ProxyKey, Vec3, geom};
+use glam::Vec3A;
 use slotmap::{SecondaryMap, SlotMap};
 
 /// The deepest octree accepted by `Octree::new`: levels `0..=MAX_DEPTH`.
@@ -31,14 +46,28 @@ pub const MAX_DEPTH: u32 = 10;
 /// "No object" / "no node" in the flat arrays.
 const NONE: u32 = u32::MAX;
 
+/// Which node a sphere lives in; see the [module docs](self). Fixed when the tree is made.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Placement {
+    /// The deepest node whose split planes the sphere's box does not straddle (RTCD 7.3).
+    /// Spheres on a plane stay in the node that owns the plane, however small they are.
+    #[default]
+    Strict,
+    /// Loose octree with looseness 2 (RTCD 7.3.6): the deepest level whose cells are at least
+    /// the sphere's diameter on every axis, in the cell holding its centre. Spheres whose centre
+    /// is outside the bounds, or whose diameter exceeds the bounds' shortest side, stay in the
+    /// root.
+    Loose,
+}
+
 /// Per-sphere data, indexed by dense id (insertion order, so `update` streams). The pair pass
 /// reads `aabb`, `qmin`/`qmax` and `walk_key`; queries follow the node lists.
 #[derive(Clone, Copy, Debug)]
 struct Obj {
     /// `center ± radius`, the box every pair test uses. 24 bytes.
     aabb: Aabb,
-    /// The box's corners as integer cell coordinates at the deepest level, clamped to the
-    /// grid. 12 bytes.
+    /// The box's corners as integer cell coordinates on the tree's integer grid (the deepest
+    /// level's cells, or their halves in loose mode), clamped to the grid. 12 bytes.
     qmin: [u16; 3],
     qmax: [u16; 3],
     /// The node the sphere is linked in. 4 bytes.
@@ -58,7 +87,8 @@ pub struct OctreeStats {
     /// Spheres placed at each level (`per_level[0]` is the root and includes the overflow
     /// spheres); levels deeper than the tree's depth are 0.
     pub per_level: [u32; MAX_DEPTH as usize + 1],
-    /// Spheres whose AABB leaves the bounds (kept in the root).
+    /// Spheres kept in the root because they do not fit it: strict, the AABB leaves the
+    /// bounds; loose, the centre is outside the bounds or the diameter exceeds the shortest side.
     pub overflow: u32,
     /// AABB overlap tests done by the last pair pass (0 before the first).
     pub aabb_tests: u64,
@@ -74,8 +104,18 @@ pub struct OctreeStats {
 pub struct Octree {
     bounds: Aabb,
     depth: u32,
-    /// Deepest-level cells per unit length on each axis: `2^depth / extent`.
-    scale: Vec3,
+    placement: Placement,
+    /// Bits per axis of the integer grid boxes are mapped to: `depth` (strict), or `depth + 1`
+    /// (loose: half the deepest cells, so every level's loose bounds lie on grid lines).
+    grid: u32,
+    /// Grid cells per unit length on each axis: `2^grid / extent`.
+    scale: Vec3A,
+    /// `bounds.min`, and the last grid cell `2^grid − 1` on every axis, for `quantize`.
+    grid_min: Vec3A,
+    grid_top: Vec3A,
+    /// Loose mode: the largest radius placed at level `L`, half the level's cell size on the
+    /// bounds' shortest axis (`min extent / 2^(L+1)`).
+    half_cell: [f32; MAX_DEPTH as usize + 1],
     /// Hot data by dense id.
     objs: Vec<Obj>,
     /// Centre and radius by dense id, exactly as given.
@@ -93,18 +133,30 @@ pub struct Octree {
 }
 
 impl Octree {
-    /// An empty octree over `bounds` with levels `0..=depth`. `Err(DepthOutOfRange)` if
+    /// An empty strict octree over `bounds` with levels `0..=depth`. `Err(DepthOutOfRange)` if
     /// `depth > MAX_DEPTH`, `Err(InvalidBounds)` if the bounds are not finite or have no
     /// volume. Cheap at any depth: node storage is paged in as spheres arrive.
     pub fn new(bounds: Aabb, depth: u32) -> Result<Octree, Error> {
+        Octree::with_placement(bounds, depth, Placement::Strict)
+    }
+
+    /// An empty octree with the given placement; same errors as [`Octree::new`].
+    pub fn with_placement(bounds: Aabb, depth: u32, placement: Placement) -> Result<Octree, Error> {
         if depth > MAX_DEPTH {
             return Err(Error::DepthOutOfRange(depth));
         }
         geom::check_bounds(&bounds)?;
+        let grid = depth + u32::from(placement == Placement::Loose);
+        let shortest = bounds.extent().min_element();
         Ok(Octree {
             bounds,
             depth,
-            scale: Vec3::splat((1u32 << depth) as f32) / bounds.extent(),
+            placement,
+            grid,
+            scale: (Vec3::splat((1u32 << grid) as f32) / bounds.extent()).into(),
+            grid_min: bounds.min.into(),
+            grid_top: Vec3A::splat(((1u32 << grid) - 1) as f32),
+            half_cell: core::array::from_fn(|l| shortest / (2u32 << l) as f32),
             objs: Vec::new(),
             spheres: Vec::new(),
             keys: Vec::new(),
@@ -155,12 +207,11 @@ impl Octree {
     pub fn update(&mut self, key: ProxyKey, center: Vec3, radius: f32) -> Result<(), Error> {
         geom::check_sphere(center, radius)?;
         let id = *self.ids.get(key).ok_or(Error::UnknownProxy)?;
-        let (aabb, qmin, qmax, node, outside) = self.placement(center, radius);
+        let (aabb, qmin, qmax, node, outside) = self.locate(center, radius);
         let i = id as usize;
+        let was_outside = self.is_outside(id);
         self.spheres[i] = (center, radius);
         let old = self.objs[i];
-        // Only root spheres can be outside: skip the box check for the rest.
-        let was_outside = old.node == 0 && !self.bounds.contains(&old.aabb);
         self.overflow = self.overflow - u32::from(was_outside) + u32::from(outside);
         let o = &mut self.objs[i];
         o.aabb = aabb;
@@ -183,7 +234,7 @@ impl Octree {
         let i = id as usize;
         let old = self.objs[i];
         self.per_level[self.nodes.level_of(old.node) as usize] -= 1;
-        self.overflow -= u32::from(!self.bounds.contains(&old.aabb));
+        self.overflow -= u32::from(self.is_outside(id));
         self.ids.remove(key);
         self.minted.remove(key);
         let last = self.objs.len() - 1;
@@ -247,11 +298,21 @@ impl Octree {
         self.depth
     }
 
+    /// The placement given to [`Octree::with_placement`] ([`Placement::Strict`] for
+    /// [`Octree::new`]).
+    #[must_use]
+    pub fn placement(&self) -> Placement {
+        self.placement
+    }
+
     /// Calls `f(a, b)` once for every pair of spheres whose AABBs overlap (closed: touching
     /// boxes overlap), in no particular order and with no particular key order inside a pair.
     pub fn for_each_pair(&mut self, f: impl FnMut(ProxyKey, ProxyKey)) {
         let mut scratch = core::mem::take(&mut self.scratch);
-        self.walk_pairs(&mut scratch, f);
+        match self.placement {
+            Placement::Strict => self.walk_pairs(&mut scratch, f),
+            Placement::Loose => self.loose_pairs(&mut scratch, f),
+        }
         self.scratch = scratch;
     }
 
@@ -281,7 +342,7 @@ impl Octree {
 
     /// Appends a sphere that passed the checks under `key`.
     fn push(&mut self, key: ProxyKey, center: Vec3, radius: f32) {
-        let (aabb, qmin, qmax, node, outside) = self.placement(center, radius);
+        let (aabb, qmin, qmax, node, outside) = self.locate(center, radius);
         let id = self.objs.len() as u32;
         self.objs.push(Obj {
             aabb,
@@ -298,6 +359,20 @@ impl Octree {
         self.per_level[self.nodes.level_of(node) as usize] += 1;
         self.overflow += u32::from(outside);
         self.link(id, node);
+    }
+
+    /// True if the sphere with dense id `id` is counted in `overflow` (only root spheres can
+    /// be).
+    fn is_outside(&self, id: u32) -> bool {
+        let o = &self.objs[id as usize];
+        o.node == 0
+            && match self.placement {
+                Placement::Strict => !self.bounds.contains(&o.aabb),
+                Placement::Loose => {
+                    let (c, r) = self.spheres[id as usize];
+                    self.locate(c, r).4
+                }
+            }
     }
 
     /// Moves the unlinked-or-linked object `from` into dense slot `to` (whose own object was

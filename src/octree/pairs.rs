@@ -44,35 +44,36 @@
 //! ancestors of group `g` and all own spheres; each pair is tested once, on its ancestor's axis.
 
 use super::Octree;
+use super::place::compact3;
 use crate::ProxyKey;
 use glam::Vec3A;
 
 /// Lists with at most this many spheres are tested all against all; longer ones are swept.
-const SHORT_SELF: usize = 16;
+pub(super) const SHORT_SELF: usize = 16;
 /// Ancestors × own with at most this many candidate pairs, or with a side of at most
 /// `SHORT_SIDE` spheres, are tested all against all; longer ones are swept.
-const SHORT_CROSS: usize = 1024;
-const SHORT_SIDE: usize = 4;
+pub(super) const SHORT_CROSS: usize = 1024;
+pub(super) const SHORT_SIDE: usize = 4;
 /// Bits per radix-sort digit.
 const RADIX_BITS: u32 = 11;
 
 /// A sphere as the walk reads it: box, integer cell range and walk position. 48 bytes.
 #[derive(Clone, Copy, Debug)]
-struct Hot {
+pub(super) struct Hot {
     /// `center ± radius`. 32 bytes.
-    min: Vec3A,
-    max: Vec3A,
-    /// Cell range at the deepest level, clamped to the grid. 12 bytes.
-    qmin: [u16; 3],
-    qmax: [u16; 3],
+    pub(super) min: Vec3A,
+    pub(super) max: Vec3A,
+    /// Range on the integer grid, clamped to the grid. 12 bytes.
+    pub(super) qmin: [u16; 3],
+    pub(super) qmax: [u16; 3],
     /// Position in walk order (index of `Scratch::keys` and `Scratch::group`). 4 bytes.
-    pos: u32,
+    pub(super) pos: u32,
 }
 const _: () = assert!(core::mem::size_of::<Hot>() == 48);
 
 impl Hot {
     #[inline]
-    fn overlaps(&self, o: &Hot) -> bool {
+    pub(super) fn overlaps(&self, o: &Hot) -> bool {
         (self.min.cmple(o.max) & o.min.cmple(self.max)).all()
     }
 }
@@ -95,7 +96,7 @@ struct Level {
 /// A float's bits mapped so that unsigned order is float order, with `-0.0` taken as `0.0`
 /// (so `ord(x) <= ord(y)` iff `x <= y` for non-NaN floats).
 #[inline]
-fn ord(f: f32) -> u32 {
+pub(super) fn ord(f: f32) -> u32 {
     let b = (f + 0.0).to_bits();
     if b >> 31 == 1 { !b } else { b | 1 << 31 }
 }
@@ -103,7 +104,7 @@ fn ord(f: f32) -> u32 {
 /// A sweep entry: `ord(lo) << 32 | index in the swept list`, so a plain `u64` sort orders by
 /// `lo`.
 #[inline]
-fn entry(lo: f32, i: usize) -> u64 {
+pub(super) fn entry(lo: f32, i: usize) -> u64 {
     u64::from(ord(lo)) << 32 | i as u64
 }
 
@@ -119,12 +120,12 @@ struct Part {
 
 /// Buffers of the long-list passes.
 #[derive(Clone, Debug, Default)]
-struct Work {
+pub(super) struct Work {
     parts: Vec<Part>,
     buf: Vec<Hot>,
     octs: Vec<u8>,
-    sweep: Vec<u64>,
-    sweep_own: Vec<u64>,
+    pub(super) sweep: Vec<u64>,
+    pub(super) sweep_own: Vec<u64>,
 }
 
 /// Buffers of the pair pass, reused by every pass; they never shrink.
@@ -136,10 +137,11 @@ pub(super) struct Scratch {
     /// `(walk key, id)` for trees too deep for a 32-bit key (depth 10).
     wide: Vec<(u64, u32)>,
     counts: Vec<u32>,
-    /// Walk-ordered copies: hot data, walk key, proxy key and sweep group of each sphere.
-    hot: Vec<Hot>,
-    node_key: Vec<u64>,
-    keys: Vec<ProxyKey>,
+    /// Walk-ordered copies: hot data, walk key, proxy key and sweep group of each sphere
+    /// (the group in strict mode only).
+    pub(super) hot: Vec<Hot>,
+    pub(super) node_key: Vec<u64>,
+    pub(super) keys: Vec<ProxyKey>,
     group: Vec<u8>,
     path: Vec<Level>,
     anc: Vec<Hot>,
@@ -147,19 +149,11 @@ pub(super) struct Scratch {
     /// of the level they are read at (see `Level::octs`).
     anc_oct: Vec<u8>,
     hot_oct: Vec<u8>,
-    work: Work,
+    pub(super) work: Work,
+    /// Buffers of the loose pair pass.
+    pub(super) loose: super::loose::Scratch,
     pub(super) tests: u64,
     pub(super) nodes_visited: u32,
-}
-
-/// Compacts every third bit of `x` (bit 3i → bit i); the inverse of `place::spread3`.
-#[inline]
-fn compact3(x: u32) -> u32 {
-    let mut x = x & 0x0924_9249;
-    x = (x | (x >> 2)) & 0x030c_30c3;
-    x = (x | (x >> 4)) & 0x0300_f00f;
-    x = (x | (x >> 8)) & 0x0300_00ff;
-    (x | (x >> 16)) & 0x3ff
 }
 
 /// LSD radix sort of `items` by bits `lo..lo + bits`, stable; `tmp` and `counts` are scratch.
@@ -200,15 +194,15 @@ fn radix_sort(items: &mut Vec<u64>, tmp: &mut Vec<u64>, counts: &mut Vec<u32>, l
 }
 
 /// Counts and runs the AABB tests of one pass, mapping walk positions to proxy keys.
-struct Tester<'a, F> {
-    keys: &'a [ProxyKey],
-    tests: u64,
-    emit: F,
+pub(super) struct Tester<'a, F> {
+    pub(super) keys: &'a [ProxyKey],
+    pub(super) tests: u64,
+    pub(super) emit: F,
 }
 
 impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
     #[inline]
-    fn test(&mut self, a: &Hot, b: &Hot) {
+    pub(super) fn test(&mut self, a: &Hot, b: &Hot) {
         self.tests += 1;
         self.emit_if(a, b);
     }
@@ -216,7 +210,7 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
     /// Emits the pair if it overlaps, without counting the test: the all-pairs loops count
     /// theirs in one addition.
     #[inline]
-    fn emit_if(&mut self, a: &Hot, b: &Hot) {
+    pub(super) fn emit_if(&mut self, a: &Hot, b: &Hot) {
         if a.overlaps(b) {
             self.emit(a, b);
         }
@@ -228,7 +222,7 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
     }
 
     /// Every pair within `list`, all against all.
-    fn all_pairs(&mut self, list: &[Hot]) {
+    pub(super) fn all_pairs(&mut self, list: &[Hot]) {
         let n = list.len() as u64;
         self.tests += n * n.saturating_sub(1) / 2;
         for (i, a) in list.iter().enumerate() {
@@ -549,7 +543,7 @@ impl Octree {
     /// Sorts the spheres by walk key and fills the walk-ordered arrays of `s`: box and cell
     /// range, walk key, proxy key, and the sweep group (the first axis whose mid plane of its
     /// own node the sphere straddles, 2 if none).
-    fn sort_into_walk_order(&self, s: &mut Scratch) {
+    pub(super) fn sort_into_walk_order(&self, s: &mut Scratch) {
         let Scratch {
             items,
             items_tmp,
@@ -587,6 +581,9 @@ impl Octree {
             );
             wide.sort_unstable();
             self.gather(wide.iter().copied(), hot, node_key, keys);
+        }
+        if self.placement == super::Placement::Loose {
+            return;
         }
         let d = self.depth;
         group.clear();

@@ -1,8 +1,9 @@
 //! Placement: which node a sphere lives in, computed in O(1), and the paged node arrays with
 //! their per-node list heads and child-occupancy masks.
 
-use super::{MAX_DEPTH, NONE, Obj, Octree};
+use super::{MAX_DEPTH, NONE, Obj, Octree, Placement};
 use crate::{Aabb, Vec3};
+use glam::Vec3A;
 
 /// First node index of each level: level `L` starts at `(8^L − 1)/7`; entry `MAX_DEPTH + 1` is
 /// the node count of a depth-`MAX_DEPTH` tree (1 227 133 513, fits in `u32`).
@@ -35,6 +36,16 @@ const fn spread3(v: u32) -> u32 {
     x = (x | (x << 8)) & 0x0300_f00f;
     x = (x | (x << 4)) & 0x030c_30c3;
     (x | (x << 2)) & 0x0924_9249
+}
+
+/// Compacts every third bit of `x` (bit 3i → bit i); the inverse of `spread3`.
+#[inline]
+pub(super) fn compact3(x: u32) -> u32 {
+    let mut x = x & 0x0924_9249;
+    x = (x | (x >> 2)) & 0x030c_30c3;
+    x = (x | (x >> 4)) & 0x0300_f00f;
+    x = (x | (x >> 8)) & 0x0300_00ff;
+    (x | (x >> 16)) & 0x3ff
 }
 
 /// The Morton code of cell `(x, y, z)`: x in bit 0 of each triple, y in bit 1, z in bit 2, so
@@ -76,6 +87,27 @@ pub fn depth_for(bounds: &Aabb, typical_radius: f32) -> u32 {
     }
 }
 
+/// A sensible depth for a [`Placement::Loose`] tree: the deepest level whose cells are still at
+/// least one sphere diameter along the bounds' shortest axis, so spheres of `typical_radius`
+/// (or smaller) are placed there, one level deeper than [`depth_for`] usually gives. Clamped to
+/// `0..=MAX_DEPTH`; a zero radius gives `MAX_DEPTH`; a negative or non-finite radius, or
+/// invalid bounds, give 0.
+#[must_use]
+pub fn depth_for_loose(bounds: &Aabb, typical_radius: f32) -> u32 {
+    let edge = bounds.extent().min_element();
+    if !(typical_radius >= 0.0 && typical_radius.is_finite() && edge > 0.0 && edge.is_finite()) {
+        return 0;
+    }
+    let cells = edge / (2.0 * typical_radius);
+    if cells < 1.0 {
+        0
+    } else if cells.is_finite() {
+        (cells.log2().floor() as u32).min(MAX_DEPTH)
+    } else {
+        MAX_DEPTH
+    }
+}
+
 /// Nodes per page of the paged node arrays.
 const PAGE_BITS: u32 = 12;
 const PAGE: usize = 1 << PAGE_BITS;
@@ -103,7 +135,7 @@ impl Nodes {
 
     /// Position of `node` in `head`/`mask`, if its page exists.
     #[inline]
-    fn slot(&self, node: u32) -> Option<usize> {
+    pub(super) fn slot(&self, node: u32) -> Option<usize> {
         let p = self.table[(node >> PAGE_BITS) as usize];
         (p != 0).then(|| (((p - 1) as usize) << PAGE_BITS) | (node as usize & (PAGE - 1)))
     }
@@ -120,10 +152,15 @@ impl Nodes {
         (((self.table[t] - 1) as usize) << PAGE_BITS) | (node as usize & (PAGE - 1))
     }
 
-    /// Nodes allocated in pages so far.
-    #[cfg(test)]
+    /// Nodes allocated in pages so far: every [`Nodes::slot`] is below this.
     pub(super) fn head_len(&self) -> usize {
         self.head.len()
+    }
+
+    /// The child mask of the node at position `slot`.
+    #[inline]
+    pub(super) fn mask_at(&self, slot: usize) -> u8 {
+        self.mask[slot]
     }
 
     #[inline]
@@ -188,8 +225,25 @@ impl Nodes {
 }
 
 impl Octree {
-    /// Where a sphere goes: its AABB, the AABB's corners as clamped cell coordinates, its
-    /// node, and whether the AABB leaves the bounds.
+    /// Where a sphere goes: its AABB, the AABB's corners as clamped grid coordinates, its
+    /// node, and whether it is kept in the root for not fitting (counted in `overflow`).
+    #[inline]
+    pub(super) fn locate(
+        &self,
+        center: Vec3,
+        radius: f32,
+    ) -> (Aabb, [u16; 3], [u16; 3], u32, bool) {
+        let aabb = Aabb::from_center_radius(center, radius);
+        let qmin = self.quantize(aabb.min);
+        let qmax = self.quantize(aabb.max);
+        let (node, outside) = match self.placement {
+            Placement::Strict => self.strict_node(&aabb, qmin, qmax),
+            Placement::Loose => self.loose_node(center, radius, qmin, qmax),
+        };
+        (aabb, qmin, qmax, node, outside)
+    }
+
+    /// Strict placement.
     ///
     /// Derivation. Map a coordinate to its deepest-level cell `q = floor((x − min)·2^d/extent)`,
     /// clamped to `0..2^d`. This map is monotone (float subtraction and multiplication by a
@@ -202,36 +256,98 @@ impl Octree {
     /// within that level is the Morton code of `qmin >> s`. A box leaving the bounds goes to
     /// the root; its clamped range still covers every cell it overlaps.
     #[inline]
-    pub(super) fn placement(
-        &self,
-        center: Vec3,
-        radius: f32,
-    ) -> (Aabb, [u16; 3], [u16; 3], u32, bool) {
-        let aabb = Aabb::from_center_radius(center, radius);
-        let qmin = self.quantize(aabb.min);
-        let qmax = self.quantize(aabb.max);
-        let outside = !self.bounds.contains(&aabb);
-        let node = if outside {
-            0
-        } else {
-            let x = (0..3).fold(0u32, |x, a| x | u32::from(qmin[a] ^ qmax[a]));
-            let s = 32 - x.leading_zeros();
-            let level = self.depth - s;
-            let c = qmin.map(|q| u32::from(q) >> s);
-            node_index(level, morton(c))
-        };
-        (aabb, qmin, qmax, node, outside)
+    fn strict_node(&self, aabb: &Aabb, qmin: [u16; 3], qmax: [u16; 3]) -> (u32, bool) {
+        if !self.bounds.contains(aabb) {
+            return (0, true);
+        }
+        let x = (0..3).fold(0u32, |x, a| x | u32::from(qmin[a] ^ qmax[a]));
+        let s = 32 - x.leading_zeros();
+        let level = self.depth - s;
+        let c = qmin.map(|q| u32::from(q) >> s);
+        (node_index(level, morton(c)), false)
     }
 
-    /// The deepest-level cell of a point, clamped to the grid. After clamping to `[0, top]`
+    /// Loose placement (looseness 2).
+    ///
+    /// Derivation. The integer grid has `2^(d+1)` cells per axis (`grid = d + 1`), half the
+    /// deepest cells, so a level-`L` cell `k` spans `S = 2^(d+1−L)` grid cells `[k·S, k·S+S−1]`
+    /// and its loose bounds, grown by `S/2` on each side, are the grid range
+    /// `[k·S − S/2, k·S + S − 1 + S/2]` (exact integers at every level). The float rule is
+    /// "radius ≤ half the level's cell size on every axis" (`half_cell`): the deepest such level
+    /// is `floor(log2(half_cell[0] / r))`, read from the quotient's exponent and corrected by one
+    /// table compare for its rounding. The pair pass relies on the integer version of "the box
+    /// is inside the loose bounds": with `qc` the centre's grid cell and `k = qc >> (grid − L)`,
+    /// the box's range `[qmin, qmax]` is inside `k`'s loose range whenever
+    /// `h = max(qc − qmin, qmax − qc) ≤ S/2 = 2^(d−L)` (worst cases `qc = k·S` and
+    /// `qc = k·S + S − 1`), i.e. for `L ≤ d − ceil_log2(h)`. Both rules agree except where
+    /// rounding makes the quantized box a cell wider; the sphere takes the shallower of the two
+    /// levels, so both hold. Clamping to the grid only moves range ends towards the grid, so a
+    /// clamped range stays inside the loose range and overlapping boxes keep overlapping ranges.
+    /// Centres outside the bounds and spheres too big for the root's loose bounds go to the
+    /// root as overflow.
+    #[inline]
+    fn loose_node(&self, center: Vec3, radius: f32, qmin: [u16; 3], qmax: [u16; 3]) -> (u32, bool) {
+        let Some(by_radius) = self.loose_level(radius) else {
+            return (0, true);
+        };
+        if !self.bounds.contains_point(center) {
+            return (0, true);
+        }
+        let qc = self.quantize(center);
+        let h = (0..3).fold(0u32, |h, a| {
+            h.max(u32::from(qc[a].saturating_sub(qmin[a])))
+                .max(u32::from(qmax[a].saturating_sub(qc[a])))
+        });
+        let need = if h <= 1 {
+            0
+        } else {
+            32 - (h - 1).leading_zeros()
+        };
+        if need > self.depth {
+            return (0, true);
+        }
+        let level = by_radius.min(self.depth - need);
+        let s = self.grid - level;
+        let c = qc.map(|q| u32::from(q) >> s);
+        (node_index(level, morton(c)), false)
+    }
+
+    /// The deepest level `L <= depth` with `radius <= half_cell[L]`, or `None` if even the root
+    /// is too small. `radius` is finite and `>= 0` (checked on input).
+    #[inline]
+    pub(super) fn loose_level(&self, radius: f32) -> Option<u32> {
+        let h = &self.half_cell;
+        if radius > h[0] {
+            return None;
+        }
+        let d = self.depth;
+        // `h[0] / radius >= 1`; its exponent is `floor(log2)` of it, off by at most one after
+        // the division's rounding (or when `h` is subnormal), which the compares fix.
+        let q = h[0] / radius;
+        let est = if q.is_finite() {
+            (q.to_bits() >> 23) as i32 - 127
+        } else {
+            d as i32
+        };
+        let mut l = est.clamp(0, d as i32) as u32;
+        while l > 0 && radius > h[l as usize] {
+            l -= 1;
+        }
+        while l < d && radius <= h[l as usize + 1] {
+            l += 1;
+        }
+        Some(l)
+    }
+
+    /// The grid cell of a point, clamped to the grid. After clamping to `[0, top]`
     /// the value is non-negative, where truncation (`as`) equals `floor`, and `floor` commutes
     /// with the clamp to integer limits; this avoids a libm `floorf` call per coordinate.
     #[inline]
     pub(super) fn quantize(&self, p: Vec3) -> [u16; 3] {
-        let top = ((1u32 << self.depth) - 1) as f32;
-        let q = ((p - self.bounds.min) * self.scale)
-            .max(Vec3::ZERO)
-            .min(Vec3::splat(top));
+        // `Vec3A` so the four operations are one SSE instruction each; same IEEE results.
+        let q = ((Vec3A::from(p) - self.grid_min) * self.scale)
+            .max(Vec3A::ZERO)
+            .min(self.grid_top);
         [q.x as u16, q.y as u16, q.z as u16]
     }
 

@@ -3,7 +3,7 @@
 //! per level plus the current node).
 
 use super::place::node_index;
-use super::{MAX_DEPTH, NONE, Octree};
+use super::{MAX_DEPTH, NONE, Octree, Placement};
 use crate::{Aabb, ProxyKey, Vec3, geom};
 
 /// Capacity of the inline traversal stack: one node, then at most 7 pending siblings per level.
@@ -56,19 +56,33 @@ impl Octree {
         }
     }
 
-    /// The cell of a node as an integer range at the deepest level.
+    /// The grid range that holds the ranges of the spheres placed in a node: its cell
+    /// (strict), or its loose bounds, the cell grown by half its size (loose; the low end is
+    /// clamped at 0, which no range is below).
     fn cell_range(&self, cell: &Cell) -> ([u32; 3], [u32; 3]) {
-        let shift = self.depth - cell.level;
+        let shift = self.grid - cell.level;
         let lo = cell.xyz.map(|c| c << shift);
-        (lo, lo.map(|l| l + (1 << shift) - 1))
+        let hi = lo.map(|l| l + (1 << shift) - 1);
+        match self.placement {
+            Placement::Strict => (lo, hi),
+            Placement::Loose => {
+                let half = (1 << shift) >> 1;
+                (lo.map(|l| l.saturating_sub(half)), hi.map(|h| h + half))
+            }
+        }
     }
 
-    /// The cell of a node as a box (rounded: a sphere placed in it may poke out by an ulp).
+    /// The box that holds the spheres placed in a node: its cell (strict) or its loose bounds
+    /// (loose); rounded, so a sphere placed in it may poke out by an ulp.
     fn cell_box(&self, cell: &Cell) -> Aabb {
         let size = self.bounds.extent() / (1u32 << cell.level) as f32;
         let min = self.bounds.min
             + Vec3::new(cell.xyz[0] as f32, cell.xyz[1] as f32, cell.xyz[2] as f32) * size;
-        Aabb::new(min, min + size)
+        let b = Aabb::new(min, min + size);
+        match self.placement {
+            Placement::Strict => b,
+            Placement::Loose => Aabb::new(b.min - size * 0.5, b.max + size * 0.5),
+        }
     }
 
     /// Visits the ids of every sphere whose integer range overlaps `aabb`'s (a superset of
@@ -185,7 +199,8 @@ impl Octree {
     }
 
     /// Calls `f(level, cell)` for every node that holds at least one sphere, parents before
-    /// their children. Overflow spheres live in the root, whose cell is the bounds.
+    /// their children: the cell itself in strict mode, its loose bounds (the cell grown by half
+    /// its size) in loose mode. Overflow spheres live in the root.
     pub fn for_each_occupied_cell(&self, mut f: impl FnMut(u32, Aabb)) {
         let mut stack = [Cell::default(); STACK];
         let mut len = usize::from(!self.objs.is_empty());

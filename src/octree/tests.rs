@@ -9,6 +9,8 @@ fn unit() -> Aabb {
     Aabb::new(Vec3::splat(-1.0), Vec3::ONE)
 }
 
+const BOTH: [Placement; 2] = [Placement::Strict, Placement::Loose];
+
 fn sorted_pairs(t: &mut Octree) -> Vec<Pair> {
     let mut out = Vec::new();
     t.pairs_into(&mut out);
@@ -56,125 +58,242 @@ fn depth_out_of_range_and_bad_bounds_are_refused() {
 
 #[test]
 fn depth_ten_is_cheap_and_works() {
-    let mut t = Octree::new(unit(), MAX_DEPTH).unwrap();
-    let a = t.insert(Vec3::splat(0.3), 0.0001).unwrap();
-    let b = t.insert(Vec3::splat(0.3001), 0.0001).unwrap();
-    let c = t.insert(Vec3::splat(-0.7), 0.0001).unwrap();
-    assert_eq!(t.level_of(a), Some(MAX_DEPTH));
-    assert_eq!(sorted_pairs(&mut t), vec![Pair::new(a, b)]);
-    // Few pages touched: the node arrays stay tiny although the tree has 1.2 G nodes.
-    assert!(t.nodes.head_len() <= 3 * 11 * 4096);
-    t.remove(c).unwrap();
-    t.validate();
+    for p in BOTH {
+        let mut t = Octree::with_placement(unit(), MAX_DEPTH, p).unwrap();
+        let a = t.insert(Vec3::splat(0.3), 0.0001).unwrap();
+        let b = t.insert(Vec3::splat(0.3001), 0.0001).unwrap();
+        let c = t.insert(Vec3::splat(-0.7), 0.0001).unwrap();
+        assert_eq!(t.level_of(a), Some(MAX_DEPTH));
+        assert_eq!(sorted_pairs(&mut t), vec![Pair::new(a, b)]);
+        // Few pages touched: the node arrays stay tiny although the tree has 1.2 G nodes.
+        assert!(t.nodes.head_len() <= 3 * 11 * 4096);
+        t.remove(c).unwrap();
+        t.validate();
+    }
 }
 
 #[test]
 fn outside_spheres_go_to_the_root_and_still_pair() {
-    let mut t = Octree::new(unit(), 3).unwrap();
-    let out = t.insert(Vec3::new(5.0, 0.5, 0.5), 4.2).unwrap();
-    let far = t.insert(Vec3::splat(100.0), 1.0).unwrap();
-    let inside = t.insert(Vec3::new(0.85, 0.5, 0.5), 0.05).unwrap();
-    assert_eq!(t.level_of(out), Some(0));
-    assert_eq!(t.level_of(far), Some(0));
-    assert_eq!(t.stats().overflow, 2);
-    assert_eq!(sorted_pairs(&mut t), vec![Pair::new(out, inside)]);
-    t.update(out, Vec3::ZERO, 0.1).unwrap();
-    assert_eq!(t.stats().overflow, 1);
-    t.validate();
+    for p in BOTH {
+        let mut t = Octree::with_placement(unit(), 3, p).unwrap();
+        let out = t.insert(Vec3::new(5.0, 0.5, 0.5), 4.2).unwrap();
+        let far = t.insert(Vec3::splat(100.0), 1.0).unwrap();
+        let inside = t.insert(Vec3::new(0.85, 0.5, 0.5), 0.05).unwrap();
+        assert_eq!(t.level_of(out), Some(0));
+        assert_eq!(t.level_of(far), Some(0));
+        assert_eq!(t.stats().overflow, 2);
+        assert_eq!(sorted_pairs(&mut t), vec![Pair::new(out, inside)]);
+        t.update(out, Vec3::ZERO, 0.1).unwrap();
+        assert_eq!(t.stats().overflow, 1);
+        t.validate();
+    }
 }
 
 #[test]
 fn a_move_inside_the_node_only_stores_the_sphere() {
-    let mut t = Octree::new(unit(), 2).unwrap();
-    let k = t.insert(Vec3::splat(0.7), 0.05).unwrap();
-    let node = t.objs[0].node;
-    t.update(k, Vec3::splat(0.75), 0.06).unwrap();
-    assert_eq!(t.objs[0].node, node);
-    assert_eq!(t.sphere(k), Some((Vec3::splat(0.75), 0.06)));
-    t.update(k, Vec3::splat(-0.75), 0.06).unwrap();
-    assert_ne!(t.objs[0].node, node);
-    t.validate();
+    for p in BOTH {
+        let mut t = Octree::with_placement(unit(), 2, p).unwrap();
+        let k = t.insert(Vec3::splat(0.7), 0.05).unwrap();
+        let node = t.objs[0].node;
+        t.update(k, Vec3::splat(0.75), 0.06).unwrap();
+        assert_eq!(t.objs[0].node, node);
+        assert_eq!(t.sphere(k), Some((Vec3::splat(0.75), 0.06)));
+        t.update(k, Vec3::splat(-0.75), 0.06).unwrap();
+        assert_ne!(t.objs[0].node, node);
+        t.validate();
+    }
 }
 
 #[test]
 fn bad_input_leaves_the_tree_unchanged() {
-    let mut t = Octree::new(unit(), 3).unwrap();
-    let keys: Vec<_> = (0..20)
-        .map(|i| t.insert(Vec3::splat(i as f32 * 0.1 - 1.0), 0.08).unwrap())
-        .collect();
-    let before = sorted_pairs(&mut t);
-    let boxes: Vec<_> = keys.iter().map(|&k| t.aabb(k)).collect();
-    let nan = Vec3::new(f32::NAN, 0.0, 0.0);
-    let inf = Vec3::new(0.0, f32::INFINITY, 0.0);
-    assert!(matches!(t.insert(nan, 1.0), Err(Error::NonFinite { .. })));
-    assert!(matches!(t.insert(inf, 1.0), Err(Error::NonFinite { .. })));
-    assert!(matches!(
-        t.insert(Vec3::ZERO, f32::NAN),
-        Err(Error::NonFinite { .. })
-    ));
-    assert_eq!(t.insert(Vec3::ZERO, -1.0), Err(Error::NegativeRadius(-1.0)));
-    assert!(matches!(
-        t.update(keys[3], nan, 1.0),
-        Err(Error::NonFinite { .. })
-    ));
-    assert_eq!(
-        t.update(keys[3], Vec3::ZERO, -0.5),
-        Err(Error::NegativeRadius(-0.5))
-    );
-    let stale = keys[5];
-    t.remove(stale).unwrap();
-    assert_eq!(t.remove(stale), Err(Error::UnknownProxy));
-    assert_eq!(t.update(stale, Vec3::ZERO, 1.0), Err(Error::UnknownProxy));
-    t.insert_keyed(stale, Vec3::ZERO, 0.1).unwrap();
-    t.remove(stale).unwrap();
-    let after_remove: Vec<_> = before
-        .iter()
-        .copied()
-        .filter(|p| p.a != stale && p.b != stale)
-        .collect();
-    assert_eq!(sorted_pairs(&mut t), after_remove);
-    for (k, b) in keys.iter().zip(&boxes) {
-        if *k != stale {
-            assert_eq!(t.aabb(*k), *b);
+    for p in BOTH {
+        let mut t = Octree::with_placement(unit(), 3, p).unwrap();
+        let keys: Vec<_> = (0..20)
+            .map(|i| t.insert(Vec3::splat(i as f32 * 0.1 - 1.0), 0.08).unwrap())
+            .collect();
+        let before = sorted_pairs(&mut t);
+        let boxes: Vec<_> = keys.iter().map(|&k| t.aabb(k)).collect();
+        let nan = Vec3::new(f32::NAN, 0.0, 0.0);
+        let inf = Vec3::new(0.0, f32::INFINITY, 0.0);
+        assert!(matches!(t.insert(nan, 1.0), Err(Error::NonFinite { .. })));
+        assert!(matches!(t.insert(inf, 1.0), Err(Error::NonFinite { .. })));
+        assert!(matches!(
+            t.insert(Vec3::ZERO, f32::NAN),
+            Err(Error::NonFinite { .. })
+        ));
+        assert_eq!(t.insert(Vec3::ZERO, -1.0), Err(Error::NegativeRadius(-1.0)));
+        assert!(matches!(
+            t.update(keys[3], nan, 1.0),
+            Err(Error::NonFinite { .. })
+        ));
+        assert_eq!(
+            t.update(keys[3], Vec3::ZERO, -0.5),
+            Err(Error::NegativeRadius(-0.5))
+        );
+        let stale = keys[5];
+        t.remove(stale).unwrap();
+        assert_eq!(t.remove(stale), Err(Error::UnknownProxy));
+        assert_eq!(t.update(stale, Vec3::ZERO, 1.0), Err(Error::UnknownProxy));
+        t.insert_keyed(stale, Vec3::ZERO, 0.1).unwrap();
+        t.remove(stale).unwrap();
+        let after_remove: Vec<_> = before
+            .iter()
+            .copied()
+            .filter(|p| p.a != stale && p.b != stale)
+            .collect();
+        assert_eq!(sorted_pairs(&mut t), after_remove);
+        for (k, b) in keys.iter().zip(&boxes) {
+            if *k != stale {
+                assert_eq!(t.aabb(*k), *b);
+            }
         }
+        assert_eq!(t.len(), 19);
+        t.validate();
     }
-    assert_eq!(t.len(), 19);
-    t.validate();
 }
 
 #[test]
 fn remove_relinks_the_moved_object() {
-    let mut t = Octree::new(unit(), 2).unwrap();
-    let keys: Vec<_> = (0..50)
-        .map(|i| {
-            t.insert(Vec3::splat((i % 7) as f32 * 0.25 - 0.75), 0.1)
-                .unwrap()
-        })
-        .collect();
-    for &k in keys.iter().step_by(3) {
-        t.remove(k).unwrap();
-        t.validate();
+    for p in BOTH {
+        let mut t = Octree::with_placement(unit(), 2, p).unwrap();
+        let keys: Vec<_> = (0..50)
+            .map(|i| {
+                t.insert(Vec3::splat((i % 7) as f32 * 0.25 - 0.75), 0.1)
+                    .unwrap()
+            })
+            .collect();
+        for &k in keys.iter().step_by(3) {
+            t.remove(k).unwrap();
+            t.validate();
+        }
+        assert_eq!(sorted_pairs(&mut t), brute::pairs(&proxies(&t)));
     }
-    assert_eq!(sorted_pairs(&mut t), brute::pairs(&proxies(&t)));
 }
 
 #[test]
 fn gas_pairs_match_the_sweep_reference() {
-    let mut g = Gas::new(3000, 11);
-    let mut t = Octree::new(g.bounds, depth_for(&g.bounds, g.radius)).unwrap();
-    let keys: Vec<_> = g
-        .centers
-        .iter()
-        .map(|&c| t.insert(c, g.radius).unwrap())
-        .collect();
-    for _ in 0..3 {
-        g.step(0.2);
-        for (&k, &c) in keys.iter().zip(&g.centers) {
-            t.update(k, c, g.radius).unwrap();
+    for p in BOTH {
+        let mut g = Gas::new(3000, 11);
+        let depth = match p {
+            Placement::Strict => depth_for(&g.bounds, g.radius),
+            Placement::Loose => depth_for_loose(&g.bounds, g.radius),
+        };
+        let mut t = Octree::with_placement(g.bounds, depth, p).unwrap();
+        let keys: Vec<_> = g
+            .centers
+            .iter()
+            .map(|&c| t.insert(c, g.radius).unwrap())
+            .collect();
+        for _ in 0..3 {
+            g.step(0.2);
+            for (&k, &c) in keys.iter().zip(&g.centers) {
+                t.update(k, c, g.radius).unwrap();
+            }
+            t.validate();
+            assert_eq!(
+                sorted_pairs(&mut t),
+                brute::sweep_pairs(&proxies(&t)),
+                "{p:?}"
+            );
         }
-        t.validate();
-        assert_eq!(sorted_pairs(&mut t), brute::sweep_pairs(&proxies(&t)));
     }
+}
+
+/// RTCD 7.3.6 with looseness 2: the level depends only on the radius (the deepest whose half
+/// cell holds it), the cell only on the centre, so a sphere on a split plane still goes deep.
+#[test]
+fn loose_placement_follows_the_radius_and_the_centre() {
+    let mut t = Octree::with_placement(unit(), 3, Placement::Loose).unwrap();
+    assert_eq!(t.placement(), Placement::Loose);
+    // Cells at levels 0..=3 are 2, 1, 0.5, 0.25 wide: half cells 1, 0.5, 0.25, 0.125.
+    let node_of = |t: &Octree, k: ProxyKey| t.objs[t.ids[k] as usize].node;
+    let small = t.insert(Vec3::splat(-0.5), 0.1).unwrap();
+    assert_eq!(t.level_of(small), Some(3));
+    // The centre −0.5 is the low corner of cell 2 of 8 (`[-0.5, -0.25)`) on each axis.
+    assert_eq!(
+        node_of(&t, small),
+        place::node_index(3, place::morton([2, 2, 2]))
+    );
+    // On the root's three planes: strict keeps it in the root, loose puts it at level 3, in
+    // the cell whose low corner is the centre.
+    let on_planes = t.insert(Vec3::ZERO, 0.1).unwrap();
+    assert_eq!(t.level_of(on_planes), Some(3));
+    assert_eq!(
+        node_of(&t, on_planes),
+        place::node_index(3, place::morton([4, 4, 4]))
+    );
+    let mut strict = Octree::new(unit(), 3).unwrap();
+    let k = strict.insert(Vec3::ZERO, 0.1).unwrap();
+    assert_eq!(strict.level_of(k), Some(0));
+    // The level is the deepest whose half cell is at least the radius, wherever the centre.
+    for (r, level) in [
+        (0.125, 3),
+        (0.126, 2),
+        (0.25, 2),
+        (0.3, 1),
+        (0.5, 1),
+        (0.6, 0),
+        (1.0, 0),
+    ] {
+        for c in [
+            Vec3::splat(-0.99),
+            Vec3::new(0.01, -0.3, 0.9),
+            Vec3::splat(0.999),
+        ] {
+            let k = t.insert(c, r).unwrap();
+            assert_eq!(t.level_of(k), Some(level), "radius {r} at {c}");
+        }
+    }
+    // Zero radius goes to the deepest level; a diameter above the shortest side or a centre
+    // outside the bounds goes to the root as overflow.
+    let point = t.insert(Vec3::new(0.9, 0.9, -0.9), 0.0).unwrap();
+    assert_eq!(t.level_of(point), Some(3));
+    assert_eq!(t.stats().overflow, 0);
+    let big = t.insert(Vec3::ZERO, 1.01).unwrap();
+    let out = t.insert(Vec3::new(1.05, 0.0, 0.0), 0.01).unwrap();
+    assert_eq!((t.level_of(big), t.level_of(out)), (Some(0), Some(0)));
+    assert_eq!(t.stats().overflow, 2);
+    t.update(out, Vec3::new(0.95, 0.0, 0.0), 0.01).unwrap();
+    assert_eq!(t.level_of(out), Some(3));
+    assert_eq!(t.stats().overflow, 1);
+    t.validate();
+    assert_eq!(sorted_pairs(&mut t), brute::pairs(&proxies(&t)));
+    t.remove(big).unwrap();
+    assert_eq!(t.stats().overflow, 0);
+    t.validate();
+}
+
+#[test]
+#[should_panic(expected = "would fit a deeper level")]
+fn validate_catches_a_loose_sphere_placed_too_shallow() {
+    let mut t = Octree::with_placement(unit(), 3, Placement::Loose).unwrap();
+    let k = t.insert(Vec3::splat(0.3), 0.01).unwrap();
+    let id = t.ids[k];
+    // Relink it in its level-2 ancestor: the box still fits, but the rule says level 3.
+    let node = place::node_index(2, place::morton([2, 2, 2]));
+    t.unlink(id);
+    t.per_level[3] -= 1;
+    t.per_level[2] += 1;
+    t.link(id, node);
+    t.validate();
+}
+
+/// The loose depth for gas puts every sphere on one level, in cells about one diameter wide.
+#[test]
+fn loose_gas_lands_on_one_level() {
+    let g = Gas::new(20_000, 3);
+    let depth = depth_for_loose(&g.bounds, g.radius);
+    assert_eq!(depth, depth_for(&g.bounds, g.radius) + 1);
+    let mut t = Octree::with_placement(g.bounds, depth, Placement::Loose).unwrap();
+    for &c in &g.centers {
+        t.insert(c, g.radius).unwrap();
+    }
+    assert_eq!(t.stats().per_level[depth as usize], g.len() as u32);
+    let pairs = sorted_pairs(&mut t);
+    assert_eq!(pairs, brute::sweep_pairs(&proxies(&t)));
+    // 13 forward neighbour cells of about 0.6 spheres each, plus the own cell.
+    let tests = t.stats().aabb_tests;
+    assert!(tests < 10 * g.len() as u64, "{tests} AABB tests");
 }
 
 /// The clustered scene must not make the walk quadratic: the AABB tests stay within a small
@@ -182,20 +301,25 @@ fn gas_pairs_match_the_sweep_reference() {
 #[test]
 fn clustered_pair_pass_is_not_quadratic() {
     let g = Gas::clustered(20_000, 5);
-    let mut t = Octree::new(g.bounds, depth_for(&g.bounds, g.radius)).unwrap();
-    for &c in &g.centers {
-        t.insert(c, g.radius).unwrap();
+    for (p, depth) in [
+        (Placement::Strict, depth_for(&g.bounds, g.radius)),
+        (Placement::Loose, depth_for_loose(&g.bounds, g.radius)),
+    ] {
+        let mut t = Octree::with_placement(g.bounds, depth, p).unwrap();
+        for &c in &g.centers {
+            t.insert(c, g.radius).unwrap();
+        }
+        let pairs = sorted_pairs(&mut t);
+        assert_eq!(pairs, brute::sweep_pairs(&proxies(&t)));
+        let tests = t.stats().aabb_tests;
+        let budget = 12 * (g.len() + pairs.len()) as u64;
+        assert!(
+            tests < budget,
+            "{p:?}: {tests} AABB tests for {} spheres and {} pairs",
+            g.len(),
+            pairs.len()
+        );
     }
-    let pairs = sorted_pairs(&mut t);
-    assert_eq!(pairs, brute::sweep_pairs(&proxies(&t)));
-    let tests = t.stats().aabb_tests;
-    let budget = 12 * (g.len() + pairs.len()) as u64;
-    assert!(
-        tests < budget,
-        "{tests} AABB tests for {} spheres and {} pairs",
-        g.len(),
-        pairs.len()
-    );
 }
 
 /// The pair pass sorts with a 32-bit radix key up to depth 9 and a comparison sort at depth
@@ -204,8 +328,11 @@ fn clustered_pair_pass_is_not_quadratic() {
 #[test]
 fn walk_order_pairs_match_brute_force_at_every_depth() {
     let mut rng = crate::scene::Rng::new(17);
-    for depth in [0, 1, 3, 8, 9, MAX_DEPTH] {
-        let mut t = Octree::new(unit(), depth).unwrap();
+    for (depth, p) in [0, 1, 3, 8, 9, MAX_DEPTH]
+        .into_iter()
+        .flat_map(|d| BOTH.map(|p| (d, p)))
+    {
+        let mut t = Octree::with_placement(unit(), depth, p).unwrap();
         for i in 0..600 {
             let (c, r) = match i % 6 {
                 // A crowd in one small region, so deep lists are long.
@@ -231,7 +358,7 @@ fn walk_order_pairs_match_brute_force_at_every_depth() {
         assert_eq!(
             sorted_pairs(&mut t),
             brute::pairs(&proxies(&t)),
-            "depth {depth}"
+            "depth {depth} {p:?}"
         );
     }
 }
