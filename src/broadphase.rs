@@ -193,8 +193,13 @@ impl BroadPhase {
 
     /// Builds from a validated config: every structure's constructor succeeds on it.
     fn build(config: Config) -> Self {
+        // Fuller leaves than the standalone default (8, traversal cost 4): the pair passes
+        // are the hot path here, and a leaf's all-pairs loop is cheaper than the node pairs
+        // it replaces (bodies 10k step: about 325 -> 310 ns/object, wall-clock medians).
         let bvh_config = BvhConfig {
             rebuild_threshold: config.rebuild_threshold,
+            max_leaf_size: 16,
+            traversal_cost: 8.0,
             ..BvhConfig::default()
         };
         let octree =
