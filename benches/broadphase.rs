@@ -3,7 +3,7 @@
 //! centre with `Octree::update`, and collects all pairs with `pairs_into` into a cleared,
 //! reused `Vec`. Throughput is spheres, so criterion's elements/s inverts to ns/object/step.
 
-use broadleaf::octree::{Octree, depth_for};
+use broadleaf::octree::{Octree, Placement, depth_for, depth_for_loose};
 use broadleaf::scene::{DT, Gas};
 use broadleaf::{Pair, ProxyKey};
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
@@ -16,10 +16,18 @@ fn octree_step(c: &mut Criterion) {
         ("gas", Gas::new(100_000, 1)),
         ("clustered", Gas::clustered(100_000, 1)),
     ];
-    for (name, scene) in scenes {
+    let placements = [("", Placement::Strict), ("-loose", Placement::Loose)];
+    for ((name, scene), (suffix, placement)) in scenes
+        .into_iter()
+        .flat_map(|s| placements.map(move |p| (s.clone(), p)))
+    {
         let mut gas = scene;
-        let depth = depth_for(&gas.bounds, gas.radius);
-        let mut tree = Octree::new(gas.bounds, depth).expect("scene bounds are valid");
+        let depth = match placement {
+            Placement::Strict => depth_for(&gas.bounds, gas.radius),
+            Placement::Loose => depth_for_loose(&gas.bounds, gas.radius),
+        };
+        let mut tree =
+            Octree::with_placement(gas.bounds, depth, placement).expect("scene bounds are valid");
         let keys: Vec<ProxyKey> = gas
             .centers
             .iter()
@@ -27,18 +35,21 @@ fn octree_step(c: &mut Criterion) {
             .collect();
         let mut pairs: Vec<Pair> = Vec::new();
         group.throughput(Throughput::Elements(gas.len() as u64));
-        group.bench_function(BenchmarkId::new(name, gas.len()), |b| {
-            b.iter(|| {
-                gas.step(DT);
-                for (&k, &c) in keys.iter().zip(&gas.centers) {
-                    tree.update(k, c, gas.radius)
-                        .expect("live key, valid sphere");
-                }
-                pairs.clear();
-                tree.pairs_into(&mut pairs);
-                black_box(pairs.len())
-            });
-        });
+        group.bench_function(
+            BenchmarkId::new(format!("{name}{suffix}"), gas.len()),
+            |b| {
+                b.iter(|| {
+                    gas.step(DT);
+                    for (&k, &c) in keys.iter().zip(&gas.centers) {
+                        tree.update(k, c, gas.radius)
+                            .expect("live key, valid sphere");
+                    }
+                    pairs.clear();
+                    tree.pairs_into(&mut pairs);
+                    black_box(pairs.len())
+                });
+            },
+        );
     }
     group.finish();
 }
@@ -175,7 +186,7 @@ mod bvh_benches {
 // Scenes: broadleaf's whole `BroadPhase` step next to rapier's broad phase, same motion.
 // ---------------------------------------------------------------------------------------------
 mod scene_benches {
-    use broadleaf::octree::depth_for;
+    use broadleaf::octree::{Placement, depth_for, depth_for_loose};
     use broadleaf::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Scene, Spawn};
     use broadleaf::{BroadPhase, Config};
     use criterion::{BenchmarkId, Criterion, Throughput};
@@ -201,11 +212,15 @@ mod scene_benches {
 
     /// broadleaf: each iteration advances the scene (untimed) and times applying the frame
     /// plus `step()` — the full step of `benchmarks.md`.
-    fn broadleaf(scene: &mut dyn Scene, iters: u64) -> Duration {
+    fn broadleaf(scene: &mut dyn Scene, iters: u64, placement: Placement) -> Duration {
         let bounds = scene.bounds();
         let mut bp = BroadPhase::new(Config {
             bounds,
-            octree_depth: depth_for(&bounds, GAS_RADIUS),
+            octree_depth: match placement {
+                Placement::Strict => depth_for(&bounds, GAS_RADIUS),
+                Placement::Loose => depth_for_loose(&bounds, GAS_RADIUS),
+            },
+            octree_placement: placement,
             ..Config::default()
         });
         let mut feed = Feed::new(false);
@@ -256,8 +271,13 @@ mod scene_benches {
             group.measurement_time(Duration::from_secs(3));
             group.throughput(Throughput::Elements(n as u64));
             group.bench_function(BenchmarkId::new("broadleaf", n), |b| {
-                b.iter_custom(|iters| broadleaf(&mut *make(), iters));
+                b.iter_custom(|iters| broadleaf(&mut *make(), iters, Placement::Strict));
             });
+            if name != "bodies" {
+                group.bench_function(BenchmarkId::new("broadleaf-loose", n), |b| {
+                    b.iter_custom(|iters| broadleaf(&mut *make(), iters, Placement::Loose));
+                });
+            }
             #[cfg(feature = "rapier")]
             group.bench_function(BenchmarkId::new("rapier", n), |b| {
                 b.iter_custom(|iters| rapier(&mut *make(), iters));
