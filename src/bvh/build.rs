@@ -10,16 +10,7 @@ use slotmap::Key;
 /// The most SAH buckets a node may use (`BvhConfig::sah_buckets`).
 pub(crate) const MAX_BUCKETS: usize = 64;
 
-/// A primitive's box as the build sees it, in SIMD lanes: 32 bytes, so the binning and
-/// partition passes stream contiguous memory. Its index before the build travels in the
-/// parallel `ids` array, swapped with it.
-#[derive(Clone, Copy, Debug)]
-struct Ref {
-    min: Vec3A, // 16 bytes
-    max: Vec3A, // 16 bytes
-}
-
-impl Ref {
+impl PrimBox {
     /// Twice the centroid, `min + max`: the build bins and splits on doubled centroids, which
     /// orders and buckets them exactly as the centroids would be.
     #[inline]
@@ -46,7 +37,7 @@ impl Bounds {
     };
 
     #[inline]
-    fn add(&mut self, r: &Ref) {
+    fn add(&mut self, r: &PrimBox) {
         let c = r.c2();
         self.min = self.min.min(r.min);
         self.max = self.max.max(r.max);
@@ -75,7 +66,7 @@ impl Bounds {
         Aabb::new(self.min.into(), self.max.into())
     }
 
-    fn of(refs: &[Ref]) -> Bounds {
+    fn of(refs: &[PrimBox]) -> Bounds {
         let mut b = Bounds::EMPTY;
         refs.iter().for_each(|r| b.add(r));
         b
@@ -110,8 +101,7 @@ impl Bucket {
 /// Buffers every build reuses, so a rebuild allocates only when the tree grew.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct BuildScratch {
-    refs: Vec<Ref>,
-    /// `ids[i]`: the primitive index (before the build) of `refs[i]`.
+    /// `ids[i]`: the primitive index (before the build) of the box now at `boxes[i]`.
     ids: Vec<u32>,
     tasks: Vec<Task>,
     keys: Vec<ProxyKey>,
@@ -125,7 +115,7 @@ struct Work {
     /// `right[i]`: the union of the buckets (or sorted boxes) right of plane `i`.
     right: Vec<Bucket>,
     order: Vec<(f32, u32)>,
-    tmp_refs: Vec<Ref>,
+    tmp_refs: Vec<PrimBox>,
     tmp_ids: Vec<u32>,
 }
 
@@ -143,18 +133,18 @@ impl Bvh {
     /// only when the tree grew past its largest size so far.
     pub fn rebuild(&mut self) {
         let mut s = core::mem::take(&mut self.scratch);
-        s.refs.clear();
+        // The build partitions `boxes` itself: drop the tombstones, remembering where each
+        // live box came from.
         s.ids.clear();
-        for (i, (aabb, key)) in self.boxes.iter().zip(&self.keys).enumerate() {
-            if !key.is_null() {
-                s.refs.push(Ref {
-                    min: aabb.min,
-                    max: aabb.max,
-                });
+        let mut n = 0;
+        for i in 0..self.boxes.len() {
+            if !self.keys[i].is_null() {
+                self.boxes[n] = self.boxes[i];
                 s.ids.push(i as u32);
+                n += 1;
             }
         }
-        let n = s.refs.len();
+        self.boxes.truncate(n);
         self.nodes.clear();
         self.parent.clear();
         self.leaf_of.clear();
@@ -162,23 +152,23 @@ impl Bvh {
         build_nodes(
             &self.config,
             &mut s,
+            &mut self.boxes,
             &mut self.nodes,
             &mut self.parent,
             &mut self.leaf_of,
         );
         // Renumber: primitive index = position in tree order, so a leaf's range indexes
-        // `boxes` and `keys` directly and traversals read contiguous memory.
+        // `boxes` and `keys` directly and traversals read contiguous memory. A rebuild of a
+        // tree whose boxes barely moved leaves most primitives in place, and their entries in
+        // `ids` (random writes into a slotmap) need no update.
         s.keys.clear();
         s.keys
             .extend(s.ids.iter().map(|&id| self.keys[id as usize]));
-        self.boxes.clear();
-        self.boxes.extend(s.refs.iter().map(|r| PrimBox {
-            min: r.min,
-            max: r.max,
-        }));
         core::mem::swap(&mut self.keys, &mut s.keys);
-        for (i, &key) in self.keys.iter().enumerate() {
-            self.ids[key] = i as u32;
+        for (i, (&key, &old)) in self.keys.iter().zip(&s.ids).enumerate() {
+            if old != i as u32 {
+                self.ids[key] = i as u32;
+            }
         }
         self.tree_len = n;
         self.tombstones = 0;
@@ -188,7 +178,7 @@ impl Bvh {
     }
 }
 
-/// Builds the depth-first array over `s.refs`, reordering `s.refs` and `s.ids` into tree order.
+/// Builds the depth-first array over `refs`, reordering `refs` and `s.ids` into tree order.
 ///
 /// Depth-first order with an explicit stack: a task's node gets the next free index when it
 /// is popped; a split pushes the second child, then the first, so the first child is popped
@@ -197,16 +187,13 @@ impl Bvh {
 fn build_nodes(
     config: &BvhConfig,
     s: &mut BuildScratch,
+    refs: &mut [PrimBox],
     nodes: &mut Vec<Node>,
     parent: &mut Vec<u32>,
     leaf_of: &mut [u32],
 ) {
     let BuildScratch {
-        refs,
-        ids,
-        tasks,
-        work,
-        ..
+        ids, tasks, work, ..
     } = s;
     if refs.is_empty() {
         return;
@@ -268,7 +255,7 @@ fn build_nodes(
 fn split(
     config: &BvhConfig,
     work: &mut Work,
-    refs: &mut [Ref],
+    refs: &mut [PrimBox],
     ids: &mut [u32],
     bounds: &Bounds,
 ) -> Option<Split> {
@@ -332,13 +319,13 @@ fn split(
 fn sah_split<const AXIS: usize>(
     config: &BvhConfig,
     work: &mut Work,
-    refs: &mut [Ref],
+    refs: &mut [PrimBox],
     ids: &mut [u32],
     bounds: &Bounds,
 ) -> Option<Split> {
     let n = refs.len();
     let nb = config.sah_buckets as usize;
-    // `x = (c − lo)·scale ∈ [0, nb]` for a doubled centroid `c` (the same sum as `Ref::c2`'s
+    // `x = (c − lo)·scale ∈ [0, nb]` for a doubled centroid `c` (the same sum as `PrimBox::c2`'s
     // lane, so the bins and the partition agree with the bounds; `x >= 0` exactly, as `lo` is
     // the least such sum). Adding 1.5·2²³, whose float spacing is 1, rounds `x` to the nearest
     // integer, read back from the bits; clamped to `nb − 1`, that is the bucket: monotone in
@@ -348,9 +335,9 @@ fn sah_split<const AXIS: usize>(
     const MAGIC: f32 = 12_582_912.0;
     let lo = bounds.cmin[AXIS];
     let scale = nb as f32 / (bounds.cmax[AXIS] - lo);
-    let rounded = |r: &Ref| (r.min[AXIS] + r.max[AXIS] - lo) * scale + MAGIC;
+    let rounded = |r: &PrimBox| (r.min[AXIS] + r.max[AXIS] - lo) * scale + MAGIC;
     let bucket_of =
-        |r: &Ref| (rounded(r).to_bits().wrapping_sub(MAGIC.to_bits()) as usize).min(nb - 1);
+        |r: &PrimBox| (rounded(r).to_bits().wrapping_sub(MAGIC.to_bits()) as usize).min(nb - 1);
 
     let Work { buckets, right, .. } = work;
     let buckets = &mut buckets[..nb];
@@ -416,7 +403,7 @@ fn merge(a: &Bucket, b: &Bucket) -> Bucket {
 fn sweep_split(
     config: &BvhConfig,
     work: &mut Work,
-    refs: &mut [Ref],
+    refs: &mut [PrimBox],
     ids: &mut [u32],
     bounds: &Bounds,
     axis: usize,
@@ -449,7 +436,7 @@ fn sweep_split(
 }
 
 /// Sorts `refs` (and `ids` alongside) by centroid along `axis`, through the gather buffers.
-fn sort_by_axis(work: &mut Work, refs: &mut [Ref], ids: &mut [u32], axis: usize) {
+fn sort_by_axis(work: &mut Work, refs: &mut [PrimBox], ids: &mut [u32], axis: usize) {
     let Work {
         order,
         tmp_refs,
@@ -484,9 +471,9 @@ fn insertion_sort(order: &mut [(f32, u32)]) {
 /// Reorders `refs` and `ids` so that position `k` holds what was at `order[k].1`.
 fn gather(
     order: &[(f32, u32)],
-    tmp_refs: &mut Vec<Ref>,
+    tmp_refs: &mut Vec<PrimBox>,
     tmp_ids: &mut Vec<u32>,
-    refs: &mut [Ref],
+    refs: &mut [PrimBox],
     ids: &mut [u32],
 ) {
     tmp_refs.clear();
@@ -498,7 +485,7 @@ fn gather(
 }
 
 /// Splits at the median centroid along `axis` (`select_nth_unstable_by`, O(n)).
-fn median_split(work: &mut Work, refs: &mut [Ref], ids: &mut [u32], axis: usize) -> Split {
+fn median_split(work: &mut Work, refs: &mut [PrimBox], ids: &mut [u32], axis: usize) -> Split {
     let mid = refs.len() / 2;
     let Work {
         order,
@@ -518,7 +505,7 @@ fn median_split(work: &mut Work, refs: &mut [Ref], ids: &mut [u32], axis: usize)
 }
 
 /// The split `refs[..mid]` / `refs[mid..]` as they lie, with bounds computed by one pass.
-fn halves(refs: &[Ref], mid: usize) -> Split {
+fn halves(refs: &[PrimBox], mid: usize) -> Split {
     Split {
         mid,
         left: Bounds::of(&refs[..mid]),
@@ -528,7 +515,7 @@ fn halves(refs: &[Ref], mid: usize) -> Split {
 
 /// Moves the refs satisfying `left` (and their ids) to the front (Hoare's scheme: each
 /// misplaced pair is swapped once) and returns how many there are.
-fn partition(refs: &mut [Ref], ids: &mut [u32], left: impl Fn(&Ref) -> bool) -> usize {
+fn partition(refs: &mut [PrimBox], ids: &mut [u32], left: impl Fn(&PrimBox) -> bool) -> usize {
     let (mut i, mut j) = (0, refs.len());
     loop {
         while i < j && left(&refs[i]) {
@@ -552,10 +539,10 @@ mod tests {
     use super::*;
 
     /// Unit boxes with their min corner at `(x, 0, 0)`, and their ids `0..`.
-    fn refs(xs: &[f32]) -> (Vec<Ref>, Vec<u32>) {
+    fn refs(xs: &[f32]) -> (Vec<PrimBox>, Vec<u32>) {
         let refs = xs
             .iter()
-            .map(|&x| Ref {
+            .map(|&x| PrimBox {
                 min: Vec3A::new(x, 0.0, 0.0),
                 max: Vec3A::new(x + 1.0, 1.0, 1.0),
             })
