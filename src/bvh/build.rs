@@ -70,8 +70,7 @@ impl Bounds {
     /// Surface area of the box union; 0 when empty (as [`Aabb::surface_area`]).
     #[inline]
     fn area(&self) -> f32 {
-        let d = (self.max - self.min).max(Vec3A::ZERO);
-        2.0 * (d.x * d.y + d.y * d.z + d.z * d.x)
+        area(self.min, self.max)
     }
 
     fn aabb(&self) -> Aabb {
@@ -83,6 +82,13 @@ impl Bounds {
         refs.iter().for_each(|r| b.add(r));
         b
     }
+}
+
+/// Surface area of the box `min..max`; 0 when empty (as [`Aabb::surface_area`]).
+#[inline]
+fn area(min: Vec3A, max: Vec3A) -> f32 {
+    let d = (max - min).max(Vec3A::ZERO);
+    2.0 * (d.x * d.y + d.y * d.z + d.z * d.x)
 }
 
 /// A node still to be made: the primitive range `start..end`, the parent to link it to, and
@@ -128,7 +134,7 @@ struct Work {
     /// Nodes of at least this many primitives use all the copies: [`BIN_SETS_MIN`] (tests
     /// change it to compare both ways).
     bin_sets_min: usize,
-    /// `right[i]`: the union of the buckets (or sorted boxes) right of plane `i`.
+    /// `right[i]`: the union of the buckets right of plane `i`.
     right: Vec<Bucket>,
     order: Vec<(f32, u32)>,
     /// `bins[k]`: the SAH bucket of the node's `k`-th primitive, from the binning pass.
@@ -305,7 +311,7 @@ fn split(
         };
     }
     match config.split {
-        SplitMethod::Sah if n <= nb => sweep_split(config, work, refs, ids, bounds, axis),
+        SplitMethod::Sah if n <= nb => sweep_split(config, refs, ids, bounds, axis),
         // One copy per axis, so the hot loops read the coordinate straight from memory.
         SplitMethod::Sah => match axis {
             0 => sah_split::<0>(config, work, refs, ids, bounds),
@@ -474,7 +480,6 @@ fn merge(a: &Bucket, b: &Bucket) -> Bucket {
 /// rule as the binned version, which would spend more time on its buckets than on the node).
 fn sweep_split(
     config: &BvhConfig,
-    work: &mut Work,
     refs: &mut [PrimBox],
     ids: &mut [u32],
     bounds: &Bounds,
@@ -483,29 +488,27 @@ fn sweep_split(
     let n = refs.len();
     debug_assert!(n <= MAX_BUCKETS);
     sort_by_axis(refs, ids, axis);
-    let right = &mut work.right;
-    let mut acc = Bounds::EMPTY;
+    // The sweeps track the boxes only (the centroid bounds matter for the chosen halves
+    // alone, computed once at the end): `right_area[i]` is the area right of split `i`.
+    let mut right_area = [0.0f32; MAX_BUCKETS];
+    let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
     for i in (1..n).rev() {
-        acc.add(&refs[i]);
-        right[i - 1].bounds = acc;
+        (lo, hi) = (lo.min(refs[i].min), hi.max(refs[i].max));
+        right_area[i - 1] = area(lo, hi);
     }
-    let (mut best_cost, mut best_mid, mut best_left) = (f32::INFINITY, 1, Bounds::EMPTY);
-    let mut acc = Bounds::EMPTY;
+    let (mut best_cost, mut best_mid) = (f32::INFINITY, 1);
+    let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
     for i in 0..n - 1 {
-        acc.add(&refs[i]);
-        let cost = (i + 1) as f32 * acc.area() + (n - i - 1) as f32 * right[i].bounds.area();
+        (lo, hi) = (lo.min(refs[i].min), hi.max(refs[i].max));
+        let cost = (i + 1) as f32 * area(lo, hi) + (n - i - 1) as f32 * right_area[i];
         if i == 0 || cost < best_cost {
-            (best_cost, best_mid, best_left) = (cost, i + 1, acc);
+            (best_cost, best_mid) = (cost, i + 1);
         }
     }
     if leaf_is_cheaper(config, n, bounds, best_cost) {
         return None;
     }
-    Some(Split {
-        mid: best_mid,
-        left: best_left,
-        right: right[best_mid - 1].bounds,
-    })
+    Some(halves(refs, best_mid))
 }
 
 /// Sorts `refs` (and `ids` alongside) by centroid along `axis`, stably, by insertion: the few
