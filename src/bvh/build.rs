@@ -134,8 +134,6 @@ struct Work {
     /// Nodes of at least this many primitives use all the copies: [`BIN_SETS_MIN`] (tests
     /// change it to compare both ways).
     bin_sets_min: usize,
-    /// `right[i]`: the union of the buckets right of plane `i`.
-    right: Vec<Bucket>,
     order: Vec<(f32, u32)>,
     /// `bins[k]`: the SAH bucket of the node's `k`-th primitive, from the binning pass.
     bins: Vec<u8>,
@@ -227,10 +225,8 @@ fn build_nodes(
     if refs.is_empty() {
         return;
     }
-    let nb = config.sah_buckets as usize;
     work.buckets.resize(BIN_SETS, [Bucket::EMPTY; MAX_BUCKETS]);
     work.bin_sets_min = BIN_SETS_MIN;
-    work.right.resize(nb.max(MAX_BUCKETS), Bucket::EMPTY);
     tasks.clear();
     tasks.push(Task {
         start: 0,
@@ -388,7 +384,6 @@ fn sah_split<const AXIS: usize>(
     let Work {
         buckets: sets,
         bin_sets_min,
-        right,
         bins,
         ..
     } = work;
@@ -424,26 +419,34 @@ fn sah_split<const AXIS: usize>(
         }
     }
     let buckets = &s0[..nb];
-    // right[i]: the union of buckets i+1.. (the right side of plane i).
-    let mut acc = Bucket::EMPTY;
+    // The sweeps track counts and box areas only: `right_cost[i]` is `N·S` of the buckets
+    // right of plane `i`. The chosen plane's full bounds (centroids too) are merged at the end.
+    let mut right_cost = [0.0f32; MAX_BUCKETS];
+    let (mut count, mut lo, mut hi) = (0, Vec3A::INFINITY, Vec3A::NEG_INFINITY);
     for i in (1..nb).rev() {
-        acc = merge(&acc, &buckets[i]);
-        right[i - 1] = acc;
+        let b = &buckets[i];
+        (count, lo, hi) = (count + b.count, lo.min(b.bounds.min), hi.max(b.bounds.max));
+        right_cost[i - 1] = count as f32 * area(lo, hi);
     }
-    let (mut best_cost, mut best_plane, mut best_left) = (f32::INFINITY, 0, Bucket::EMPTY);
-    let mut acc = Bucket::EMPTY;
+    let (mut best_cost, mut best_plane) = (f32::INFINITY, 0);
+    let (mut count, mut lo, mut hi) = (0, Vec3A::INFINITY, Vec3A::NEG_INFINITY);
     for i in 0..nb - 1 {
-        acc = merge(&acc, &buckets[i]);
-        let cost =
-            acc.count as f32 * acc.bounds.area() + right[i].count as f32 * right[i].bounds.area();
+        let b = &buckets[i];
+        (count, lo, hi) = (count + b.count, lo.min(b.bounds.min), hi.max(b.bounds.max));
+        let cost = count as f32 * area(lo, hi) + right_cost[i];
         // `i == 0`: areas overflow to ∞ for huge boxes, and the best must still be a plane.
         if i == 0 || cost < best_cost {
-            (best_cost, best_plane, best_left) = (cost, i, acc);
+            (best_cost, best_plane) = (cost, i);
         }
     }
     if leaf_is_cheaper(config, n, bounds, best_cost) {
         return None;
     }
+    let union = |b: &[Bucket]| b.iter().fold(Bucket::EMPTY, |acc, b| merge(&acc, b));
+    let (best_left, best_right) = (
+        union(&buckets[..=best_plane]),
+        union(&buckets[best_plane + 1..]),
+    );
     // Left: the primitives binned at or below the plane, so the halves are exactly the ones
     // counted and bounded by the sweep (the pass reads one byte per primitive, and touches the
     // boxes only to swap them).
@@ -457,7 +460,7 @@ fn sah_split<const AXIS: usize>(
     Some(Split {
         mid,
         left: best_left.bounds,
-        right: right[best_plane].bounds,
+        right: best_right.bounds,
     })
 }
 
@@ -650,7 +653,6 @@ mod tests {
     fn work() -> Work {
         Work {
             buckets: vec![[Bucket::EMPTY; MAX_BUCKETS]; BIN_SETS],
-            right: vec![Bucket::EMPTY; MAX_BUCKETS],
             bin_sets_min: BIN_SETS_MIN,
             ..Work::default()
         }
