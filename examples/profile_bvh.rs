@@ -2,13 +2,16 @@
 //!
 //! `cargo run --release --example profile_bvh -- --what build --n 1000000 --steps 5`
 //! rebuilds a SAH tree over `n` random boxes (the `bodies` box distribution) `steps` times and
-//! prints the median build time. `--what step` runs the `bodies` scene through a
+//! prints the median build time. Each rebuild after the first starts from the tree order of
+//! the one before (the boxes did not move, so no box changes place); `--shuffle true` hands
+//! the keys a random permutation of the boxes before each rebuild (untimed), so every timed
+//! rebuild starts from random order, as a first build does. `--what step` runs the `bodies` scene through a
 //! `BroadPhase` (spawn, then per step `Feed::apply` + `BroadPhase::step`) and prints the
 //! median ns/object/step, the pair count and the dynamic tree's shape. `--warmup W` steps are
 //! run (and not timed) first.
 
 use broadleaf::bvh::{Bvh, BvhConfig};
-use broadleaf::scene::{Bodies, Feed, Frame, Scene};
+use broadleaf::scene::{Bodies, Feed, Frame, Rng, Scene};
 use broadleaf::{Aabb, BroadPhase, Config};
 use std::time::Instant;
 
@@ -17,6 +20,7 @@ struct Args {
     steps: usize,
     warmup: usize,
     what: String,
+    shuffle: bool,
     config: BvhConfig,
 }
 
@@ -26,6 +30,7 @@ fn parse() -> Args {
         steps: 30,
         warmup: 5,
         what: "step".into(),
+        shuffle: false,
         config: BvhConfig::default(),
     };
     let mut it = std::env::args().skip(1);
@@ -38,13 +43,21 @@ fn parse() -> Args {
             "--what" => args.what = value,
             "--trav" => args.config.traversal_cost = value.parse().expect("--trav C"),
             "--leaf" => args.config.max_leaf_size = value.parse().expect("--leaf L"),
+            "--shuffle" => args.shuffle = value.parse().expect("--shuffle true|false"),
             _ => panic!(
                 "unknown flag {flag}; use --n, --steps, --warmup, --what build|step|pairs, \
-                 --trav, --leaf"
+                 --trav, --leaf, --shuffle"
             ),
         }
     }
     args
+}
+
+/// Nanoseconds this thread has run on a CPU (Linux `schedstat`), or `None` elsewhere: unlike the
+/// wall clock it does not count the time another process held the core.
+fn cpu_ns() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    s.split_whitespace().next()?.parse().ok()
 }
 
 fn median(mut xs: Vec<f64>) -> f64 {
@@ -55,18 +68,37 @@ fn median(mut xs: Vec<f64>) -> f64 {
 fn build(args: &Args) {
     let scene = Bodies::new(args.n, 1);
     let boxes: Vec<Aabb> = scene.dynamic.iter().map(|o| o.aabb()).collect();
-    let (mut bvh, _) = Bvh::from_aabbs(args.config, &boxes).expect("valid boxes");
-    let mut ms = Vec::with_capacity(args.steps);
+    let (mut bvh, keys) = Bvh::from_aabbs(args.config, &boxes).expect("valid boxes");
+    let (mut ms, mut cpu_ms) = (Vec::with_capacity(args.steps), Vec::new());
+    let mut rng = Rng::new(7);
+    let mut order: Vec<usize> = (0..boxes.len()).collect();
     for _ in 0..args.steps {
-        let t = Instant::now();
+        if args.shuffle {
+            // Hand every key another key's box, so that the tree order of the last build is
+            // random in space again (as for a first build) and the rebuild moves every box.
+            for i in (1..order.len()).rev() {
+                order.swap(i, rng.next_u32() as usize % (i + 1));
+            }
+            for (&key, &j) in keys.iter().zip(&order) {
+                bvh.update(key, boxes[j]).expect("live key");
+            }
+        }
+        let (t, c) = (Instant::now(), cpu_ns());
         bvh.rebuild();
         ms.push(t.elapsed().as_secs_f64() * 1e3);
+        if let (Some(c0), Some(c1)) = (c, cpu_ns()) {
+            cpu_ms.push((c1 - c0) as f64 * 1e-6);
+        }
     }
     let s = bvh.stats();
     println!(
-        "build n={} median {:.2} ms over {} builds; nodes {} leaves {} depth {} cost {:.1}",
+        "build n={}{} median {:.2} ms (min {:.2}, cpu {:.2}) over {} builds; nodes {} leaves {} \
+         depth {} cost {:.1}",
         args.n,
-        median(ms),
+        if args.shuffle { " shuffled" } else { "" },
+        median(ms.clone()),
+        ms.iter().copied().fold(f64::INFINITY, f64::min),
+        median(cpu_ms),
         args.steps,
         s.nodes,
         s.leaves,

@@ -10,16 +10,19 @@ use slotmap::Key;
 /// The most SAH buckets a node may use (`BvhConfig::sah_buckets`).
 pub(crate) const MAX_BUCKETS: usize = 64;
 
-/// A primitive's box as the build sees it, in SIMD lanes: 32 bytes, so the binning and
-/// partition passes stream contiguous memory. Its index before the build travels in the
-/// parallel `ids` array, swapped with it.
-#[derive(Clone, Copy, Debug)]
-struct Ref {
-    min: Vec3A, // 16 bytes
-    max: Vec3A, // 16 bytes
-}
+/// Interleaved copies of the SAH buckets that a large node bins into: primitive `i` goes to
+/// copy `i % BIN_SETS`. Neighbours in the array often share a bucket (a rebuild starts from the
+/// last tree order), and one copy makes each update wait for the previous one's store.
+const BIN_SETS: usize = 4;
 
-impl Ref {
+// `sah_split` masks bucket indices with `MAX_BUCKETS − 1`.
+const _: () = assert!(MAX_BUCKETS.is_power_of_two());
+
+/// Nodes of at least this many primitives bin into [`BIN_SETS`] copies; smaller ones into one,
+/// where clearing and merging the copies would cost more than the stalls.
+const BIN_SETS_MIN: usize = 1024;
+
+impl PrimBox {
     /// Twice the centroid, `min + max`: the build bins and splits on doubled centroids, which
     /// orders and buckets them exactly as the centroids would be.
     #[inline]
@@ -46,7 +49,7 @@ impl Bounds {
     };
 
     #[inline]
-    fn add(&mut self, r: &Ref) {
+    fn add(&mut self, r: &PrimBox) {
         let c = r.c2();
         self.min = self.min.min(r.min);
         self.max = self.max.max(r.max);
@@ -67,19 +70,25 @@ impl Bounds {
     /// Surface area of the box union; 0 when empty (as [`Aabb::surface_area`]).
     #[inline]
     fn area(&self) -> f32 {
-        let d = (self.max - self.min).max(Vec3A::ZERO);
-        2.0 * (d.x * d.y + d.y * d.z + d.z * d.x)
+        area(self.min, self.max)
     }
 
     fn aabb(&self) -> Aabb {
         Aabb::new(self.min.into(), self.max.into())
     }
 
-    fn of(refs: &[Ref]) -> Bounds {
+    fn of(refs: &[PrimBox]) -> Bounds {
         let mut b = Bounds::EMPTY;
         refs.iter().for_each(|r| b.add(r));
         b
     }
+}
+
+/// Surface area of the box `min..max`; 0 when empty (as [`Aabb::surface_area`]).
+#[inline]
+fn area(min: Vec3A, max: Vec3A) -> f32 {
+    let d = (max - min).max(Vec3A::ZERO);
+    2.0 * (d.x * d.y + d.y * d.z + d.z * d.x)
 }
 
 /// A node still to be made: the primitive range `start..end`, the parent to link it to, and
@@ -110,8 +119,7 @@ impl Bucket {
 /// Buffers every build reuses, so a rebuild allocates only when the tree grew.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct BuildScratch {
-    refs: Vec<Ref>,
-    /// `ids[i]`: the primitive index (before the build) of `refs[i]`.
+    /// `ids[i]`: the primitive index (before the build) of the box now at `boxes[i]`.
     ids: Vec<u32>,
     tasks: Vec<Task>,
     keys: Vec<ProxyKey>,
@@ -121,11 +129,15 @@ pub(crate) struct BuildScratch {
 /// Per-node scratch of [`split`]: SAH buckets and the gather buffers of the sorting splits.
 #[derive(Clone, Debug, Default)]
 struct Work {
-    buckets: Vec<Bucket>,
-    /// `right[i]`: the union of the buckets (or sorted boxes) right of plane `i`.
-    right: Vec<Bucket>,
+    /// [`BIN_SETS`] copies of the SAH buckets (`sah_buckets` of each in use).
+    buckets: Vec<[Bucket; MAX_BUCKETS]>,
+    /// Nodes of at least this many primitives use all the copies: [`BIN_SETS_MIN`] (tests
+    /// change it to compare both ways).
+    bin_sets_min: usize,
     order: Vec<(f32, u32)>,
-    tmp_refs: Vec<Ref>,
+    /// `bins[k]`: the SAH bucket of the node's `k`-th primitive, from the binning pass.
+    bins: Vec<u8>,
+    tmp_refs: Vec<PrimBox>,
     tmp_ids: Vec<u32>,
 }
 
@@ -143,18 +155,23 @@ impl Bvh {
     /// only when the tree grew past its largest size so far.
     pub fn rebuild(&mut self) {
         let mut s = core::mem::take(&mut self.scratch);
-        s.refs.clear();
+        // The build partitions `boxes` itself: drop the tombstones, remembering where each
+        // live box came from.
         s.ids.clear();
-        for (i, (aabb, key)) in self.boxes.iter().zip(&self.keys).enumerate() {
-            if !key.is_null() {
-                s.refs.push(Ref {
-                    min: aabb.min,
-                    max: aabb.max,
-                });
-                s.ids.push(i as u32);
+        if self.tombstones == 0 {
+            s.ids.extend(0..self.boxes.len() as u32);
+        } else {
+            let mut n = 0;
+            for i in 0..self.boxes.len() {
+                if !self.keys[i].is_null() {
+                    self.boxes[n] = self.boxes[i];
+                    s.ids.push(i as u32);
+                    n += 1;
+                }
             }
+            self.boxes.truncate(n);
         }
-        let n = s.refs.len();
+        let n = self.boxes.len();
         self.nodes.clear();
         self.parent.clear();
         self.leaf_of.clear();
@@ -162,23 +179,23 @@ impl Bvh {
         build_nodes(
             &self.config,
             &mut s,
+            &mut self.boxes,
             &mut self.nodes,
             &mut self.parent,
             &mut self.leaf_of,
         );
         // Renumber: primitive index = position in tree order, so a leaf's range indexes
-        // `boxes` and `keys` directly and traversals read contiguous memory.
+        // `boxes` and `keys` directly and traversals read contiguous memory. A rebuild of a
+        // tree whose boxes barely moved leaves most primitives in place, and their entries in
+        // `ids` (random writes into a slotmap) need no update.
         s.keys.clear();
         s.keys
             .extend(s.ids.iter().map(|&id| self.keys[id as usize]));
-        self.boxes.clear();
-        self.boxes.extend(s.refs.iter().map(|r| PrimBox {
-            min: r.min,
-            max: r.max,
-        }));
         core::mem::swap(&mut self.keys, &mut s.keys);
-        for (i, &key) in self.keys.iter().enumerate() {
-            self.ids[key] = i as u32;
+        for (i, (&key, &old)) in self.keys.iter().zip(&s.ids).enumerate() {
+            if old != i as u32 {
+                self.ids[key] = i as u32;
+            }
         }
         self.tree_len = n;
         self.tombstones = 0;
@@ -188,7 +205,7 @@ impl Bvh {
     }
 }
 
-/// Builds the depth-first array over `s.refs`, reordering `s.refs` and `s.ids` into tree order.
+/// Builds the depth-first array over `refs`, reordering `refs` and `s.ids` into tree order.
 ///
 /// Depth-first order with an explicit stack: a task's node gets the next free index when it
 /// is popped; a split pushes the second child, then the first, so the first child is popped
@@ -197,23 +214,19 @@ impl Bvh {
 fn build_nodes(
     config: &BvhConfig,
     s: &mut BuildScratch,
+    refs: &mut [PrimBox],
     nodes: &mut Vec<Node>,
     parent: &mut Vec<u32>,
     leaf_of: &mut [u32],
 ) {
     let BuildScratch {
-        refs,
-        ids,
-        tasks,
-        work,
-        ..
+        ids, tasks, work, ..
     } = s;
     if refs.is_empty() {
         return;
     }
-    let nb = config.sah_buckets as usize;
-    work.buckets.resize(nb, Bucket::EMPTY);
-    work.right.resize(nb.max(MAX_BUCKETS), Bucket::EMPTY);
+    work.buckets.resize(BIN_SETS, [Bucket::EMPTY; MAX_BUCKETS]);
+    work.bin_sets_min = BIN_SETS_MIN;
     tasks.clear();
     tasks.push(Task {
         start: 0,
@@ -268,7 +281,7 @@ fn build_nodes(
 fn split(
     config: &BvhConfig,
     work: &mut Work,
-    refs: &mut [Ref],
+    refs: &mut [PrimBox],
     ids: &mut [u32],
     bounds: &Bounds,
 ) -> Option<Split> {
@@ -294,7 +307,7 @@ fn split(
         };
     }
     match config.split {
-        SplitMethod::Sah if n <= nb => sweep_split(config, work, refs, ids, bounds, axis),
+        SplitMethod::Sah if n <= nb => sweep_split(config, refs, ids, bounds, axis),
         // One copy per axis, so the hot loops read the coordinate straight from memory.
         SplitMethod::Sah => match axis {
             0 => sah_split::<0>(config, work, refs, ids, bounds),
@@ -328,71 +341,126 @@ fn split(
 // finite. Both end buckets hold a centroid (the extremes of the centroid bounds), so every
 // candidate has two non-empty sides. The bucket unions are the children's exact bounds, so
 // the children need no pass of their own before they are split in turn: each tree level costs
-// one binning pass and one partition pass over its primitives.
+// one binning pass over its boxes, and one partition pass that reads a byte per primitive (its
+// bucket, noted while binning) and moves only the boxes on the wrong side.
 fn sah_split<const AXIS: usize>(
     config: &BvhConfig,
     work: &mut Work,
-    refs: &mut [Ref],
+    refs: &mut [PrimBox],
     ids: &mut [u32],
     bounds: &Bounds,
 ) -> Option<Split> {
     let n = refs.len();
     let nb = config.sah_buckets as usize;
-    // `x = (c − lo)·scale ∈ [0, nb]` for a doubled centroid `c` (the same sum as `Ref::c2`'s
-    // lane, so the bins and the partition agree with the bounds; `x >= 0` exactly, as `lo` is
-    // the least such sum). Adding 1.5·2²³, whose float spacing is 1, rounds `x` to the nearest
-    // integer, read back from the bits; clamped to `nb − 1`, that is the bucket: monotone in
-    // `x`, 0 for the smallest centroid and `nb − 1` for the largest, as the SAH sweep needs,
-    // in a few instructions where a saturating `as` cast takes a dozen. (The end buckets are
-    // half and one and a half buckets wide.)
+    // `x = (c − lo)·scale ∈ [0, nb]` for a doubled centroid `c` (lane `AXIS` of `PrimBox::c2`,
+    // the sums the centroid bounds were taken over, so `x >= 0` exactly). Adding 1.5·2²³,
+    // whose float spacing is 1, rounds `x` to the nearest integer; clamped to `nb − 1` (a NaN
+    // from overflowed sums too: `min` returns its argument then) and read back from the bits,
+    // that is the bucket: monotone in `x`, 0 for the smallest centroid and `nb − 1` for the
+    // largest, as the SAH sweep needs, in a few instructions where a saturating `as` cast
+    // takes a dozen. (The end buckets are half and one and a half buckets wide.) The float
+    // clamp keeps the index in `0..nb` whatever the input, which the mask shows the compiler
+    // (no bounds check); the lanes are computed together from the sum the centroid bounds
+    // take anyway.
     const MAGIC: f32 = 12_582_912.0;
-    let lo = bounds.cmin[AXIS];
-    let scale = nb as f32 / (bounds.cmax[AXIS] - lo);
-    let rounded = |r: &Ref| (r.min[AXIS] + r.max[AXIS] - lo) * scale + MAGIC;
-    let bucket_of =
-        |r: &Ref| (rounded(r).to_bits().wrapping_sub(MAGIC.to_bits()) as usize).min(nb - 1);
-
-    let Work { buckets, right, .. } = work;
-    let buckets = &mut buckets[..nb];
-    buckets.fill(Bucket::EMPTY);
-    for r in refs.iter() {
-        let b = &mut buckets[bucket_of(r)];
+    let lo = Vec3A::splat(bounds.cmin[AXIS]);
+    let scale = Vec3A::splat(nb as f32 / (bounds.cmax[AXIS] - bounds.cmin[AXIS]));
+    let (first, last) = (Vec3A::splat(MAGIC), Vec3A::splat(MAGIC + (nb - 1) as f32));
+    // Count and bound a primitive in its bucket of `set`, and note the bucket for the partition.
+    let bin = |set: &mut [Bucket; MAX_BUCKETS], r: &PrimBox, bin: &mut u8| {
+        let c = r.c2();
+        let rounded = ((c - lo) * scale + first).min(last).max(first);
+        let k = rounded[AXIS].to_bits().wrapping_sub(MAGIC.to_bits()) as usize;
+        debug_assert!(k < nb);
+        *bin = k as u8;
+        let b = &mut set[k & (MAX_BUCKETS - 1)];
         b.count += 1;
-        b.bounds.add(r);
+        b.bounds.min = b.bounds.min.min(r.min);
+        b.bounds.max = b.bounds.max.max(r.max);
+        b.bounds.cmin = b.bounds.cmin.min(c);
+        b.bounds.cmax = b.bounds.cmax.max(c);
+    };
+
+    let Work {
+        buckets: sets,
+        bin_sets_min,
+        bins,
+        ..
+    } = work;
+    if bins.len() < n {
+        bins.resize(n, 0);
     }
-    // right[i]: the union of buckets i+1.. (the right side of plane i).
-    let mut acc = Bucket::EMPTY;
+    let bins = &mut bins[..n];
+    let [s0, s1, s2, s3] = &mut sets[..] else {
+        unreachable!("build_nodes makes BIN_SETS bucket sets")
+    };
+    if n >= *bin_sets_min {
+        for set in [&mut *s0, &mut *s1, &mut *s2, &mut *s3] {
+            set[..nb].fill(Bucket::EMPTY);
+        }
+        let mut chunks = refs.chunks_exact(BIN_SETS);
+        let mut bin_chunks = bins.chunks_exact_mut(BIN_SETS);
+        for (r, k) in (&mut chunks).zip(&mut bin_chunks) {
+            bin(s0, &r[0], &mut k[0]);
+            bin(s1, &r[1], &mut k[1]);
+            bin(s2, &r[2], &mut k[2]);
+            bin(s3, &r[3], &mut k[3]);
+        }
+        for (r, k) in chunks.remainder().iter().zip(bin_chunks.into_remainder()) {
+            bin(s0, r, k);
+        }
+        for i in 0..nb {
+            s0[i] = merge(&merge(&s0[i], &s1[i]), &merge(&s2[i], &s3[i]));
+        }
+    } else {
+        s0[..nb].fill(Bucket::EMPTY);
+        for (r, k) in refs.iter().zip(bins.iter_mut()) {
+            bin(s0, r, k);
+        }
+    }
+    let buckets = &s0[..nb];
+    // The sweeps track counts and box areas only: `right_cost[i]` is `N·S` of the buckets
+    // right of plane `i`. The chosen plane's full bounds (centroids too) are merged at the end.
+    let mut right_cost = [0.0f32; MAX_BUCKETS];
+    let (mut count, mut lo, mut hi) = (0, Vec3A::INFINITY, Vec3A::NEG_INFINITY);
     for i in (1..nb).rev() {
-        acc = merge(&acc, &buckets[i]);
-        right[i - 1] = acc;
+        let b = &buckets[i];
+        (count, lo, hi) = (count + b.count, lo.min(b.bounds.min), hi.max(b.bounds.max));
+        right_cost[i - 1] = count as f32 * area(lo, hi);
     }
-    let (mut best_cost, mut best_plane, mut best_left) = (f32::INFINITY, 0, Bucket::EMPTY);
-    let mut acc = Bucket::EMPTY;
+    let (mut best_cost, mut best_plane) = (f32::INFINITY, 0);
+    let (mut count, mut lo, mut hi) = (0, Vec3A::INFINITY, Vec3A::NEG_INFINITY);
     for i in 0..nb - 1 {
-        acc = merge(&acc, &buckets[i]);
-        let cost =
-            acc.count as f32 * acc.bounds.area() + right[i].count as f32 * right[i].bounds.area();
+        let b = &buckets[i];
+        (count, lo, hi) = (count + b.count, lo.min(b.bounds.min), hi.max(b.bounds.max));
+        let cost = count as f32 * area(lo, hi) + right_cost[i];
         // `i == 0`: areas overflow to ∞ for huge boxes, and the best must still be a plane.
         if i == 0 || cost < best_cost {
-            (best_cost, best_plane, best_left) = (cost, i, acc);
+            (best_cost, best_plane) = (cost, i);
         }
     }
     if leaf_is_cheaper(config, n, bounds, best_cost) {
         return None;
     }
-    // `bucket_of(r) <= best_plane` (< nb − 1, so the clamp never decides), compared on the
-    // integer-valued float `rounded(r)` itself.
-    let limit = MAGIC + best_plane as f32;
-    let mid = partition(refs, ids, |r| rounded(r) <= limit);
+    let union = |b: &[Bucket]| b.iter().fold(Bucket::EMPTY, |acc, b| merge(&acc, b));
+    let (best_left, best_right) = (
+        union(&buckets[..=best_plane]),
+        union(&buckets[best_plane + 1..]),
+    );
+    // Left: the primitives binned at or below the plane, so the halves are exactly the ones
+    // counted and bounded by the sweep (the pass reads one byte per primitive, and touches the
+    // boxes only to swap them).
+    let mid = best_left.count as usize;
     if mid == 0 || mid == n {
         // Reached when doubled centroids `min + max` overflow to ±∞ (boxes near `f32::MAX`):
         // every primitive bins alike and no plane separates them. Split in halves instead.
         return Some(halves(refs, n / 2));
     }
+    partition_bins(refs, ids, bins, best_plane as u8, mid);
     Some(Split {
         mid,
         left: best_left.bounds,
-        right: right[best_plane].bounds,
+        right: best_right.bounds,
     })
 }
 
@@ -415,78 +483,69 @@ fn merge(a: &Bucket, b: &Bucket) -> Bucket {
 /// rule as the binned version, which would spend more time on its buckets than on the node).
 fn sweep_split(
     config: &BvhConfig,
-    work: &mut Work,
-    refs: &mut [Ref],
+    refs: &mut [PrimBox],
     ids: &mut [u32],
     bounds: &Bounds,
     axis: usize,
 ) -> Option<Split> {
     let n = refs.len();
-    sort_by_axis(work, refs, ids, axis);
-    let right = &mut work.right;
-    let mut acc = Bounds::EMPTY;
+    debug_assert!(n <= MAX_BUCKETS);
+    sort_by_axis(refs, ids, axis);
+    // The sweeps track the boxes only (the centroid bounds matter for the chosen halves
+    // alone, computed once at the end): `right_area[i]` is the area right of split `i`.
+    let mut right_area = [0.0f32; MAX_BUCKETS];
+    let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
     for i in (1..n).rev() {
-        acc.add(&refs[i]);
-        right[i - 1].bounds = acc;
+        (lo, hi) = (lo.min(refs[i].min), hi.max(refs[i].max));
+        right_area[i - 1] = area(lo, hi);
     }
-    let (mut best_cost, mut best_mid, mut best_left) = (f32::INFINITY, 1, Bounds::EMPTY);
-    let mut acc = Bounds::EMPTY;
+    let (mut best_cost, mut best_mid) = (f32::INFINITY, 1);
+    let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
     for i in 0..n - 1 {
-        acc.add(&refs[i]);
-        let cost = (i + 1) as f32 * acc.area() + (n - i - 1) as f32 * right[i].bounds.area();
+        (lo, hi) = (lo.min(refs[i].min), hi.max(refs[i].max));
+        let cost = (i + 1) as f32 * area(lo, hi) + (n - i - 1) as f32 * right_area[i];
         if i == 0 || cost < best_cost {
-            (best_cost, best_mid, best_left) = (cost, i + 1, acc);
+            (best_cost, best_mid) = (cost, i + 1);
         }
     }
     if leaf_is_cheaper(config, n, bounds, best_cost) {
         return None;
     }
-    Some(Split {
-        mid: best_mid,
-        left: best_left,
-        right: right[best_mid - 1].bounds,
-    })
+    Some(halves(refs, best_mid))
 }
 
-/// Sorts `refs` (and `ids` alongside) by centroid along `axis`, through the gather buffers.
-fn sort_by_axis(work: &mut Work, refs: &mut [Ref], ids: &mut [u32], axis: usize) {
-    let Work {
-        order,
-        tmp_refs,
-        tmp_ids,
-        ..
-    } = work;
-    order.clear();
-    order.extend(
-        refs.iter()
-            .enumerate()
-            .map(|(i, r)| (r.c2()[axis], i as u32)),
-    );
-    insertion_sort(order);
-    gather(order, tmp_refs, tmp_ids, refs, ids);
-}
-
-/// Sorts by the key (stable). For the few entries of a node that `sweep_split` takes (at most
-/// `sah_buckets`) this beats the general sort; keys are sums of checked finite coordinates,
-/// so `<` orders them totally.
-fn insertion_sort(order: &mut [(f32, u32)]) {
-    for i in 1..order.len() {
-        let x = order[i];
+/// Sorts `refs` (and `ids` alongside) by centroid along `axis`, stably, by insertion: the few
+/// entries of a node that `sweep_split` takes (at most `sah_buckets`) are sorted in place
+/// faster than the general sort would gather them, and not moved at all when they already lie
+/// in order, as they do in a rebuild of a tree whose boxes barely moved. Keys are sums of
+/// checked finite coordinates (at worst ±∞), so `<` orders them totally.
+fn sort_by_axis(refs: &mut [PrimBox], ids: &mut [u32], axis: usize) {
+    let mut keys = [0.0f32; MAX_BUCKETS];
+    let keys = &mut keys[..refs.len()];
+    for (key, r) in keys.iter_mut().zip(refs.iter()) {
+        *key = r.c2()[axis];
+    }
+    for i in 1..keys.len() {
+        let (key, r, id) = (keys[i], refs[i], ids[i]);
         let mut j = i;
-        while j > 0 && x.0 < order[j - 1].0 {
-            order[j] = order[j - 1];
+        while j > 0 && key < keys[j - 1] {
+            keys[j] = keys[j - 1];
+            refs[j] = refs[j - 1];
+            ids[j] = ids[j - 1];
             j -= 1;
         }
-        order[j] = x;
+        if j < i {
+            (keys[j], refs[j], ids[j]) = (key, r, id);
+        }
     }
 }
 
 /// Reorders `refs` and `ids` so that position `k` holds what was at `order[k].1`.
 fn gather(
     order: &[(f32, u32)],
-    tmp_refs: &mut Vec<Ref>,
+    tmp_refs: &mut Vec<PrimBox>,
     tmp_ids: &mut Vec<u32>,
-    refs: &mut [Ref],
+    refs: &mut [PrimBox],
     ids: &mut [u32],
 ) {
     tmp_refs.clear();
@@ -498,7 +557,7 @@ fn gather(
 }
 
 /// Splits at the median centroid along `axis` (`select_nth_unstable_by`, O(n)).
-fn median_split(work: &mut Work, refs: &mut [Ref], ids: &mut [u32], axis: usize) -> Split {
+fn median_split(work: &mut Work, refs: &mut [PrimBox], ids: &mut [u32], axis: usize) -> Split {
     let mid = refs.len() / 2;
     let Work {
         order,
@@ -518,7 +577,7 @@ fn median_split(work: &mut Work, refs: &mut [Ref], ids: &mut [u32], axis: usize)
 }
 
 /// The split `refs[..mid]` / `refs[mid..]` as they lie, with bounds computed by one pass.
-fn halves(refs: &[Ref], mid: usize) -> Split {
+fn halves(refs: &[PrimBox], mid: usize) -> Split {
     Split {
         mid,
         left: Bounds::of(&refs[..mid]),
@@ -526,9 +585,35 @@ fn halves(refs: &[Ref], mid: usize) -> Split {
     }
 }
 
+/// Moves the `mid` primitives whose bucket `bins[k]` is at most `plane` (and their ids) to the
+/// front. Each misplaced one on the left is swapped with the next misplaced one on the right,
+/// which the counts guarantee exists. Runs of 32 already in place, which a rebuild of a tree
+/// whose boxes barely moved is made of, are skipped by one vectorised maximum over their bytes.
+fn partition_bins(refs: &mut [PrimBox], ids: &mut [u32], bins: &[u8], plane: u8, mid: usize) {
+    const RUN: usize = 32;
+    let mut j = mid;
+    for start in (0..mid).step_by(RUN) {
+        let run = start..(start + RUN).min(mid);
+        if bins[run.clone()].iter().fold(0, |m, &b| m.max(b)) <= plane {
+            continue;
+        }
+        for i in run {
+            if bins[i] > plane {
+                while bins[j] > plane {
+                    j += 1;
+                }
+                refs.swap(i, j);
+                ids.swap(i, j);
+                j += 1;
+            }
+        }
+    }
+    debug_assert!(bins[j..].iter().all(|&b| b > plane));
+}
+
 /// Moves the refs satisfying `left` (and their ids) to the front (Hoare's scheme: each
 /// misplaced pair is swapped once) and returns how many there are.
-fn partition(refs: &mut [Ref], ids: &mut [u32], left: impl Fn(&Ref) -> bool) -> usize {
+fn partition(refs: &mut [PrimBox], ids: &mut [u32], left: impl Fn(&PrimBox) -> bool) -> usize {
     let (mut i, mut j) = (0, refs.len());
     loop {
         while i < j && left(&refs[i]) {
@@ -550,12 +635,14 @@ fn partition(refs: &mut [Ref], ids: &mut [u32], left: impl Fn(&Ref) -> bool) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Vec3;
+    use crate::scene::Rng;
 
     /// Unit boxes with their min corner at `(x, 0, 0)`, and their ids `0..`.
-    fn refs(xs: &[f32]) -> (Vec<Ref>, Vec<u32>) {
+    fn refs(xs: &[f32]) -> (Vec<PrimBox>, Vec<u32>) {
         let refs = xs
             .iter()
-            .map(|&x| Ref {
+            .map(|&x| PrimBox {
                 min: Vec3A::new(x, 0.0, 0.0),
                 max: Vec3A::new(x + 1.0, 1.0, 1.0),
             })
@@ -563,11 +650,10 @@ mod tests {
         (refs, (0..xs.len() as u32).collect())
     }
 
-    fn work(config: &BvhConfig) -> Work {
-        let nb = config.sah_buckets as usize;
+    fn work() -> Work {
         Work {
-            buckets: vec![Bucket::EMPTY; nb],
-            right: vec![Bucket::EMPTY; MAX_BUCKETS],
+            buckets: vec![[Bucket::EMPTY; MAX_BUCKETS]; BIN_SETS],
+            bin_sets_min: BIN_SETS_MIN,
             ..Work::default()
         }
     }
@@ -588,6 +674,72 @@ mod tests {
     }
 
     #[test]
+    fn partition_bins_moves_the_low_buckets_first_with_their_ids() {
+        // The bucket of each box is its x. Runs in place (skipped by the run check), runs with
+        // a few misplaced ones and shuffled stretches, around a left side of odd length.
+        let mut rng = Rng::new(11);
+        let mut xs: Vec<f32> = (0..300).map(|i| if i < 150 { 2.0 } else { 9.0 }).collect();
+        for i in (40..60).chain(90..250) {
+            xs[i] = rng.below(12) as f32;
+        }
+        xs[5] = 7.0;
+        xs[290] = 1.0;
+        let plane = 4;
+        let bins: Vec<u8> = xs.iter().map(|&x| x as u8).collect();
+        let mid = bins.iter().filter(|&&b| b <= plane).count();
+        let (mut r, mut ids) = refs(&xs);
+        partition_bins(&mut r, &mut ids, &bins, plane, mid);
+        assert!(r[..mid].iter().all(|r| r.min.x <= 4.0));
+        assert!(r[mid..].iter().all(|r| r.min.x > 4.0));
+        assert!(r.iter().zip(&ids).all(|(r, &i)| r.min.x == xs[i as usize]));
+    }
+
+    #[test]
+    fn sort_by_axis_is_stable_and_keeps_ids() {
+        let xs = [3.0, 1.0, 3.0, 0.0, 1.0, 3.0, -2.0];
+        let (mut r, mut ids) = refs(&xs);
+        sort_by_axis(&mut r, &mut ids, 0);
+        assert_eq!(ids, [6, 3, 1, 4, 0, 2, 5]);
+        assert!(r.iter().zip(&ids).all(|(r, &i)| r.min.x == xs[i as usize]));
+        // Already sorted: nothing moves.
+        let before = ids.clone();
+        sort_by_axis(&mut r, &mut ids, 0);
+        assert_eq!(ids, before);
+    }
+
+    /// Large nodes bin into `BIN_SETS` interleaved bucket copies, small ones into one: both
+    /// must give the same split, with exact child bounds (merging the copies loses nothing).
+    #[test]
+    fn interleaved_bucket_sets_bin_like_one() {
+        let mut rng = Rng::new(5);
+        let n = BIN_SETS_MIN + 3;
+        let boxes: Vec<PrimBox> = (0..n)
+            .map(|_| {
+                let c = rng.vec3_in(Vec3::splat(-50.0), Vec3::new(80.0, 20.0, 20.0));
+                let h = Vec3::splat(rng.range(0.1, 2.0));
+                PrimBox::new(&Aabb::new(c - h, c + h))
+            })
+            .collect();
+        let config = BvhConfig::default();
+        let b = Bounds::of(&boxes);
+        let run = |bin_sets_min| {
+            let mut w = Work {
+                bin_sets_min,
+                ..work()
+            };
+            let (mut r, mut ids) = (boxes.clone(), (0..n as u32).collect::<Vec<_>>());
+            let s = split(&config, &mut w, &mut r, &mut ids, &b).expect("a split");
+            assert!(same(&s.left, &Bounds::of(&r[..s.mid])));
+            assert!(same(&s.right, &Bounds::of(&r[s.mid..])));
+            assert!(r.iter().zip(&ids).all(|(r, &i)| *r == boxes[i as usize]));
+            (s.mid, ids)
+        };
+        let (sets, one) = (run(BIN_SETS_MIN), run(usize::MAX));
+        assert_eq!(sets, one);
+        assert!(sets.0 > 0 && sets.0 < n);
+    }
+
+    #[test]
     fn sah_separates_two_clusters() {
         for (nb, traversal_cost) in [(12, 1.0), (4, 1.0), (12, 0.0)] {
             let config = BvhConfig {
@@ -597,7 +749,7 @@ mod tests {
             };
             let (mut r, mut ids) = refs(&[0.0, 0.5, 1.0, 100.0, 100.5, 101.0, 0.2, 100.2, 0.7]);
             let b = Bounds::of(&r);
-            let s = split(&config, &mut work(&config), &mut r, &mut ids, &b).expect("a split");
+            let s = split(&config, &mut work(), &mut r, &mut ids, &b).expect("a split");
             assert_eq!(s.mid, 5, "{nb} buckets");
             assert!(r[..5].iter().all(|r| r.min.x < 50.0));
             assert!(same(&s.left, &Bounds::of(&r[..5])));
@@ -618,7 +770,7 @@ mod tests {
             };
             let (mut r, mut ids) = refs(&xs);
             let b = Bounds::of(&r);
-            let s = split(&config, &mut work(&config), &mut r, &mut ids, &b);
+            let s = split(&config, &mut work(), &mut r, &mut ids, &b);
             assert_eq!(s.is_none(), leaf, "C_t = {traversal_cost}");
         }
     }
@@ -631,11 +783,11 @@ mod tests {
         };
         let (mut r, mut ids) = refs(&[3.0; 4]);
         let b = Bounds::of(&r);
-        assert!(split(&config, &mut work(&config), &mut r, &mut ids, &b).is_none());
+        assert!(split(&config, &mut work(), &mut r, &mut ids, &b).is_none());
         let (mut r, mut ids) = refs(&[3.0; 9]);
         let b = Bounds::of(&r);
         assert_eq!(
-            split(&config, &mut work(&config), &mut r, &mut ids, &b).map(|s| s.mid),
+            split(&config, &mut work(), &mut r, &mut ids, &b).map(|s| s.mid),
             Some(4)
         );
     }
@@ -644,8 +796,7 @@ mod tests {
     fn median_split_keeps_ids_with_their_boxes() {
         let xs = [9.0, 3.0, 7.0, 1.0, 5.0, 8.0, 2.0];
         let (mut r, mut ids) = refs(&xs);
-        let config = BvhConfig::default();
-        let s = median_split(&mut work(&config), &mut r, &mut ids, 0);
+        let s = median_split(&mut work(), &mut r, &mut ids, 0);
         assert_eq!(s.mid, 3);
         assert!(
             r[..3]
