@@ -73,18 +73,7 @@ static SPREAD3: [u32; 1024] = {
 /// `MAX_DEPTH`; a negative or non-finite radius, or invalid bounds, give 0.
 #[must_use]
 pub fn depth_for(bounds: &Aabb, typical_radius: f32) -> u32 {
-    let edge = bounds.extent().max_element();
-    if !(typical_radius >= 0.0 && typical_radius.is_finite() && edge > 0.0 && edge.is_finite()) {
-        return 0;
-    }
-    let cells = edge / (4.0 * typical_radius);
-    if cells < 1.0 {
-        0
-    } else if cells.is_finite() {
-        (cells.log2().floor() as u32).min(MAX_DEPTH)
-    } else {
-        MAX_DEPTH
-    }
+    deepest_level_with_cells(bounds.extent().max_element(), 4.0 * typical_radius)
 }
 
 /// A sensible depth for a [`Placement::Loose`] tree: the deepest level whose cells are still at
@@ -94,11 +83,17 @@ pub fn depth_for(bounds: &Aabb, typical_radius: f32) -> u32 {
 /// invalid bounds, give 0.
 #[must_use]
 pub fn depth_for_loose(bounds: &Aabb, typical_radius: f32) -> u32 {
-    let edge = bounds.extent().min_element();
-    if !(typical_radius >= 0.0 && typical_radius.is_finite() && edge > 0.0 && edge.is_finite()) {
+    deepest_level_with_cells(bounds.extent().min_element(), 2.0 * typical_radius)
+}
+
+/// The deepest level (at most `MAX_DEPTH`) at which `edge` split in `2^L` cells leaves cells of
+/// at least `cell`: `MAX_DEPTH` for `cell == 0`, 0 for a negative or non-finite `cell` or a
+/// non-positive or non-finite `edge`.
+fn deepest_level_with_cells(edge: f32, cell: f32) -> u32 {
+    if !(cell >= 0.0 && cell.is_finite() && edge > 0.0 && edge.is_finite()) {
         return 0;
     }
-    let cells = edge / (2.0 * typical_radius);
+    let cells = edge / cell;
     if cells < 1.0 {
         0
     } else if cells.is_finite() {
