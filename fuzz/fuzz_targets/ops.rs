@@ -5,7 +5,9 @@
 #![no_main]
 
 use arbitrary::Arbitrary;
-use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Pair, ProxyKey, Shape, Vec3, brute};
+use broadleaf::{
+    Aabb, BodyKind, BroadPhase, Config, Pair, Placement, ProxyKey, Shape, Vec3, brute,
+};
 use libfuzzer_sys::fuzz_target;
 
 #[derive(Arbitrary, Debug)]
@@ -23,6 +25,8 @@ enum Op {
 #[derive(Arbitrary, Debug)]
 struct Input {
     depth: u8,
+    /// The octree placement: strict (false) or loose (true).
+    loose: bool,
     margin: u8,
     ops: Vec<Op>,
 }
@@ -45,6 +49,11 @@ fuzz_target!(|input: Input| {
         bounds: Aabb::new(Vec3::splat(-16.0), Vec3::splat(16.0)),
         octree_depth: u32::from(input.depth % 7),
         margin,
+        octree_placement: if input.loose {
+            Placement::Loose
+        } else {
+            Placement::Strict
+        },
         ..Config::default()
     });
     let mut model: Vec<(ProxyKey, Shape)> = Vec::new();
