@@ -143,17 +143,7 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
             self.all_pairs(list);
             return;
         }
-        let e = &mut w.sweep;
-        e.clear();
-        e.extend(list.iter().enumerate().map(|(i, h)| entry(h.min.x, i)));
-        e.sort_unstable();
-        for (k, &x) in e.iter().enumerate() {
-            let a = &list[x as u32 as usize];
-            let hi = u64::from(ord(a.max.x)) << 32 | u64::from(u32::MAX);
-            for &y in e[k + 1..].iter().take_while(|&&y| y <= hi) {
-                self.test(a, &list[y as u32 as usize]);
-            }
-        }
+        pairs::sweep_x(list, &mut w.sweep, |a, b| self.test(a, b));
     }
 
     /// Every pair across the disjoint lists `a` and `b`: all against all when small, else a

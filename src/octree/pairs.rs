@@ -108,6 +108,23 @@ pub(super) fn entry(lo: f32, i: usize) -> u64 {
     u64::from(ord(lo)) << 32 | i as u64
 }
 
+/// Calls `f(a, b)` for every pair of `list` whose x intervals overlap (closed), each once: a
+/// sort of `(min.x, index)` entries in `sweep`, then a scan from each entry until `min.x`
+/// passes its `max.x`.
+#[inline]
+pub(super) fn sweep_x(list: &[Hot], sweep: &mut Vec<u64>, mut f: impl FnMut(&Hot, &Hot)) {
+    sweep.clear();
+    sweep.extend(list.iter().enumerate().map(|(i, h)| entry(h.min.x, i)));
+    sweep.sort_unstable();
+    for (k, &x) in sweep.iter().enumerate() {
+        let a = &list[x as u32 as usize];
+        let hi = u64::from(ord(a.max.x)) << 32 | u64::from(u32::MAX);
+        for &y in sweep[k + 1..].iter().take_while(|&&y| y <= hi) {
+            f(a, &list[y as u32 as usize]);
+        }
+    }
+}
+
 /// A part of a node's cell in the subdivision of a long own list: its integer corner, its
 /// size `2^shift`, and its spheres `Work::buf[start..end]`.
 #[derive(Clone, Copy, Debug)]
@@ -267,20 +284,11 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
                     }
                 } else {
                     // A crowd in one deepest cell: sweep along x.
-                    let e = &mut w.sweep;
-                    e.clear();
-                    e.extend(l.iter().enumerate().map(|(i, h)| entry(h.min.x, i)));
-                    e.sort_unstable();
-                    for (k, &x) in e.iter().enumerate() {
-                        let a = &l[x as u32 as usize];
-                        let hi = u64::from(ord(a.max.x)) << 32 | u64::from(u32::MAX);
-                        for &y in e[k + 1..].iter().take_while(|&&y| y <= hi) {
-                            let b = &l[y as u32 as usize];
-                            if here(a, b) {
-                                self.test(a, b);
-                            }
+                    sweep_x(l, &mut w.sweep, |a, b| {
+                        if here(a, b) {
+                            self.test(a, b);
                         }
-                    }
+                    });
                 }
                 continue;
             }
