@@ -3,7 +3,7 @@
 //! centre with `Octree::update`, and collects all pairs with `pairs_into` into a cleared,
 //! reused `Vec`. Throughput is spheres, so criterion's elements/s inverts to ns/object/step.
 
-use broadleaf::octree::{Octree, Placement, depth_for, depth_for_loose};
+use broadleaf::octree::{Octree, Placement};
 use broadleaf::scene::{DT, Gas};
 use broadleaf::{Pair, ProxyKey};
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
@@ -22,10 +22,7 @@ fn octree_step(c: &mut Criterion) {
         .flat_map(|s| placements.map(move |p| (s.clone(), p)))
     {
         let mut gas = scene;
-        let depth = match placement {
-            Placement::Strict => depth_for(&gas.bounds, gas.radius),
-            Placement::Loose => depth_for_loose(&gas.bounds, gas.radius),
-        };
+        let depth = placement.depth_for(&gas.bounds, gas.radius);
         let mut tree =
             Octree::with_placement(gas.bounds, depth, placement).expect("scene bounds are valid");
         let keys: Vec<ProxyKey> = gas
@@ -186,7 +183,7 @@ mod bvh_benches {
 // Scenes: broadleaf's whole `BroadPhase` step next to rapier's broad phase, same motion.
 // ---------------------------------------------------------------------------------------------
 mod scene_benches {
-    use broadleaf::octree::{Placement, depth_for, depth_for_loose};
+    use broadleaf::octree::Placement;
     use broadleaf::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Scene, Spawn};
     use broadleaf::{BroadPhase, Config};
     use criterion::{BenchmarkId, Criterion, Throughput};
@@ -216,10 +213,7 @@ mod scene_benches {
         let bounds = scene.bounds();
         let mut bp = BroadPhase::new(Config {
             bounds,
-            octree_depth: match placement {
-                Placement::Strict => depth_for(&bounds, GAS_RADIUS),
-                Placement::Loose => depth_for_loose(&bounds, GAS_RADIUS),
-            },
+            octree_depth: placement.depth_for(&bounds, GAS_RADIUS),
             octree_placement: placement,
             ..Config::default()
         });

@@ -9,7 +9,7 @@
 //! `depth_for_loose` (loose). Under callgrind, `--toggle-collect=*measured*` counts
 //! only the measured steps.
 
-use broadleaf::octree::{Octree, Placement, depth_for, depth_for_loose};
+use broadleaf::octree::{Octree, Placement};
 use broadleaf::scene::{DT, Gas};
 use broadleaf::{BroadPhase, Config, Pair, ProxyKey};
 use std::hint::black_box;
@@ -70,10 +70,9 @@ fn main() {
         "clustered" => Gas::clustered(args.n, 1),
         other => panic!("unknown scene {other}"),
     };
-    let depth = args.depth.unwrap_or_else(|| match args.placement {
-        Placement::Strict => depth_for(&gas.bounds, gas.radius),
-        Placement::Loose => depth_for_loose(&gas.bounds, gas.radius),
-    });
+    let depth = args
+        .depth
+        .unwrap_or_else(|| args.placement.depth_for(&gas.bounds, gas.radius));
     let n = gas.len();
     let mut times = Vec::with_capacity(args.steps);
     let mut pair_count = 0;

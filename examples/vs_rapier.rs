@@ -36,7 +36,6 @@
 //! `ratio=<speed-up> missed=<n> extra=<n>`; for `--scene all` the ratio is the worst (smallest)
 //! speed-up of the scenes and `missed`/`extra` are summed over them.
 
-use broadleaf::octree::{depth_for, depth_for_loose};
 use broadleaf::rapier::{Comparison, SceneWorld, record_pile};
 use broadleaf::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Scene};
 use broadleaf::{BroadPhase, Config, Placement, brute};
@@ -160,10 +159,7 @@ impl Ours {
         Ours {
             bp: BroadPhase::new(Config {
                 bounds,
-                octree_depth: match placement {
-                    Placement::Strict => depth_for(&bounds, GAS_RADIUS),
-                    Placement::Loose => depth_for_loose(&bounds, GAS_RADIUS),
-                },
+                octree_depth: placement.depth_for(&bounds, GAS_RADIUS),
                 octree_placement: placement,
                 ..Config::default()
             }),

@@ -1,7 +1,6 @@
 //! No allocation per step in steady state, and no memory growth under churn, measured with a
 //! counting global allocator (this test binary only; the library itself has no `unsafe`).
 
-use broadleaf::octree::{depth_for, depth_for_loose};
 use broadleaf::scene::{Churn, Feed, Frame, Gas, Scene};
 use broadleaf::{BroadPhase, Config, Placement};
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -58,10 +57,7 @@ fn setup(scene: &impl Scene, placement: Placement) -> (BroadPhase, Feed) {
     let bounds = scene.bounds();
     let mut bp = BroadPhase::new(Config {
         bounds,
-        octree_depth: match placement {
-            Placement::Strict => depth_for(&bounds, 0.5),
-            Placement::Loose => depth_for_loose(&bounds, 0.5),
-        },
+        octree_depth: placement.depth_for(&bounds, 0.5),
         octree_placement: placement,
         ..Config::default()
     });

@@ -60,6 +60,18 @@ pub enum Placement {
     Loose,
 }
 
+impl Placement {
+    /// A sensible octree depth for spheres of about `typical_radius` in `bounds` under this
+    /// placement: [`depth_for`] for `Strict`, [`depth_for_loose`] for `Loose`.
+    #[must_use]
+    pub fn depth_for(self, bounds: &Aabb, typical_radius: f32) -> u32 {
+        match self {
+            Placement::Strict => depth_for(bounds, typical_radius),
+            Placement::Loose => depth_for_loose(bounds, typical_radius),
+        }
+    }
+}
+
 /// Per-sphere data, indexed by dense id (insertion order, so `update` streams). The pair pass
 /// reads `aabb`, `qmin`/`qmax` and `walk_key`; queries follow the node lists.
 #[derive(Clone, Copy, Debug)]

@@ -174,10 +174,7 @@ fn remove_relinks_the_moved_object() {
 fn gas_pairs_match_the_sweep_reference() {
     for p in BOTH {
         let mut g = Gas::new(3000, 11);
-        let depth = match p {
-            Placement::Strict => depth_for(&g.bounds, g.radius),
-            Placement::Loose => depth_for_loose(&g.bounds, g.radius),
-        };
+        let depth = p.depth_for(&g.bounds, g.radius);
         let mut t = Octree::with_placement(g.bounds, depth, p).unwrap();
         let keys: Vec<_> = g
             .centers
