@@ -3,6 +3,7 @@
 //! ```text
 //! cargo run --release --features rapier --example vs_rapier -- --scene gas --n 100000
 //!     [--steps 30] [--warmup 5] [--index octree|bvh|auto] [--placement strict|loose] [--seed 1]
+//!     [--skin 0]
 //! ```
 //!
 //! `--scene` is `gas`, `clustered`, `bodies`, `churn`, `pile` or `all` (every scene at its
@@ -16,8 +17,8 @@
 //! - broadleaf: the frame's removes, inserts and new positions/boxes, then `step()`; spheres go
 //!   in with `insert_sphere` (`--index octree` or `auto`) or as dynamic bodies by their box
 //!   (`--index bvh`); boxes always go in as bodies. The octree's placement is `--placement`
-//!   (default strict, depth `depth_for`; loose uses `depth_for_loose`). Timed with `Instant`
-//!   around all of it.
+//!   (default strict, depth `depth_for`; loose uses `depth_for_loose`), its pair cache's skin
+//!   `--skin` (`Config::skin`, default 0: no cache). Timed with `Instant` around all of it.
 //! - rapier: kinematic position-based bodies, ball or cuboid colliders with
 //!   `ActiveCollisionTypes::all()`, fixed bodies for static boxes; moved with
 //!   `set_next_kinematic_translation`, then `PhysicsPipeline::step`. Its broad-phase time per
@@ -56,6 +57,8 @@ struct Args {
     warmup: usize,
     index: Index,
     placement: Placement,
+    /// `Config::skin`.
+    skin: f32,
     seed: u64,
     /// Several sizes of one scene instead of `n` (`--sizes 1000,10000,100000`).
     sizes: Vec<usize>,
@@ -67,7 +70,7 @@ struct Args {
 
 const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|all] [--n N] \
                      [--steps 30] [--warmup 5] [--index octree|bvh|auto] \
-                     [--placement strict|loose] [--seed 1] \
+                     [--placement strict|loose] [--skin 0] [--seed 1] \
                      [--sizes N1,N2,...] [--plot PATH.svg] [--interleave]";
 
 fn parse_args() -> Result<Args, String> {
@@ -78,6 +81,7 @@ fn parse_args() -> Result<Args, String> {
         warmup: 5,
         index: Index::Auto,
         placement: Placement::Strict,
+        skin: 0.0,
         seed: 1,
         sizes: Vec::new(),
         plot: None,
@@ -105,6 +109,11 @@ fn parse_args() -> Result<Args, String> {
                 args.sizes = value.split(',').map(number).collect::<Result<_, _>>()?;
             }
             "--plot" => args.plot = Some(value),
+            "--skin" => {
+                args.skin = value
+                    .parse::<f32>()
+                    .map_err(|e| format!("{flag} {value}: {e}"))?;
+            }
             "--index" => {
                 args.index = match value.as_str() {
                     "octree" => Index::Octree,
@@ -155,12 +164,13 @@ struct Ours {
 }
 
 impl Ours {
-    fn new(bounds: broadleaf::Aabb, index: Index, placement: Placement) -> Self {
+    fn new(bounds: broadleaf::Aabb, index: Index, placement: Placement, skin: f32) -> Self {
         Ours {
             bp: BroadPhase::new(Config {
                 bounds,
                 octree_depth: placement.depth_for(&bounds, GAS_RADIUS),
                 octree_placement: placement,
+                skin,
                 ..Config::default()
             }),
             feed: Feed::new(index == Index::Bvh),
@@ -188,7 +198,7 @@ struct Row {
 
 fn run(name: &str, n: usize, args: &Args) -> Row {
     let mut scene = make_scene(name, n, args.seed, args.warmup + args.steps).expect("known scene");
-    let mut ours = Ours::new(scene.bounds(), args.index, args.placement);
+    let mut ours = Ours::new(scene.bounds(), args.index, args.placement, args.skin);
     let mut theirs = SceneWorld::new();
     let mut spawns = Vec::new();
     scene.spawns(&mut spawns);
@@ -285,10 +295,11 @@ fn main() {
         }
     };
     println!(
-        "index {:?}, octree placement {:?}, {} measured steps after {} warm-up, seed {}, {}; \
-         times: median ns/object/step",
+        "index {:?}, octree placement {:?}, skin {}, {} measured steps after {} warm-up, seed {}, \
+         {}; times: median ns/object/step",
         args.index,
         args.placement,
+        args.skin,
         args.steps,
         args.warmup,
         args.seed,

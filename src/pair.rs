@@ -46,7 +46,7 @@ fn key_rank(k: ProxyKey) -> u64 {
 /// Keys order by `(idx, version)`, slot index first; `tests::slot_index_orders_live_keys`
 /// pins this layout down against slotmap.
 #[inline]
-fn slot(k: ProxyKey) -> u32 {
+pub(crate) fn slot(k: ProxyKey) -> u32 {
     use slotmap::Key;
     k.data().as_ffi() as u32
 }

@@ -34,14 +34,21 @@ fn bad_boxes() -> Vec<(Aabb, &'static str)> {
     v
 }
 
-const BOTH: [Placement; 2] = [Placement::Strict, Placement::Loose];
+/// Both placements without the pair cache, and both with it (skin 0.25).
+const BOTH: [(Placement, f32); 4] = [
+    (Placement::Strict, 0.0),
+    (Placement::Loose, 0.0),
+    (Placement::Strict, 0.25),
+    (Placement::Loose, 0.25),
+];
 
 /// A small world with one of each kind, stepped once.
-fn world(placement: Placement) -> (BroadPhase, Vec<ProxyKey>) {
+fn world((placement, skin): (Placement, f32)) -> (BroadPhase, Vec<ProxyKey>) {
     let mut bp = BroadPhase::new(Config {
         bounds: Aabb::new(Vec3::splat(-4.0), Vec3::splat(4.0)),
         octree_depth: 3,
         octree_placement: placement,
+        skin,
         ..Config::default()
     });
     let keys = vec![
@@ -204,6 +211,14 @@ fn bad_config_is_refused_by_try_new_and_corrected_by_new() {
         },
         Config {
             rebuild_threshold: 0.5,
+            ..Config::default()
+        },
+        Config {
+            skin: -0.1,
+            ..Config::default()
+        },
+        Config {
+            skin: f32::INFINITY,
             ..Config::default()
         },
         Config {

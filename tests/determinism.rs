@@ -43,10 +43,16 @@ enum Unrelated {
 /// inserted after the scene's own, so they take no key the scene uses and pair with nothing:
 /// the hash must not depend on them or on their order.
 fn scene_hash(unrelated: Unrelated) -> u64 {
+    scene_hash_with_skin(unrelated, 0.0)
+}
+
+/// [`scene_hash`] with `Config::skin`: the pair cache changes the cost, never the lists.
+fn scene_hash_with_skin(unrelated: Unrelated, skin: f32) -> u64 {
     let mut gas = Gas::new(1500, 99);
     let mut bp = BroadPhase::new(Config {
         bounds: gas.bounds,
         octree_depth: 4,
+        skin,
         ..Config::default()
     });
     let mut rng = Rng::new(5);
@@ -143,4 +149,16 @@ fn unrelated_proxies_in_any_insertion_order_change_nothing() {
     ] {
         assert_eq!(scene_hash(order), GOLDEN);
     }
+}
+
+#[test]
+fn the_pair_cache_gives_the_same_lists() {
+    for skin in [0.02, 0.3, 2.0] {
+        assert_eq!(
+            scene_hash_with_skin(Unrelated::None, skin),
+            GOLDEN,
+            "skin {skin}"
+        );
+    }
+    assert_eq!(scene_hash_with_skin(Unrelated::Reverse, 0.3), GOLDEN);
 }

@@ -52,12 +52,13 @@ fn op() -> impl Strategy<Value = Op> {
     ]
 }
 
-fn config(depth: u32, margin: f32, placement: Placement) -> Config {
+fn config(depth: u32, margin: f32, placement: Placement, skin: f32) -> Config {
     Config {
         bounds: Aabb::new(Vec3::splat(-8.0), Vec3::splat(8.0)),
         octree_depth: depth,
         octree_placement: placement,
         margin,
+        skin,
         ..Config::default()
     }
 }
@@ -87,8 +88,8 @@ fn check_step(bp: &mut BroadPhase, model: &[(ProxyKey, Shape)], prev: &[Pair]) -
     expected
 }
 
-fn run(depth: u32, margin: f32, placement: Placement, ops: &[Op]) {
-    let mut bp = BroadPhase::try_new(config(depth, margin, placement)).unwrap();
+fn run(depth: u32, margin: f32, placement: Placement, skin: f32, ops: &[Op]) {
+    let mut bp = BroadPhase::try_new(config(depth, margin, placement, skin)).unwrap();
     assert_eq!(bp.octree().placement(), placement);
     let mut model: Vec<(ProxyKey, Shape)> = Vec::new();
     let mut prev = Vec::new();
@@ -147,6 +148,8 @@ fn run(depth: u32, margin: f32, placement: Placement, ops: &[Op]) {
             Op::Step => prev = check_step(&mut bp, &model, &prev),
             _ => {}
         }
+        // Between steps too: queries and rays see the current boxes.
+        bp.validate();
         assert_eq!(bp.len(), model.len());
     }
     check_step(&mut bp, &model, &prev);
@@ -164,9 +167,10 @@ proptest! {
         depth in 0u32..=5,
         margin in prop_oneof![3 => Just(0.0f32), 1 => Just(0.25f32), 1 => Just(0.1f32)],
         placement in prop_oneof![Just(Placement::Strict), Just(Placement::Loose)],
+        skin in prop_oneof![3 => Just(0.0f32), 1 => Just(0.1f32), 1 => Just(0.6f32)],
         ops in prop::collection::vec(op(), 0..160),
     ) {
-        run(depth, margin, placement, &ops);
+        run(depth, margin, placement, skin, &ops);
     }
 }
 
@@ -230,8 +234,14 @@ fn cast_ray_hits_spheres_as_spheres_and_bodies_as_boxes() {
 
 #[test]
 fn query_aabb_equals_brute_force() {
-    for placement in [Placement::Strict, Placement::Loose] {
-        let mut bp = BroadPhase::new(config(3, 0.0, placement));
+    let settings = [
+        (Placement::Strict, 0.0),
+        (Placement::Loose, 0.0),
+        (Placement::Strict, 0.3),
+        (Placement::Loose, 0.3),
+    ];
+    for (placement, skin) in settings {
+        let mut bp = BroadPhase::new(config(3, 0.0, placement, skin));
         let mut rng = broadleaf::scene::Rng::new(11);
         let mut proxies = Vec::new();
         for i in 0..300 {
@@ -256,6 +266,174 @@ fn query_aabb_equals_brute_force() {
             bp.query_aabb(&q, |k| got.push(k));
             got.sort_unstable();
             assert_eq!(got, brute::query_aabb(&proxies, &q));
+        }
+    }
+}
+
+/// With and without a pair cache, after moves small enough to stay inside the skin (so the
+/// structures still hold the old fat boxes) and some that leave it: `query_aabb` equals brute
+/// force over the exact boxes, and `cast_ray` equals the brute-force closest hit (spheres as
+/// balls, bodies as boxes; same key, same `t`).
+#[test]
+fn queries_and_rays_see_exact_shapes_with_a_pair_cache() {
+    for (placement, skin) in [
+        (Placement::Strict, 0.0),
+        (Placement::Strict, 0.4),
+        (Placement::Loose, 0.4),
+        (Placement::Loose, 2.0),
+    ] {
+        let mut bp = BroadPhase::new(config(3, 0.0, placement, skin));
+        let mut rng = broadleaf::scene::Rng::new(29);
+        let mut model: Vec<(ProxyKey, Shape)> = Vec::new();
+        for i in 0..240 {
+            let c = rng.vec3_in(Vec3::splat(-10.0), Vec3::splat(10.0));
+            let shape = if i % 4 == 0 {
+                let h = Vec3::splat(rng.range(0.0, 1.5));
+                Shape::Body {
+                    aabb: Aabb::from_center_half_extents(c, h),
+                    kind: if i % 8 == 0 {
+                        BodyKind::Static
+                    } else {
+                        BodyKind::Dynamic
+                    },
+                }
+            } else {
+                Shape::Sphere {
+                    center: c,
+                    radius: rng.range(0.0, 1.0),
+                }
+            };
+            let key = match shape {
+                Shape::Sphere { center, radius } => bp.insert_sphere(center, radius),
+                Shape::Body { aabb, kind } => bp.insert_body(aabb, kind),
+            }
+            .unwrap();
+            model.push((key, shape));
+        }
+        for round in 0..6 {
+            bp.step();
+            for (key, shape) in &mut model {
+                // Mostly diagonal moves within the skin; one in eight jumps further.
+                let reach = if rng.below(8) == 0 { 3.0 } else { 0.3 };
+                let d = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), 1.0) * reach;
+                match shape {
+                    Shape::Sphere { center, radius } => {
+                        *center += d;
+                        bp.update_sphere(*key, *center, *radius).unwrap();
+                    }
+                    Shape::Body { aabb, .. } => {
+                        *aabb = Aabb::new(aabb.min + d, aabb.max + d);
+                        bp.update_body(*key, *aabb).unwrap();
+                    }
+                }
+            }
+            bp.validate();
+            let proxies: Vec<brute::Proxy> = model
+                .iter()
+                .map(|(k, s)| brute::Proxy::of(*k, s, 0.0))
+                .collect();
+            for _ in 0..60 {
+                let c = rng.vec3_in(Vec3::splat(-12.0), Vec3::splat(12.0));
+                let q = Aabb::from_center_half_extents(c, Vec3::splat(rng.range(0.0, 3.0)));
+                let mut got = Vec::new();
+                bp.query_aabb(&q, |k| got.push(k));
+                got.sort_unstable();
+                assert_eq!(got, brute::query_aabb(&proxies, &q), "round {round}");
+
+                let o = rng.vec3_in(Vec3::splat(-14.0), Vec3::splat(14.0));
+                let dir = rng.vec3_in(Vec3::splat(-1.0), Vec3::splat(1.0));
+                let inv = broadleaf::geom::inverse_dir(dir);
+                let want = model
+                    .iter()
+                    .filter_map(|(k, s)| {
+                        let t = match *s {
+                            Shape::Sphere { center, radius } => {
+                                broadleaf::geom::ray_sphere(o, dir, center, radius, 40.0)
+                            }
+                            Shape::Body { aabb, .. } => aabb.ray_entry(o, inv, 40.0),
+                        };
+                        t.map(|t| (*k, t))
+                    })
+                    .min_by(|x, y| x.1.total_cmp(&y.1).then(x.0.cmp(&y.0)));
+                assert_eq!(
+                    bp.cast_ray(o, dir, 40.0),
+                    want,
+                    "round {round}, skin {skin}"
+                );
+            }
+        }
+    }
+}
+
+/// The pair cache's incremental path: many proxies, few of them changing per step (so the
+/// cache patches its list instead of regenerating it), small moves inside the skin and jumps
+/// out of it, resizes, inserts and removes; every step equals brute force, events included.
+#[test]
+fn pair_cache_patches_equal_brute_force_step_by_step() {
+    for (placement, skin, margin) in [
+        (Placement::Strict, 0.2, 0.0),
+        (Placement::Loose, 0.2, 0.1),
+        (Placement::Loose, 1.0, 0.0),
+    ] {
+        let mut bp = BroadPhase::try_new(config(3, margin, placement, skin)).unwrap();
+        let mut rng = broadleaf::scene::Rng::new(41);
+        let mut model: Vec<(ProxyKey, Shape)> = Vec::new();
+        let add = |bp: &mut BroadPhase, rng: &mut broadleaf::scene::Rng| {
+            let c = rng.vec3_in(Vec3::splat(-9.0), Vec3::splat(9.0));
+            let shape = match rng.below(6) {
+                0 => Shape::Body {
+                    aabb: Aabb::from_center_half_extents(c, Vec3::splat(rng.range(0.0, 1.0))),
+                    kind: BodyKind::Static,
+                },
+                1 | 2 => Shape::Body {
+                    aabb: Aabb::from_center_half_extents(c, Vec3::splat(rng.range(0.0, 1.0))),
+                    kind: BodyKind::Dynamic,
+                },
+                _ => Shape::Sphere {
+                    center: c,
+                    radius: rng.range(0.0, 0.8),
+                },
+            };
+            let key = match shape {
+                Shape::Sphere { center, radius } => bp.insert_sphere(center, radius),
+                Shape::Body { aabb, kind } => bp.insert_body(aabb, kind),
+            }
+            .unwrap();
+            (key, shape)
+        };
+        for _ in 0..400 {
+            model.push(add(&mut bp, &mut rng));
+        }
+        let mut prev = check_step(&mut bp, &model, &[]);
+        for _ in 0..150 {
+            for _ in 0..rng.below(12) {
+                let i = rng.below(model.len() as u32) as usize;
+                let (key, shape) = &mut model[i];
+                let d = rng.vec3_in(Vec3::splat(-1.0), Vec3::splat(1.0))
+                    * if rng.below(4) == 0 { 2.0 } else { 0.1 };
+                match shape {
+                    Shape::Sphere { center, radius } => {
+                        *center += d;
+                        if rng.below(6) == 0 {
+                            *radius = rng.range(0.0, 0.8);
+                        }
+                        bp.update_sphere(*key, *center, *radius).unwrap();
+                    }
+                    Shape::Body { aabb, .. } => {
+                        *aabb = Aabb::new(aabb.min + d, aabb.max + d);
+                        bp.update_body(*key, *aabb).unwrap();
+                    }
+                }
+            }
+            if rng.below(3) == 0 {
+                let i = rng.below(model.len() as u32) as usize;
+                let (key, _) = model.swap_remove(i);
+                bp.remove(key).unwrap();
+            }
+            if rng.below(3) == 0 {
+                model.push(add(&mut bp, &mut rng));
+            }
+            prev = check_step(&mut bp, &model, &prev);
         }
     }
 }

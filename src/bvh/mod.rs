@@ -35,10 +35,11 @@ mod validate;
 
 use crate::geom::check_aabb;
 use crate::{Aabb, Error, ProxyKey};
-use node::{Node, PrimBox};
+use node::Node;
 use slotmap::{Key, SecondaryMap, SlotMap};
 
 pub(crate) use build::BuildScratch;
+pub(crate) use node::PrimBox;
 
 /// "No index" in the `u32` side arrays.
 const NONE: u32 = u32::MAX;

@@ -1,11 +1,14 @@
 //! `BroadPhase`: spheres and rigid bodies behind one set of keys, one sorted pair list per step,
 //! and the pairs that started and stopped overlapping since the last step.
 
+mod cache;
+
 use crate::bvh::{Bvh, BvhConfig};
 use crate::geom::{self, check_aabb, check_sphere};
 use crate::octree::{Octree, Placement};
 use crate::pair::{self, Pair, PairSorter, ProxyKey};
 use crate::{Aabb, Error, Vec3};
+use cache::PairCache;
 use slotmap::SlotMap;
 
 /// Whether a body moves. Static bodies never pair with each other.
@@ -80,11 +83,20 @@ pub struct Config {
     /// The dynamic BVH is rebuilt when its SAH cost after a refit exceeds this many times its
     /// cost at build; finite, `>= 1`.
     pub rebuild_threshold: f32,
+    /// The pair cache's skin in metres, finite and `>= 0`; 0 (the default) turns the cache
+    /// off. With a skin the structures hold every box grown by it (a "fat" box, placed
+    /// again only when the exact box leaves it), the broadphase keeps the pairs of fat
+    /// boxes as candidates, and each step re-tests only the candidates' exact boxes. The
+    /// pairs stay exact (the same lists as without the cache); what changes is the cost.
+    /// Worth it when most objects move less than the skin per step (resting piles, stacks,
+    /// slow crowds); for objects that cross their skin every few steps it is slower. Try
+    /// about a tenth of the typical object size.
+    pub skin: f32,
 }
 
 impl Default for Config {
     /// Bounds ±512 m, octree depth 7 (deepest cells 8 m), strict placement, margin 0, rebuild
-    /// threshold 1.5.
+    /// threshold 1.5, no pair cache (skin 0).
     fn default() -> Self {
         Self {
             bounds: Aabb::new(Vec3::splat(-512.0), Vec3::splat(512.0)),
@@ -92,6 +104,7 @@ impl Default for Config {
             octree_placement: Placement::Strict,
             margin: 0.0,
             rebuild_threshold: 1.5,
+            skin: 0.0,
         }
     }
 }
@@ -113,6 +126,12 @@ impl Config {
             return Err(Error::InvalidConfig {
                 what: "rebuild_threshold",
                 value: self.rebuild_threshold,
+            });
+        }
+        if !(self.skin.is_finite() && self.skin >= 0.0) {
+            return Err(Error::InvalidConfig {
+                what: "skin",
+                value: self.skin,
             });
         }
         Ok(())
@@ -138,14 +157,21 @@ pub struct BroadPhase {
     config: Config,
     /// Every proxy as the user gave it (no margin); the key space of the whole broadphase.
     proxies: SlotMap<ProxyKey, Shape>,
-    /// Spheres, stored with `radius + margin`.
+    /// Spheres, stored with `radius + margin` (plus the skin with a pair cache).
     octree: Octree,
-    /// Dynamic bodies, stored grown by the margin; refitted every step.
+    /// Dynamic bodies, stored grown by the margin (plus the skin with a pair cache);
+    /// refitted every step (with a pair cache: in a step after a change).
     dynamic: Bvh,
-    /// Static bodies, stored grown by the margin; refitted only in a step after a change.
+    /// Static bodies, stored grown like the dynamic ones; refitted only in a step after a
+    /// change.
     statics: Bvh,
     /// True when a static body was inserted, updated or removed since the last step.
     statics_changed: bool,
+    /// True when a dynamic body's stored box changed, or one was inserted or removed, since
+    /// the last step.
+    dynamic_changed: bool,
+    /// The pair cache, with `Config::skin > 0`.
+    cache: Option<PairCache>,
     pairs: Vec<Pair>,
     prev: Vec<Pair>,
     added: Vec<Pair>,
@@ -181,6 +207,11 @@ impl BroadPhase {
             } else {
                 d.rebuild_threshold
             },
+            skin: if config.skin.is_finite() && config.skin >= 0.0 {
+                config.skin
+            } else {
+                0.0
+            },
         };
         Self::build(fixed)
     }
@@ -215,6 +246,8 @@ impl BroadPhase {
             dynamic,
             statics,
             statics_changed: false,
+            dynamic_changed: false,
+            cache: (config.skin > 0.0).then(|| PairCache::new(config.skin)),
             pairs: Vec::new(),
             prev: Vec::new(),
             added: Vec::new(),
@@ -252,12 +285,17 @@ impl BroadPhase {
     pub fn insert_sphere(&mut self, center: Vec3, radius: f32) -> Result<ProxyKey, Error> {
         check_sphere(center, radius)?;
         let key = self.proxies.insert(Shape::Sphere { center, radius });
-        let fat = radius + self.config.margin;
+        let grown = radius + self.config.margin;
+        let stored = grown + self.cache.as_ref().map_or(0.0, PairCache::skin);
         self.octree
-            .insert_keyed(key, center, fat)
+            .insert_keyed(key, center, stored)
             .inspect_err(|_| {
                 self.proxies.remove(key);
             })?;
+        if let Some(cache) = &mut self.cache {
+            let exact = Aabb::from_center_radius(center, grown);
+            cache.insert(key, &exact, Aabb::from_center_radius(center, stored));
+        }
         Ok(key)
     }
 
@@ -265,17 +303,27 @@ impl BroadPhase {
     pub fn insert_body(&mut self, aabb: Aabb, kind: BodyKind) -> Result<ProxyKey, Error> {
         check_aabb(&aabb)?;
         let key = self.proxies.insert(Shape::Body { aabb, kind });
-        let fat = aabb.grown(self.config.margin);
+        let exact = aabb.grown(self.config.margin);
+        let stored = match &self.cache {
+            Some(cache) => exact.grown(cache.skin()),
+            None => exact,
+        };
         let tree = match kind {
-            BodyKind::Dynamic => &mut self.dynamic,
+            BodyKind::Dynamic => {
+                self.dynamic_changed = true;
+                &mut self.dynamic
+            }
             BodyKind::Static => {
                 self.statics_changed = true;
                 &mut self.statics
             }
         };
-        tree.insert_keyed(key, fat).inspect_err(|_| {
+        tree.insert_keyed(key, stored).inspect_err(|_| {
             self.proxies.remove(key);
         })?;
+        if let Some(cache) = &mut self.cache {
+            cache.insert(key, &exact, stored);
+        }
         Ok(key)
     }
 
@@ -285,8 +333,20 @@ impl BroadPhase {
         check_sphere(center, radius)?;
         match self.proxies.get_mut(key) {
             Some(shape @ Shape::Sphere { .. }) => {
-                let fat = radius + self.config.margin;
-                self.octree.update(key, center, fat)?;
+                let grown = radius + self.config.margin;
+                match &mut self.cache {
+                    None => self.octree.update(key, center, grown)?,
+                    Some(cache) => {
+                        let exact = Aabb::from_center_radius(center, grown);
+                        if cache.needs_new_fat(key, &exact) {
+                            let stored = grown + cache.skin();
+                            self.octree.update(key, center, stored)?;
+                            cache.refat(key, &exact, Aabb::from_center_radius(center, stored));
+                        } else {
+                            cache.set_exact(key, &exact);
+                        }
+                    }
+                }
                 *shape = Shape::Sphere { center, radius };
                 Ok(())
             }
@@ -302,16 +362,30 @@ impl BroadPhase {
         match self.proxies.get_mut(key) {
             Some(Shape::Body { aabb: a, kind }) => {
                 let margin = self.config.margin;
-                match kind {
+                let tree = match kind {
+                    BodyKind::Dynamic => &mut self.dynamic,
+                    BodyKind::Static => &mut self.statics,
+                };
+                match &mut self.cache {
                     // No margin: the box just checked is the one the tree stores.
-                    BodyKind::Dynamic if margin == 0.0 => {
-                        self.dynamic.update_checked(key, &aabb)?
+                    None if margin == 0.0 => tree.update_checked(key, &aabb)?,
+                    None => tree.update(key, aabb.grown(margin))?,
+                    Some(cache) => {
+                        let exact = aabb.grown(margin);
+                        if cache.needs_new_fat(key, &exact) {
+                            let stored = exact.grown(cache.skin());
+                            tree.update(key, stored)?;
+                            cache.refat(key, &exact, stored);
+                        } else {
+                            cache.set_exact(key, &exact);
+                            *a = aabb;
+                            return Ok(());
+                        }
                     }
-                    BodyKind::Dynamic => self.dynamic.update(key, aabb.grown(margin))?,
-                    BodyKind::Static => {
-                        self.statics.update(key, aabb.grown(margin))?;
-                        self.statics_changed = true;
-                    }
+                }
+                match kind {
+                    BodyKind::Dynamic => self.dynamic_changed = true,
+                    BodyKind::Static => self.statics_changed = true,
                 }
                 *a = aabb;
                 Ok(())
@@ -330,7 +404,10 @@ impl BroadPhase {
             Shape::Body {
                 kind: BodyKind::Dynamic,
                 ..
-            } => self.dynamic.remove(key)?,
+            } => {
+                self.dynamic.remove(key)?;
+                self.dynamic_changed = true;
+            }
             Shape::Body {
                 kind: BodyKind::Static,
                 ..
@@ -338,6 +415,9 @@ impl BroadPhase {
                 self.statics.remove(key)?;
                 self.statics_changed = true;
             }
+        }
+        if let Some(cache) = &mut self.cache {
+            cache.remove(key);
         }
         self.proxies.remove(key);
         Ok(())
@@ -380,42 +460,113 @@ impl BroadPhase {
     /// sorted, and merged against the previous step's list for `added` / `removed`. Steady
     /// state allocates nothing: every list is kept and reused.
     pub fn step(&mut self) -> StepPairs<'_> {
-        self.dynamic.refit();
-        if self.statics_changed {
-            self.statics.refit();
-            self.statics_changed = false;
-        }
-        core::mem::swap(&mut self.prev, &mut self.pairs);
-        let pairs = &mut self.pairs;
-        pairs.clear();
-        self.octree.pairs_into(pairs);
-        self.dynamic
-            .for_each_pair(|a, b| pairs.push(Pair::new(a, b)));
-        self.dynamic
-            .for_each_pair_with(&self.statics, |a, b| pairs.push(Pair::new(a, b)));
-        let bodies = self.dynamic.len() + self.statics.len();
-        if bodies <= self.octree.len() {
-            for tree in [&self.dynamic, &self.statics] {
-                tree.for_each(|body, aabb| {
-                    self.octree
-                        .query_aabb_unchecked(&aabb, |sphere| pairs.push(Pair::new(sphere, body)));
-                });
-            }
+        if self.cache.is_some() {
+            self.step_cached();
         } else {
-            self.octree.for_each(|sphere, aabb| {
-                for tree in [&self.dynamic, &self.statics] {
-                    tree.query_aabb_unchecked(&aabb, |body| pairs.push(Pair::new(sphere, body)));
-                }
-            });
+            self.dynamic.refit();
+            if self.statics_changed {
+                self.statics.refit();
+                self.statics_changed = false;
+            }
+            core::mem::swap(&mut self.prev, &mut self.pairs);
+            self.pairs.clear();
+            structure_pairs(
+                &mut self.octree,
+                &mut self.dynamic,
+                &self.statics,
+                &mut self.pairs,
+            );
+            self.sorter.sort(&mut self.pairs);
+            debug_assert!(
+                self.pairs.windows(2).all(|w| w[0] < w[1]),
+                "a pair found twice"
+            );
+            pair::diff(&self.prev, &self.pairs, &mut self.added, &mut self.removed);
         }
-        self.sorter.sort(pairs);
-        debug_assert!(pairs.windows(2).all(|w| w[0] < w[1]), "a pair found twice");
-        pair::diff(&self.prev, &self.pairs, &mut self.added, &mut self.removed);
         StepPairs {
             pairs: &self.pairs,
             added: &self.added,
             removed: &self.removed,
         }
+    }
+
+    /// [`BroadPhase::step`] with the pair cache: bring the candidates up to date for the
+    /// proxies marked since the last step, then filter them by their exact boxes.
+    fn step_cached(&mut self) {
+        let Self {
+            cache: Some(cache),
+            proxies,
+            octree,
+            dynamic,
+            statics,
+            ..
+        } = self
+        else {
+            return;
+        };
+        if core::mem::take(&mut self.dynamic_changed) {
+            dynamic.refit();
+        }
+        if core::mem::take(&mut self.statics_changed) {
+            statics.refit();
+        }
+        core::mem::swap(&mut self.prev, &mut self.pairs);
+        let marked = cache.dirty().len();
+        // Re-querying one proxy costs a few times its share of a full pair pass.
+        let full = marked.saturating_mul(8) > proxies.len();
+        let mut fresh = core::mem::take(&mut cache.fresh);
+        fresh.clear();
+        if full {
+            structure_pairs(octree, dynamic, statics, &mut fresh);
+            self.sorter.sort(&mut fresh);
+        } else {
+            // The candidates `(x, k)`, `x < k`, of each marked key `k`: every `x` whose fat
+            // box overlaps the one `k` had when they were found (an unmarked `x` still has
+            // its box then; a marked one drops its own range `(x, ..)`).
+            let mut stale = core::mem::take(&mut cache.stale);
+            stale.clear();
+            for (key, old) in cache.marked_with_old_fat() {
+                let mut push = |other: ProxyKey| {
+                    if other < key {
+                        stale.push(Pair { a: other, b: key });
+                    }
+                };
+                octree.query_aabb_unchecked(old, &mut push);
+                dynamic.query_aabb_unchecked(old, &mut push);
+                statics.query_aabb_unchecked(old, &mut push);
+            }
+            cache.stale = stale;
+            for &key in cache.dirty() {
+                let Some(shape) = proxies.get(key) else {
+                    continue; // removed since it was marked
+                };
+                let fat = cache.fat(key);
+                let mut push = |other: ProxyKey| {
+                    if other != key {
+                        fresh.push(Pair::new(key, other));
+                    }
+                };
+                octree.query_aabb_unchecked(fat, &mut push);
+                dynamic.query_aabb_unchecked(fat, &mut push);
+                if !matches!(
+                    shape,
+                    Shape::Body {
+                        kind: BodyKind::Static,
+                        ..
+                    }
+                ) {
+                    statics.query_aabb_unchecked(fat, &mut push);
+                }
+            }
+        }
+        cache.fresh = fresh;
+        cache.step(
+            full,
+            &self.prev,
+            &mut self.pairs,
+            &mut self.added,
+            &mut self.removed,
+        );
     }
 
     /// Calls `f` with every proxy whose (margin-grown) box overlaps `aabb`, each once, in no
@@ -424,9 +575,24 @@ impl BroadPhase {
         if check_aabb(aabb).is_err() {
             return;
         }
-        self.octree.query_aabb(aabb, &mut f);
-        self.dynamic.query_aabb(aabb, &mut f);
-        self.statics.query_aabb(aabb, &mut f);
+        match &self.cache {
+            None => {
+                self.octree.query_aabb(aabb, &mut f);
+                self.dynamic.query_aabb(aabb, &mut f);
+                self.statics.query_aabb(aabb, &mut f);
+            }
+            Some(cache) => {
+                // The structures hold fat boxes: each hit is re-tested with its exact box.
+                let mut exact = |key: ProxyKey| {
+                    if cache.exact(key).overlaps(aabb) {
+                        f(key);
+                    }
+                };
+                self.octree.query_aabb(aabb, &mut exact);
+                self.dynamic.query_aabb(aabb, &mut exact);
+                self.statics.query_aabb(aabb, &mut exact);
+            }
+        }
     }
 
     /// The nearest proxy hit by the segment `origin + t·dir`, `t ∈ [0, max_t]`, with its `t`
@@ -444,7 +610,7 @@ impl BroadPhase {
             (None, h) => h,
             (b, _) => b,
         };
-        if self.config.margin == 0.0 {
+        if self.config.margin == 0.0 && self.cache.is_none() {
             // The structures hold the exact shapes: their closest-hit searches answer directly.
             let mut best = self.octree.cast_ray(origin, dir, max_t);
             for tree in [&self.dynamic, &self.statics] {
@@ -453,7 +619,7 @@ impl BroadPhase {
             }
             return best;
         }
-        // Grown shapes: every grown hit is a candidate, re-tested against the exact shape.
+        // Grown (or fat) shapes: every hit is a candidate, re-tested against the exact shape.
         let inv = geom::inverse_dir(dir);
         let mut best = None;
         let mut exact = |key: ProxyKey, _: f32| {
@@ -466,7 +632,13 @@ impl BroadPhase {
             };
             best = closer(best, t.map(|t| (key, t)));
         };
-        self.octree.cast_ray_all(origin, dir, max_t, &mut exact);
+        if self.cache.is_some() {
+            // A fat sphere holds the exact sphere's box, not always its ball.
+            self.octree
+                .cast_ray_all_boxes(origin, dir, max_t, &mut exact);
+        } else {
+            self.octree.cast_ray_all(origin, dir, max_t, &mut exact);
+        }
         self.dynamic.cast_ray_all(origin, dir, max_t, &mut exact);
         self.statics.cast_ray_all(origin, dir, max_t, &mut exact);
         best
@@ -494,8 +666,49 @@ impl BroadPhase {
                 } => (self.statics.aabb(key), &mut statics),
             };
             *count += 1;
-            let want = shape.grown_aabb(margin);
+            let exact = shape.grown_aabb(margin);
+            let want = match &self.cache {
+                None => exact,
+                Some(cache) => {
+                    assert_eq!(cache.exact(key), exact, "proxy {key:?}: cached box stale");
+                    let fat = *cache.fat(key);
+                    assert!(fat.contains(&exact), "proxy {key:?} outside its fat box");
+                    fat
+                }
+            };
             assert_eq!(tree_box, Some(want), "proxy {key:?} ({shape:?}) misfiled");
+        }
+        if let Some(cache) = &self.cache {
+            cache.validate(|key| self.proxies.contains_key(key), &self.pairs);
+            if cache.dirty().is_empty() {
+                // Complete: every pair of overlapping fat boxes is a candidate.
+                for (key, shape) in &self.proxies {
+                    let is_static = matches!(
+                        shape,
+                        Shape::Body {
+                            kind: BodyKind::Static,
+                            ..
+                        }
+                    );
+                    let mut check = |other: ProxyKey| {
+                        let other_static = matches!(
+                            self.proxies[other],
+                            Shape::Body {
+                                kind: BodyKind::Static,
+                                ..
+                            }
+                        );
+                        if other != key && !(is_static && other_static) {
+                            let pair = Pair::new(key, other);
+                            assert!(cache.is_candidate(&pair), "cache: {pair:?} missing");
+                        }
+                    };
+                    let fat = cache.fat(key);
+                    self.octree.query_aabb_unchecked(fat, &mut check);
+                    self.dynamic.query_aabb_unchecked(fat, &mut check);
+                    self.statics.query_aabb_unchecked(fat, &mut check);
+                }
+            }
         }
         assert_eq!(spheres, self.octree.len(), "octree holds unknown spheres");
         assert_eq!(
@@ -508,5 +721,29 @@ impl BroadPhase {
             self.statics.len(),
             "static tree holds unknown bodies"
         );
+    }
+}
+
+/// Every pair of boxes the structures hold (static×static excepted), each once, unsorted:
+/// sphere×sphere (the octree's walk), dynamic×dynamic (the dynamic tree against itself),
+/// dynamic×static (tree against tree) and sphere×body (the smaller side queried against the
+/// larger).
+fn structure_pairs(octree: &mut Octree, dynamic: &mut Bvh, statics: &Bvh, pairs: &mut Vec<Pair>) {
+    octree.pairs_into(pairs);
+    dynamic.for_each_pair(|a, b| pairs.push(Pair::new(a, b)));
+    dynamic.for_each_pair_with(statics, |a, b| pairs.push(Pair::new(a, b)));
+    let bodies = dynamic.len() + statics.len();
+    if bodies <= octree.len() {
+        for tree in [&*dynamic, statics] {
+            tree.for_each(|body, aabb| {
+                octree.query_aabb_unchecked(&aabb, |sphere| pairs.push(Pair::new(sphere, body)));
+            });
+        }
+    } else {
+        octree.for_each(|sphere, aabb| {
+            for tree in [&*dynamic, statics] {
+                tree.query_aabb_unchecked(&aabb, |body| pairs.push(Pair::new(sphere, body)));
+            }
+        });
     }
 }
