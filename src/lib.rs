@@ -9,6 +9,11 @@
 //! - **[`BroadPhase`]** — start here. One key space for spheres and rigid bodies, one sorted
 //!   pair list per [`BroadPhase::step`], plus `added` / `removed` events, ray casts and box
 //!   queries. Spheres go to the octree, dynamic bodies to one BVH, static bodies to another.
+//!   For worlds that are mostly at rest (settled piles, stacks, parked bodies) set
+//!   [`Config::skin`]: the structures then hold boxes grown by the skin, the broadphase keeps
+//!   the pairs of those as candidates, and a step only re-tests the candidates' exact boxes —
+//!   the same exact lists, several times cheaper while objects stay inside their skin, slower
+//!   when most objects leave it every few steps (fast gas).
 //! - **[`Octree`]** — many moving spheres of similar size in a known region (particles, gas,
 //!   piles, crowds). A top-down preallocated octree (Ericson, *Real-Time Collision Detection*
 //!   7.3), and a move that keeps the node costs one store. Two [`Placement`]s: `Strict` (the
@@ -57,7 +62,8 @@
 //! - **Bad input is refused, never half-applied.** NaN or infinite coordinates, a negative
 //!   radius, an inverted box or a stale key give an [`Error`] and leave the structure exactly
 //!   as it was. Objects outside the octree's bounds are not errors: they are kept and paired.
-//! - **No allocation per step** in steady state: every buffer is kept and reused.
+//! - **No allocation per step** in steady state: every buffer is kept and reused (with a pair
+//!   cache, once its lists have seen their peak sizes).
 //!
 //! # Keys
 //! [`ProxyKey`] is a slotmap key: a removed proxy's key is refused forever after

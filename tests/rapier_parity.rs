@@ -175,6 +175,11 @@ fn falling_balls_and_boxes_match_rapier_at_every_step() {
     });
     // A second mirror synced after the step (one step late), to show what that timing gives.
     let mut late = Mirror::new(*mirror.broadphase().config());
+    // A third with the pair cache: the same contract at every step.
+    let mut cached = Mirror::new(Config {
+        skin: 0.05,
+        ..*mirror.broadphase().config()
+    });
     let (mut late_failures, mut max_pairs, mut max_rapier) = (0, 0, 0);
     for step in 0..STEPS {
         // Churn: remove 40 balls and drop 40 new ones in, so rapier reuses collider slots.
@@ -193,6 +198,7 @@ fn falling_balls_and_boxes_match_rapier_at_every_step() {
         }
         let report = mirror.sync(&world.bodies, &world.colliders);
         assert_eq!(report.skipped, 0, "step {step}: {report:?}");
+        cached.sync(&world.bodies, &world.colliders);
         world.step();
         let cmp = mirror.compare(&world.narrow_phase);
         if !cmp.holds() {
@@ -201,6 +207,15 @@ fn falling_balls_and_boxes_match_rapier_at_every_step() {
         assert_eq!(mirror.len(), world.colliders.len());
         max_pairs = max_pairs.max(cmp.ours);
         max_rapier = max_rapier.max(cmp.rapier);
+
+        let c = cached.compare(&world.narrow_phase);
+        if !c.holds() {
+            panic!("skin 0.05: {}", explain(step, &c, &mut cached, &world));
+        }
+        assert_eq!(
+            c.ours, cmp.ours,
+            "step {step}: the cache changed the pair count"
+        );
 
         late.sync(&world.bodies, &world.colliders);
         let c = late.compare(&world.narrow_phase);

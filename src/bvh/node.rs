@@ -110,6 +110,29 @@ impl PrimBox {
         }
     }
 
+    /// The box `center ± radius`, lane for lane the same floats as
+    /// [`Aabb::from_center_radius`].
+    #[inline]
+    pub(crate) fn from_center_radius(center: Vec3, radius: f32) -> Self {
+        let (c, r) = (Vec3A::from(center), Vec3A::splat(radius));
+        PrimBox {
+            min: c - r,
+            max: c + r,
+        }
+    }
+
+    /// True if `other` lies inside `self`, as [`Aabb::contains`].
+    #[inline]
+    pub(crate) fn contains(&self, other: &PrimBox) -> bool {
+        (self.min.cmple(other.min) & other.max.cmple(self.max)).all()
+    }
+
+    /// `max - min` per axis.
+    #[inline]
+    pub(crate) fn extent(&self) -> Vec3A {
+        self.max - self.min
+    }
+
     #[inline]
     pub(crate) fn aabb(&self) -> Aabb {
         Aabb::new(self.min.into(), self.max.into())
