@@ -19,11 +19,12 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 const USAGE: &str = "\
-usage: falling_spheres [--n N] [--steps S] [--index octree|bvh] [--verify]
+usage: falling_spheres [--n N] [--steps S] [--index octree|bvh] [--skin S] [--verify]
                        [--out PATH] [--png PATH] [--frames F] [--seed SEED]
   --n N          spheres to drop (default 4000)
   --steps S      steps of 1/60 s (default 480)
   --index KIND   where the spheres live: octree (default) or bvh
+  --skin S       the broadphase's pair cache skin in metres (Config::skin; default 0: off)
   --verify       check every step's pairs against brute force over the same boxes
   --out PATH     animated GIF to write (default falling_spheres.gif)
   --png PATH     also write the last frame as a PNG
@@ -43,6 +44,7 @@ struct Args {
     n: usize,
     steps: usize,
     index: IndexKind,
+    skin: f32,
     verify: bool,
     out: PathBuf,
     png: Option<PathBuf>,
@@ -55,6 +57,7 @@ fn parse_args() -> Result<Args, String> {
         n: 4000,
         steps: 480,
         index: IndexKind::Octree,
+        skin: 0.0,
         verify: false,
         out: PathBuf::from("falling_spheres.gif"),
         png: None,
@@ -78,6 +81,10 @@ fn parse_args() -> Result<Args, String> {
                 }
             }
             "--verify" => args.verify = true,
+            "--skin" => {
+                let v = value()?;
+                args.skin = v.parse().map_err(|e| format!("--skin {v}: {e}"))?;
+            }
             "--out" => args.out = PathBuf::from(value()?),
             "--png" => args.png = Some(PathBuf::from(value()?)),
             "--help" | "-h" => return Err(String::new()),
@@ -110,6 +117,7 @@ fn main() -> ExitCode {
 fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut config = DropConfig::new(args.n, RADIUS, args.seed);
     config.world.index = args.index;
+    config.world.broadphase.skin = args.skin;
     let scene = config.build()?;
     let mut world = scene.world;
     let view = View::new(&world, scene.interior);

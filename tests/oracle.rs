@@ -262,12 +262,26 @@ fn query_aabb_equals_brute_force() {
         for _ in 0..100 {
             let c = rng.vec3_in(Vec3::splat(-10.0), Vec3::splat(10.0));
             let q = Aabb::from_center_half_extents(c, Vec3::splat(rng.range(0.0, 4.0)));
-            let mut got = Vec::new();
-            bp.query_aabb(&q, |k| got.push(k));
-            got.sort_unstable();
-            assert_eq!(got, brute::query_aabb(&proxies, &q));
+            assert_query_is_brute(&bp, &proxies, &q);
         }
     }
+}
+
+/// `query_aabb` finds exactly what brute force over `proxies` finds.
+fn assert_query_is_brute(bp: &BroadPhase, proxies: &[brute::Proxy], q: &Aabb) {
+    let mut got = Vec::new();
+    bp.query_aabb(q, |k| got.push(k));
+    got.sort_unstable();
+    assert_eq!(got, brute::query_aabb(proxies, q), "query {q:?}");
+}
+
+/// Inserts `shape` (a sphere or a body) and returns its key.
+fn insert(bp: &mut BroadPhase, shape: Shape) -> ProxyKey {
+    match shape {
+        Shape::Sphere { center, radius } => bp.insert_sphere(center, radius),
+        Shape::Body { aabb, kind } => bp.insert_body(aabb, kind),
+    }
+    .unwrap()
 }
 
 /// With and without a pair cache, after moves small enough to stay inside the skin (so the
@@ -303,12 +317,7 @@ fn queries_and_rays_see_exact_shapes_with_a_pair_cache() {
                     radius: rng.range(0.0, 1.0),
                 }
             };
-            let key = match shape {
-                Shape::Sphere { center, radius } => bp.insert_sphere(center, radius),
-                Shape::Body { aabb, kind } => bp.insert_body(aabb, kind),
-            }
-            .unwrap();
-            model.push((key, shape));
+            model.push((insert(&mut bp, shape), shape));
         }
         for round in 0..6 {
             bp.step();
@@ -335,10 +344,7 @@ fn queries_and_rays_see_exact_shapes_with_a_pair_cache() {
             for _ in 0..60 {
                 let c = rng.vec3_in(Vec3::splat(-12.0), Vec3::splat(12.0));
                 let q = Aabb::from_center_half_extents(c, Vec3::splat(rng.range(0.0, 3.0)));
-                let mut got = Vec::new();
-                bp.query_aabb(&q, |k| got.push(k));
-                got.sort_unstable();
-                assert_eq!(got, brute::query_aabb(&proxies, &q), "round {round}");
+                assert_query_is_brute(&bp, &proxies, &q);
 
                 let o = rng.vec3_in(Vec3::splat(-14.0), Vec3::splat(14.0));
                 let dir = rng.vec3_in(Vec3::splat(-1.0), Vec3::splat(1.0));
@@ -394,12 +400,7 @@ fn pair_cache_patches_equal_brute_force_step_by_step() {
                     radius: rng.range(0.0, 0.8),
                 },
             };
-            let key = match shape {
-                Shape::Sphere { center, radius } => bp.insert_sphere(center, radius),
-                Shape::Body { aabb, kind } => bp.insert_body(aabb, kind),
-            }
-            .unwrap();
-            (key, shape)
+            (insert(bp, shape), shape)
         };
         for _ in 0..400 {
             model.push(add(&mut bp, &mut rng));
