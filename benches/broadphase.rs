@@ -209,12 +209,13 @@ mod scene_benches {
 
     /// broadleaf: each iteration advances the scene (untimed) and times applying the frame
     /// plus `step()` — the full step of `benchmarks.md`.
-    fn broadleaf(scene: &mut dyn Scene, iters: u64, placement: Placement) -> Duration {
+    fn broadleaf(scene: &mut dyn Scene, iters: u64, placement: Placement, skin: f32) -> Duration {
         let bounds = scene.bounds();
         let mut bp = BroadPhase::new(Config {
             bounds,
             octree_depth: placement.depth_for(&bounds, GAS_RADIUS),
             octree_placement: placement,
+            skin,
             ..Config::default()
         });
         let mut feed = Feed::new(false);
@@ -256,7 +257,110 @@ mod scene_benches {
         total
     }
 
+    /// The recorded `pile` (rapier feature): 10 000 settled spheres, replayed forwards and
+    /// backwards so that every timed step moves them however many steps criterion asks for.
+    #[cfg(feature = "rapier")]
+    mod pile {
+        use broadleaf::scene::{Frame, Object, Scene, Spawn};
+        use broadleaf::{Aabb, Vec3};
+        use std::rc::Rc;
+
+        /// Frames recorded once, shared by every copy.
+        #[derive(Clone)]
+        pub struct PingPong {
+            pub bounds: Aabb,
+            pub radius: f32,
+            pub frames: Rc<Vec<Vec<Vec3>>>,
+            pub at: usize,
+            pub forward: bool,
+        }
+
+        impl Scene for PingPong {
+            fn bounds(&self) -> Aabb {
+                self.bounds
+            }
+
+            fn len(&self) -> usize {
+                self.frames[0].len()
+            }
+
+            fn spawns(&self, out: &mut Vec<Spawn>) {
+                let radius = self.radius;
+                out.extend(
+                    self.frames[self.at]
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &center)| Spawn {
+                            id: i as u32,
+                            object: Object::Sphere { center, radius },
+                            is_static: false,
+                        }),
+                );
+            }
+
+            fn advance(&mut self, frame: &mut Frame) {
+                frame.clear();
+                let last = self.frames.len() - 1;
+                if (self.forward && self.at == last) || (!self.forward && self.at == 0) {
+                    self.forward = !self.forward;
+                }
+                self.at = if self.forward {
+                    self.at + 1
+                } else {
+                    self.at - 1
+                };
+                let radius = self.radius;
+                frame.moved.extend(
+                    self.frames[self.at]
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &center)| (i as u32, Object::Sphere { center, radius })),
+                );
+            }
+        }
+
+        /// Records the pile (240 settling steps, then 120 frames).
+        pub fn record() -> PingPong {
+            let rec = broadleaf::rapier::record_pile(10_000, 1, 240, 120);
+            PingPong {
+                bounds: rec.bounds,
+                radius: rec.radius,
+                frames: Rc::new(rec.frames),
+                at: 0,
+                forward: true,
+            }
+        }
+    }
+
+    /// `pile/10000`: broadleaf without and with the pair cache (loose, skin 0.05), and rapier.
+    #[cfg(feature = "rapier")]
+    fn register_pile(c: &mut Criterion) {
+        let recorded = pile::record();
+        let n = recorded.len();
+        let mut group = c.benchmark_group(format!("pile/{n}"));
+        group.sample_size(10);
+        group.warm_up_time(Duration::from_secs(1));
+        group.measurement_time(Duration::from_secs(3));
+        group.throughput(Throughput::Elements(n as u64));
+        let runs = [
+            ("broadleaf", Placement::Strict, 0.0),
+            ("broadleaf-loose", Placement::Loose, 0.0),
+            ("broadleaf-loose-skin0.05", Placement::Loose, 0.05),
+        ];
+        for (name, placement, skin) in runs {
+            group.bench_function(BenchmarkId::new(name, n), |b| {
+                b.iter_custom(|iters| broadleaf(&mut recorded.clone(), iters, placement, skin));
+            });
+        }
+        group.bench_function(BenchmarkId::new("rapier", n), |b| {
+            b.iter_custom(|iters| rapier(&mut recorded.clone(), iters));
+        });
+        group.finish();
+    }
+
     pub fn register(c: &mut Criterion) {
+        #[cfg(feature = "rapier")]
+        register_pile(c);
         for (name, mut make) in scenes() {
             let n = make().len();
             let mut group = c.benchmark_group(format!("{name}/{n}"));
@@ -265,11 +369,11 @@ mod scene_benches {
             group.measurement_time(Duration::from_secs(3));
             group.throughput(Throughput::Elements(n as u64));
             group.bench_function(BenchmarkId::new("broadleaf", n), |b| {
-                b.iter_custom(|iters| broadleaf(&mut *make(), iters, Placement::Strict));
+                b.iter_custom(|iters| broadleaf(&mut *make(), iters, Placement::Strict, 0.0));
             });
             if name != "bodies" {
                 group.bench_function(BenchmarkId::new("broadleaf-loose", n), |b| {
-                    b.iter_custom(|iters| broadleaf(&mut *make(), iters, Placement::Loose));
+                    b.iter_custom(|iters| broadleaf(&mut *make(), iters, Placement::Loose, 0.0));
                 });
             }
             #[cfg(feature = "rapier")]
