@@ -7,13 +7,20 @@
 use broadleaf::scene::Rng;
 use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Pair, Placement, ProxyKey, Vec3, brute};
 
-const BOTH: [Placement; 2] = [Placement::Strict, Placement::Loose];
+/// Both placements, without and with the pair cache (skin 0.3).
+const BOTH: [(Placement, f32); 4] = [
+    (Placement::Strict, 0.0),
+    (Placement::Loose, 0.0),
+    (Placement::Strict, 0.3),
+    (Placement::Loose, 0.3),
+];
 
-fn broadphase(depth: u32, placement: Placement) -> BroadPhase {
+fn broadphase(depth: u32, (placement, skin): (Placement, f32)) -> BroadPhase {
     let bp = BroadPhase::new(Config {
         bounds: Aabb::new(Vec3::splat(-10.0), Vec3::splat(10.0)),
         octree_depth: depth,
         octree_placement: placement,
+        skin,
         ..Config::default()
     });
     assert_eq!(bp.octree().placement(), placement);
@@ -221,8 +228,9 @@ fn a_sphere_whose_box_overflows_to_infinity_pairs_with_the_bodies_it_overlaps() 
         let mut bp = BroadPhase::new(Config {
             bounds: Aabb::new(Vec3::splat(-16.0), Vec3::splat(16.0)),
             octree_depth: 3,
-            octree_placement: p,
+            octree_placement: p.0,
             margin: 0.75,
+            skin: p.1,
             ..Config::default()
         });
         bp.insert_sphere(Vec3::new(0.0, 0.046_875, 4.5737e-41), tiny)
@@ -250,5 +258,48 @@ fn a_sphere_whose_box_overflows_to_infinity_pairs_with_the_bodies_it_overlaps() 
         check(&mut bp);
         bp.insert_sphere(Vec3::splat(big), big).unwrap();
         check(&mut bp);
+    }
+}
+
+/// A skin or a margin so large that the grown boxes of finite boxes overflow to infinity:
+/// every insert and move is still accepted, nothing is lost, and the pairs equal brute force
+/// at every step.
+#[test]
+fn a_skin_or_margin_that_overflows_the_grown_boxes_is_still_exact() {
+    for (placement, skin, margin) in [
+        (Placement::Strict, 3.0e38, 0.0),
+        (Placement::Loose, 3.0e38, 0.0),
+        (Placement::Loose, 0.0, 3.0e38),
+        (Placement::Strict, 0.1, 3.0e38),
+    ] {
+        let mut bp = BroadPhase::new(Config {
+            bounds: Aabb::new(Vec3::splat(-10.0), Vec3::splat(10.0)),
+            octree_depth: 3,
+            octree_placement: placement,
+            skin,
+            margin,
+            ..Config::default()
+        });
+        assert_eq!(bp.config().margin, margin);
+        let big = 3.0e38_f32;
+        let body = Aabb::new(Vec3::splat(big * 0.5), Vec3::splat(big));
+        let b = bp.insert_body(body, BodyKind::Dynamic).unwrap();
+        let s = bp
+            .insert_sphere(Vec3::splat(big * 0.9), big * 0.05)
+            .unwrap();
+        let w = bp.insert_body(body, BodyKind::Static).unwrap();
+        bp.insert_sphere(Vec3::ZERO, 1.0).unwrap();
+        check(&mut bp);
+        for step in 1..6 {
+            let d = Vec3::splat(-1.0e37 * step as f32);
+            bp.update_body(b, Aabb::new(body.min + d, body.max + d))
+                .unwrap();
+            bp.update_body(w, Aabb::new(body.min + d * 2.0, body.max))
+                .unwrap();
+            bp.update_sphere(s, Vec3::splat(big * 0.9) + d, big * 0.05)
+                .unwrap();
+            check(&mut bp);
+        }
+        assert_eq!(bp.len(), 4);
     }
 }

@@ -51,13 +51,14 @@ impl Shape {
     }
 
     /// The box the broadphase pairs: a sphere's `center ± (radius + margin)`, a body's box
-    /// grown by `margin` on every side. (For a sphere this is not always bit-equal to
+    /// grown by `margin` on every side (faces that overflow stay at `±f32::MAX`, which
+    /// overlaps exactly what `±∞` would). (For a sphere this is not always bit-equal to
     /// `aabb().grown(margin)`, which rounds twice.)
     #[must_use]
     pub fn grown_aabb(&self, margin: f32) -> Aabb {
         match *self {
             Shape::Sphere { center, radius } => Aabb::from_center_radius(center, radius + margin),
-            Shape::Body { aabb, .. } => aabb.grown(margin),
+            Shape::Body { aabb, .. } => finite_grown(&aabb, margin),
         }
     }
 }
@@ -286,7 +287,7 @@ impl BroadPhase {
         check_sphere(center, radius)?;
         let key = self.proxies.insert(Shape::Sphere { center, radius });
         let grown = radius + self.config.margin;
-        let stored = grown + self.cache.as_ref().map_or(0.0, PairCache::skin);
+        let stored = fat_radius(grown, self.cache.as_ref().map_or(0.0, PairCache::skin));
         self.octree
             .insert_keyed(key, center, stored)
             .inspect_err(|_| {
@@ -303,9 +304,9 @@ impl BroadPhase {
     pub fn insert_body(&mut self, aabb: Aabb, kind: BodyKind) -> Result<ProxyKey, Error> {
         check_aabb(&aabb)?;
         let key = self.proxies.insert(Shape::Body { aabb, kind });
-        let exact = aabb.grown(self.config.margin);
+        let exact = finite_grown(&aabb, self.config.margin);
         let stored = match &self.cache {
-            Some(cache) => exact.grown(cache.skin()),
+            Some(cache) => finite_grown(&exact, cache.skin()),
             None => exact,
         };
         let tree = match kind {
@@ -359,7 +360,7 @@ impl BroadPhase {
                     Some(cache) => {
                         let exact = PrimBox::from_center_radius(center, grown);
                         if cache.needs_new_fat(key, &exact) {
-                            let stored = grown + cache.skin();
+                            let stored = fat_radius(grown, cache.skin());
                             self.octree.update(key, center, stored)?;
                             cache.refat(key, exact, &Aabb::from_center_radius(center, stored));
                         } else {
@@ -391,12 +392,12 @@ impl BroadPhase {
                 match &mut self.cache {
                     // No margin: the box just checked is the one the tree stores.
                     None if margin == 0.0 => tree.update_checked(key, &aabb)?,
-                    None => tree.update(key, aabb.grown(margin))?,
+                    None => tree.update(key, finite_grown(&aabb, margin))?,
                     Some(cache) => {
-                        let exact = aabb.grown(margin);
+                        let exact = finite_grown(&aabb, margin);
                         let lanes = PrimBox::new(&exact);
                         if cache.needs_new_fat(key, &lanes) {
-                            let stored = exact.grown(cache.skin());
+                            let stored = finite_grown(&exact, cache.skin());
                             tree.update(key, stored)?;
                             cache.refat(key, lanes, &stored);
                         } else {
@@ -768,5 +769,27 @@ fn structure_pairs(octree: &mut Octree, dynamic: &mut Bvh, statics: &Bvh, pairs:
                 tree.query_aabb_unchecked(&aabb, |body| pairs.push(Pair::new(sphere, body)));
             }
         });
+    }
+}
+
+/// `aabb` grown by `margin`, with coordinates that overflowed clamped to `±f32::MAX`, so the
+/// BVH (which holds finite boxes only) accepts it. Overlaps are unchanged: no box the
+/// broadphase tests has a minimum of `+∞` or a maximum of `−∞`, so a face at `±∞` and one at
+/// `±f32::MAX` overlap the same boxes.
+fn finite_grown(aabb: &Aabb, margin: f32) -> Aabb {
+    let g = aabb.grown(margin);
+    Aabb {
+        min: g.min.max(Vec3::splat(-f32::MAX)),
+        max: g.max.min(Vec3::splat(f32::MAX)),
+    }
+}
+
+/// A sphere's fat radius: `grown + skin`, at most `f32::MAX` (still `>= grown`, so the fat
+/// box holds the exact one) when `grown` is finite.
+fn fat_radius(grown: f32, skin: f32) -> f32 {
+    if grown.is_finite() {
+        (grown + skin).min(f32::MAX)
+    } else {
+        grown
     }
 }
