@@ -27,6 +27,8 @@ struct Input {
     depth: u8,
     /// The octree placement: strict (false) or loose (true).
     loose: bool,
+    /// Bits 0–1: the margin (0, 0.25, 0.5, 0.75); bits 2–3: the pair cache's skin (0, 0,
+    /// 0.1, 0.5).
     margin: u8,
     ops: Vec<Op>,
 }
@@ -45,10 +47,12 @@ fn valid_box(b: &Aabb) -> bool {
 
 fuzz_target!(|input: Input| {
     let margin = f32::from(input.margin % 4) * 0.25;
+    let skin = [0.0, 0.0, 0.1, 0.5][usize::from(input.margin >> 2) % 4];
     let mut bp = BroadPhase::new(Config {
         bounds: Aabb::new(Vec3::splat(-16.0), Vec3::splat(16.0)),
         octree_depth: u32::from(input.depth % 7),
         margin,
+        skin,
         octree_placement: if input.loose {
             Placement::Loose
         } else {

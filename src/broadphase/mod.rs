@@ -90,8 +90,8 @@ pub struct Config {
     /// boxes as candidates, and each step re-tests only the candidates' exact boxes. The
     /// pairs stay exact (the same lists as without the cache); what changes is the cost.
     /// Worth it when most objects move less than the skin per step (resting piles, stacks,
-    /// slow crowds); for objects that cross their skin every few steps it is slower. Try
-    /// about a tenth of the typical object size.
+    /// slow crowds); for objects that cross their skin every few steps it is slower. Try 2–5 %
+    /// of the typical object size (0.05 m was best for the 1 m spheres of the `pile` scene).
     pub skin: f32,
 }
 
