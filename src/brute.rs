@@ -24,13 +24,7 @@ impl Proxy {
         Self {
             key,
             aabb: shape.grown_aabb(margin),
-            is_static: matches!(
-                shape,
-                crate::Shape::Body {
-                    kind: crate::BodyKind::Static,
-                    ..
-                }
-            ),
+            is_static: shape.is_static(),
         }
     }
 

@@ -264,13 +264,7 @@ impl Mirror {
     }
 
     fn is_static(&self, key: ProxyKey) -> bool {
-        matches!(
-            self.broadphase.shape(key),
-            Some(Shape::Body {
-                kind: BodyKind::Static,
-                ..
-            })
-        )
+        self.broadphase.shape(key).is_some_and(|s| s.is_static())
     }
 
     /// The brute-force pair set of the mirrored boxes as they are now (grown by the

@@ -50,6 +50,18 @@ impl Shape {
         }
     }
 
+    /// True for a static body: two of them never pair.
+    #[must_use]
+    pub fn is_static(&self) -> bool {
+        matches!(
+            self,
+            Shape::Body {
+                kind: BodyKind::Static,
+                ..
+            }
+        )
+    }
+
     /// The box the broadphase pairs: a sphere's `center ± (radius + margin)`, a body's box
     /// grown by `margin` on every side (faces that overflow stay at `±f32::MAX`, which
     /// overlaps exactly what `±∞` would). (For a sphere this is not always bit-equal to
@@ -488,6 +500,7 @@ impl BroadPhase {
             self.step_cached();
         } else {
             self.dynamic.refit();
+            self.dynamic_changed = false;
             if self.statics_changed {
                 self.statics.refit();
                 self.statics_changed = false;
@@ -550,14 +563,13 @@ impl BroadPhase {
             let mut stale = core::mem::take(&mut cache.stale);
             stale.clear();
             for (key, old) in cache.marked_with_old_fat() {
-                let mut push = |other: ProxyKey| {
+                // A removed key's kind is gone: its static neighbours are searched too.
+                let is_static = proxies.get(key).is_some_and(Shape::is_static);
+                query_stored(octree, dynamic, statics, old, is_static, |other| {
                     if other < key {
                         stale.push(Pair { a: other, b: key });
                     }
-                };
-                octree.query_aabb_unchecked(old, &mut push);
-                dynamic.query_aabb_unchecked(old, &mut push);
-                statics.query_aabb_unchecked(old, &mut push);
+                });
             }
             cache.stale = stale;
             for &key in cache.dirty() {
@@ -565,22 +577,11 @@ impl BroadPhase {
                     continue; // removed since it was marked
                 };
                 let fat = &cache.fat(key);
-                let mut push = |other: ProxyKey| {
+                query_stored(octree, dynamic, statics, fat, shape.is_static(), |other| {
                     if other != key {
                         fresh.push(Pair::new(key, other));
                     }
-                };
-                octree.query_aabb_unchecked(fat, &mut push);
-                dynamic.query_aabb_unchecked(fat, &mut push);
-                if !matches!(
-                    shape,
-                    Shape::Body {
-                        kind: BodyKind::Static,
-                        ..
-                    }
-                ) {
-                    statics.query_aabb_unchecked(fat, &mut push);
-                }
+                });
             }
         }
         cache.fresh = fresh;
@@ -707,30 +708,14 @@ impl BroadPhase {
             if cache.dirty().is_empty() {
                 // Complete: every pair of overlapping fat boxes is a candidate.
                 for (key, shape) in &self.proxies {
-                    let is_static = matches!(
-                        shape,
-                        Shape::Body {
-                            kind: BodyKind::Static,
-                            ..
-                        }
-                    );
-                    let mut check = |other: ProxyKey| {
-                        let other_static = matches!(
-                            self.proxies[other],
-                            Shape::Body {
-                                kind: BodyKind::Static,
-                                ..
-                            }
-                        );
-                        if other != key && !(is_static && other_static) {
+                    let (octree, dynamic, statics) = (&self.octree, &self.dynamic, &self.statics);
+                    let fat = &cache.fat(key);
+                    query_stored(octree, dynamic, statics, fat, shape.is_static(), |other| {
+                        if other != key {
                             let pair = Pair::new(key, other);
                             assert!(cache.is_candidate(&pair), "cache: {pair:?} missing");
                         }
-                    };
-                    let fat = &cache.fat(key);
-                    self.octree.query_aabb_unchecked(fat, &mut check);
-                    self.dynamic.query_aabb_unchecked(fat, &mut check);
-                    self.statics.query_aabb_unchecked(fat, &mut check);
+                    });
                 }
             }
         }
@@ -769,6 +754,24 @@ fn structure_pairs(octree: &mut Octree, dynamic: &mut Bvh, statics: &Bvh, pairs:
                 tree.query_aabb_unchecked(&aabb, |body| pairs.push(Pair::new(sphere, body)));
             }
         });
+    }
+}
+
+/// Calls `f` with every proxy whose stored box overlaps `aabb`, in the octree and both trees;
+/// the static tree is skipped for a static querier (`static_querier`), which never pairs
+/// with a static body.
+fn query_stored(
+    octree: &Octree,
+    dynamic: &Bvh,
+    statics: &Bvh,
+    aabb: &Aabb,
+    static_querier: bool,
+    mut f: impl FnMut(ProxyKey),
+) {
+    octree.query_aabb_unchecked(aabb, &mut f);
+    dynamic.query_aabb_unchecked(aabb, &mut f);
+    if !static_querier {
+        statics.query_aabb_unchecked(aabb, &mut f);
     }
 }
 
