@@ -9,119 +9,67 @@
 //! loose ranges overlap iff `|k − k'|·S <= 2S − 1`, i.e. iff `|k − k'| <= 1` on every axis: `b`'s
 //! node is in the subtree of one of the 27 cells around `a`'s (its own included).
 //!
-//! The pass. The spheres are radix-sorted into walk order as in the strict pass, so each
-//! occupied node is a run of the walk-ordered array; the run is recorded in a per-node slot of
-//! the paged node storage for the pass and cleared after it. Then, per occupied node:
+//! The pass. The spheres are radix-sorted by their node's key (`Octree::walk_key`: level,
+//! then the cell in row-major order), so each occupied node is a run of the sorted array and a
+//! level's nodes come in rows along x. Then, per occupied node:
 //! - the pairs within its run (a sweep along x when long);
 //! - the pairs with the 13 "forward" same-level neighbours, the offsets `(dx, dy, dz)` with
 //!   `(dz, dy, dx)` lexicographically positive: of two neighbouring nodes exactly one sees the
-//!   other forward, so each same-level pair is found once;
+//!   other forward, so each same-level pair is found once. They are the next node of the same
+//!   row (`dx = 1`) and the cells `x − 1 ..= x + 1` of four rows, `(dy, dz)` = `(1, 0)`,
+//!   `(−1, 1)`, `(0, 1)`, `(1, 1)`. The three cells of a row are one stretch of the sorted
+//!   spheres, found by two pointers into the sorted runs per row; the keys they look for grow
+//!   with the node's key, so each pointer passes over the runs once per pass, and no neighbour
+//!   is looked up in the node storage;
 //! - if some sphere lives deeper, the pairs with every sphere deeper than the node in the
 //!   subtrees of the 27 cells around it, found by descending the occupied subtrees (child
 //!   masks) and pruning every node whose loose range misses the union of the run's ranges
 //!   (which holds every range the run overlaps). A cross-level pair is found only from its
 //!   shallower sphere's node, through the one neighbour cell that is its deeper sphere's
-//!   ancestor, so once.
+//!   ancestor, so once. Only then are the runs recorded in a per-node slot of the paged node
+//!   storage (and cleared after the pass), for the descent to find them.
 //!
 //! Overflow spheres sit in the root, whose 27-cell neighbourhood is the root itself: they are
 //! tested against the whole tree pruned by their clamped ranges, which overlap the range of
 //! everything their boxes overlap.
 
 use super::pairs::{self, Hot, SHORT_CROSS, SHORT_SELF, SHORT_SIDE, Tester, Work, entry, ord};
-use super::place::{compact3, morton, node_index};
+use super::place::{morton, node_index};
 use super::{MAX_DEPTH, Octree};
 use crate::ProxyKey;
 
-/// An occupied node of a pass: its run `[start, end)` of walk-ordered spheres, its slot in the
-/// node storage, its level, and its cell as Morton code and coordinates. 32 bytes.
-#[derive(Clone, Copy, Debug)]
-struct Run {
-    start: u32,
-    end: u32,
-    slot: u32,
-    level: u32,
-    code: u32,
-    xyz: [u32; 3],
-}
-const _: () = assert!(core::mem::size_of::<Run>() == 32);
+/// The four forward neighbour rows `(dy, dz)` of a cell (see the module docs).
+const ROWS: [[i32; 2]; 4] = [[1, 0], [-1, 1], [0, 1], [1, 1]];
 
 /// Buffers of the loose pair pass, reused by every pass; they never shrink.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Scratch {
-    runs: Vec<Run>,
+    /// The occupied nodes of a pass, in key order: node `k` has key `run_key[k]` and the sorted
+    /// spheres `run_start[k]..run_start[k + 1]`; a sentinel ends both (key `u64::MAX`, start
+    /// the sphere count). `run_slot[k]` is its slot in the node storage, filled only when some
+    /// level below it is occupied.
+    run_key: Vec<u64>,
+    run_start: Vec<u32>,
+    run_slot: Vec<u32>,
     /// By node slot ([`super::place::Nodes::slot`]): the node's run `[start, end)` during a
     /// pass, `[0, 0]` otherwise. Grows with the node pages.
     run_of: Vec<[u32; 2]>,
 }
 
-/// The 13 same-level neighbour offsets `(dx, dy, dz)` with `(dz, dy, dx)` lexicographically
-/// positive (half of the 26, one of each opposite pair), as indices `offset + 1`.
-const FORWARD: [[usize; 3]; 13] = [
-    [2, 1, 1],
-    [0, 2, 1],
-    [1, 2, 1],
-    [2, 2, 1],
-    [0, 0, 2],
-    [1, 0, 2],
-    [2, 0, 2],
-    [0, 1, 2],
-    [1, 1, 2],
-    [2, 1, 2],
-    [0, 2, 2],
-    [1, 2, 2],
-    [2, 2, 2],
-];
-
-/// The bits of the x coordinate in a Morton code (every third bit from bit 0); y's are these
-/// shifted by one, z's by two.
-const DILATED_X: u32 = 0x0924_9249;
-
-/// The coordinate held in the dilated bits `m` (a Morton code masked to one axis's bits
-/// `axis`) minus one, plus zero and plus one, still dilated: adding 1 to a dilated integer
-/// sets the gaps first so the carry runs through them (`(m | !axis) + 1`). Out-of-grid
-/// results wrap; the caller checks the coordinate.
+/// The level and cell of a loose tree's node key (`Octree::walk_key`) in a tree of depth `d`.
 #[inline]
-fn dilated_steps(m: u32, axis: u32) -> [u32; 3] {
-    [
-        m.wrapping_sub(1) & axis,
-        m,
-        (m | !axis).wrapping_add(1) & axis,
-    ]
-}
-
-/// The Morton codes of the 13 [`FORWARD`] neighbours of the cell with code `code` (wrapped
-/// where they leave the grid).
-#[inline]
-fn forward_codes(code: u32) -> [u32; 13] {
-    let axis = [DILATED_X, DILATED_X << 1, DILATED_X << 2];
-    let [x, y, z] = [0, 1, 2].map(|a| dilated_steps(code & axis[a], axis[a]));
-    // `FORWARD` spelled out, so the compiler sees constant indices.
-    [
-        x[2] | y[1] | z[1],
-        x[0] | y[2] | z[1],
-        x[1] | y[2] | z[1],
-        x[2] | y[2] | z[1],
-        x[0] | y[0] | z[2],
-        x[1] | y[0] | z[2],
-        x[2] | y[0] | z[2],
-        x[0] | y[1] | z[2],
-        x[1] | y[1] | z[2],
-        x[2] | y[1] | z[2],
-        x[0] | y[2] | z[2],
-        x[1] | y[2] | z[2],
-        x[2] | y[2] | z[2],
-    ]
-}
-
-/// Bit `k` set iff the `k`-th [`FORWARD`] neighbour of cell `xyz` is in a grid of `top + 1`
-/// cells per axis.
-fn forward_inside(xyz: [u32; 3], top: u32) -> u16 {
-    let ok = xyz.map(|c| [c > 0, true, c < top]);
-    FORWARD
-        .iter()
-        .enumerate()
-        .filter(|(_, [dx, dy, dz])| ok[0][*dx] && ok[1][*dy] && ok[2][*dz])
-        .fold(0, |m, (k, _)| m | 1 << k)
+fn cell_of(key: u64, d: u32) -> (u32, [u32; 3]) {
+    let level = (key >> (3 * d)) as u32;
+    let mask = (1u32 << level) - 1;
+    let cell = key as u32;
+    (
+        level,
+        [
+            cell & mask,
+            (cell >> level) & mask,
+            (cell >> (2 * level)) & mask,
+        ],
+    )
 }
 
 /// A node on the descent stack.
@@ -219,33 +167,6 @@ impl Octree {
             ..
         } = s;
         let d = self.depth;
-        let slots = self.nodes.head_len();
-        if loose.run_of.len() < slots {
-            loose.run_of.resize(slots, [0, 0]);
-        }
-        loose.runs.clear();
-        let n = hot.len();
-        let mut i = 0;
-        while i < n {
-            let key = node_key[i];
-            let j = i + node_key[i..].iter().take_while(|&&k| k == key).count();
-            let level = (key & 15) as u32;
-            let code = ((key >> 4) as u32) >> (3 * (d - level));
-            let slot = self
-                .nodes
-                .slot(node_index(level, code))
-                .expect("an occupied node's page exists");
-            loose.run_of[slot] = [i as u32, j as u32];
-            loose.runs.push(Run {
-                start: i as u32,
-                end: j as u32,
-                slot: slot as u32,
-                level,
-                code,
-                xyz: [compact3(code), compact3(code >> 1), compact3(code >> 2)],
-            });
-            i = j;
-        }
         // `deeper[L]`: some sphere lives below level `L`.
         let mut deeper = [false; MAX_DEPTH as usize + 1];
         let mut below = 0;
@@ -253,55 +174,126 @@ impl Octree {
             deeper[l] = below > 0;
             below += self.per_level[l];
         }
+        // Only a pass with cross-level pairs needs the runs by node slot.
+        let cross = (0..=d as usize).any(|l| deeper[l] && self.per_level[l] > 0);
+        if cross && loose.run_of.len() < self.nodes.head_len() {
+            loose.run_of.resize(self.nodes.head_len(), [0, 0]);
+        }
+        let (run_key, run_start, run_slot) = (
+            &mut loose.run_key,
+            &mut loose.run_start,
+            &mut loose.run_slot,
+        );
+        run_key.clear();
+        run_start.clear();
+        run_slot.clear();
+        let n = hot.len();
+        let mut i = 0;
+        while i < n {
+            let key = node_key[i];
+            let j = i + node_key[i..].iter().take_while(|&&k| k == key).count();
+            if cross {
+                let (level, xyz) = cell_of(key, d);
+                let slot = self
+                    .nodes
+                    .slot(node_index(level, morton(xyz)))
+                    .expect("an occupied node's page exists");
+                loose.run_of[slot] = [i as u32, j as u32];
+                run_slot.push(slot as u32);
+            }
+            run_key.push(key);
+            run_start.push(i as u32);
+            i = j;
+        }
+        let runs = run_key.len();
+        run_key.push(u64::MAX);
+        run_start.push(n as u32);
+        let (run_key, run_start) = (&run_key[..], &run_start[..]);
+        let spheres =
+            |from: usize, to: usize| &hot[run_start[from] as usize..run_start[to] as usize];
+        // The first run whose key is at least `target`, from `p` on; `target` never exceeds
+        // the sentinel. The first two steps are branch-free: most calls move by 0, 1 or 2.
+        let seek = |p: &mut usize, target: u64| {
+            *p += usize::from(run_key[*p] < target);
+            *p += usize::from(run_key[*p] < target);
+            while run_key[*p] < target {
+                *p += 1;
+            }
+        };
         let mut t = Tester {
             keys,
             tests: 0,
             emit,
         };
-        let mut visited = loose.runs.len() as u32;
-        for r in &loose.runs {
-            let own = &hot[r.start as usize..r.end as usize];
+        let mut visited = runs as u32;
+        // Per forward row: the first run at or after its lowest and after its highest cell
+        // looked for last.
+        let mut first = [0usize; ROWS.len()];
+        let mut past = [0usize; ROWS.len()];
+        // The key offsets of the four rows at the current level.
+        let (mut at_level, mut offsets) = (u32::MAX, [0u64; ROWS.len()]);
+        for r in 0..runs {
+            let own = spheres(r, r + 1);
             if own.len() > 1 {
                 t.within(own, work);
             }
-            // The neighbours' Morton codes by dilated arithmetic, and (unless the cell is
-            // interior, the common case) which of them are in the grid.
-            let top = (1u32 << r.level) - 1;
-            let base = node_index(r.level, 0);
-            let codes = forward_codes(r.code);
-            let inside = if r.xyz.iter().all(|&c| c > 0 && c < top) {
-                u16::MAX
-            } else {
-                forward_inside(r.xyz, top)
-            };
-            for (k, &code) in codes.iter().enumerate() {
-                if inside & (1 << k) == 0 {
+            let key = run_key[r];
+            let (level, [x, y, z]) = cell_of(key, d);
+            let side = 1u32 << level;
+            if level != at_level {
+                at_level = level;
+                offsets = ROWS.map(|[dy, dz]| {
+                    (i64::from(dy) * i64::from(side)
+                        + i64::from(dz) * i64::from(side) * i64::from(side))
+                        as u64
+                });
+            }
+            // The next cell of the row: the next run, if its key is one more.
+            if x + 1 < side && run_key[r + 1] == key + 1 {
+                t.between(own, spheres(r + 1, r + 2), work);
+            }
+            // Cells `x − 1 ..= x + 1` of a row are one stretch of the sorted spheres: from the
+            // first run at or after the key of cell `x − 1` to the first after `x + 1` (both
+            // clamped to the row).
+            let (back, ahead) = (u64::from(x > 0), 1 + u64::from(x + 1 < side));
+            let inside = [
+                y + 1 < side,
+                y > 0 && z + 1 < side,
+                z + 1 < side,
+                y + 1 < side && z + 1 < side,
+            ];
+            for k in 0..ROWS.len() {
+                if !inside[k] {
                     continue;
                 }
-                if let Some(slot) = self.nodes.slot(base + code) {
-                    let [a, b] = loose.run_of[slot];
-                    if a < b {
-                        t.between(own, &hot[a as usize..b as usize], work);
-                    }
+                let cell = key.wrapping_add(offsets[k]);
+                seek(&mut first[k], cell - back);
+                seek(&mut past[k], cell + ahead);
+                if first[k] < past[k] {
+                    t.between(own, spheres(first[k], past[k]), work);
                 }
             }
-            if deeper[r.level as usize] {
-                visited += self.descend(r, own, hot, &loose.run_of, &mut t, work);
+            if deeper[level as usize] {
+                visited += self.descend(level, [x, y, z], own, hot, &loose.run_of, &mut t, work);
             }
         }
-        for r in &loose.runs {
-            loose.run_of[r.slot as usize] = [0, 0];
+        if cross {
+            for &slot in run_slot.iter() {
+                loose.run_of[slot as usize] = [0, 0];
+            }
         }
         s.tests = t.tests;
         s.nodes_visited = visited;
     }
 
-    /// The cross-level pairs of run `r` (spheres `own`): every sphere placed below `r`'s level
-    /// in the subtrees of the 27 cells around `r`'s cell, pruned by the union of `own`'s
-    /// ranges. Returns the number of nodes visited.
+    /// The cross-level pairs of the spheres `own` of the node at cell `xyz` of `level`: every
+    /// sphere placed below `level` in the subtrees of the 27 cells around `xyz`, pruned by the
+    /// union of `own`'s ranges. Returns the number of nodes visited.
+    #[allow(clippy::too_many_arguments)]
     fn descend<F: FnMut(ProxyKey, ProxyKey)>(
         &self,
-        r: &Run,
+        level: u32,
+        xyz: [u32; 3],
         own: &[Hot],
         hot: &[Hot],
         run_of: &[[u32; 2]],
@@ -325,19 +317,19 @@ impl Octree {
                 lo <= i32::from(umax[a]) && i32::from(umin[a]) <= hi
             })
         };
-        let side = 1i32 << r.level;
+        let side = 1i32 << level;
         let mut stack = [Cell::default(); STACK];
         let mut visited = 0;
         for dz in -1..=1 {
             for dy in -1..=1 {
                 for dx in -1..=1 {
-                    let xyz = [0, 1, 2].map(|a| r.xyz[a] as i32 + [dx, dy, dz][a]);
-                    if xyz.iter().any(|&v| v < 0 || v >= side) {
+                    let cell = [0, 1, 2].map(|a| xyz[a] as i32 + [dx, dy, dz][a]);
+                    if cell.iter().any(|&v| v < 0 || v >= side) {
                         continue;
                     }
                     let start = Cell {
-                        level: r.level,
-                        xyz: xyz.map(|v| v as u32),
+                        level,
+                        xyz: cell.map(|v| v as u32),
                     };
                     if !reaches(&start) {
                         continue;
@@ -388,25 +380,13 @@ mod tests {
     use super::*;
 
     #[test]
-    fn forward_codes_are_the_forward_offsets() {
-        let c = [5u32, 9, 3];
-        let codes = forward_codes(morton(c));
-        for (k, off) in FORWARD.iter().enumerate() {
-            let n = [0, 1, 2].map(|a| (c[a] as i32 + off[a] as i32 - 1) as u32);
-            assert_eq!(codes[k], morton(n), "offset {off:?}");
-        }
-        // Each unordered neighbour pair once: the offsets and their negations cover all 26.
-        let mut all: Vec<[i32; 3]> = FORWARD
-            .iter()
-            .flat_map(|o| {
-                let d = o.map(|v| v as i32 - 1);
-                [d, d.map(|v| -v)]
-            })
-            .collect();
-        all.sort_unstable();
-        all.dedup();
-        assert_eq!(all.len(), 26);
-        assert_eq!(forward_inside([0, 0, 0], 7), 0b1_1011_0000_1101);
-        assert_eq!(forward_inside([3, 3, 3], 7), 0x1FFF);
+    fn cell_of_reads_the_row_major_key() {
+        let d = 6;
+        let key = (4u64 << (3 * d)) | (3 << 8) | (9 << 4) | 5;
+        assert_eq!(cell_of(key, d), (4, [5, 9, 3]));
+        assert_eq!(cell_of(0, d), (0, [0, 0, 0]));
+        // Depth 10, deepest level: 30 cell bits below the level.
+        let key = (10u64 << 30) | (1023 << 20) | 1023;
+        assert_eq!(cell_of(key, 10), (10, [1023, 0, 1023]));
     }
 }

@@ -346,15 +346,31 @@ impl Octree {
         [q.x as u16, q.y as u16, q.z as u16]
     }
 
-    /// The key that puts `node` in depth-first walk order: the node's Morton code at its
-    /// level `L`, shifted to the deepest level (`<< 3·(depth − L)`, the code of the node's first
-    /// deepest-level cell), then `L` in the low 4 bits. A node's subtree shares its shifted
-    /// prefix range and is deeper, so the node sorts before its subtree and after everything
-    /// that precedes it; `3·depth + 4` bits.
+    /// The key the pair pass sorts the spheres by; nodes with equal keys are equal.
+    ///
+    /// Strict trees: depth-first walk order. The node's Morton code at its level `L`, shifted
+    /// to the deepest level (`<< 3·(depth − L)`, the code of the node's first deepest-level
+    /// cell), then `L` in the low 4 bits. A node's subtree shares its shifted prefix range and
+    /// is deeper, so the node sorts before its subtree and after everything that precedes it.
+    ///
+    /// Loose trees: level by level, each level in row-major order. `L << 3·depth`, then the
+    /// cell `(x, y, z)` as `z·4^L + y·2^L + x`, so a level's nodes come in rows along x, rows
+    /// in y-then-z order, which the loose pass walks with one pointer per neighbour row.
+    ///
+    /// Either way `3·depth + 4` bits.
     pub(super) fn walk_key(&self, node: u32) -> u64 {
         let level = self.nodes.level_of(node);
-        let code = u64::from(node - LEVEL_START[level as usize]);
-        ((code << (3 * (self.depth - level))) << 4) | u64::from(level)
+        let code = node - LEVEL_START[level as usize];
+        match self.placement {
+            Placement::Strict => {
+                ((u64::from(code) << (3 * (self.depth - level))) << 4) | u64::from(level)
+            }
+            Placement::Loose => {
+                let [x, y, z] = [compact3(code), compact3(code >> 1), compact3(code >> 2)];
+                let cell = (u64::from(z) << (2 * level)) | (u64::from(y) << level) | u64::from(x);
+                (u64::from(level) << (3 * self.depth)) | cell
+            }
+        }
     }
 
     /// Pushes object `id` at the front of `node`'s list.
