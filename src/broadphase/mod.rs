@@ -368,6 +368,10 @@ impl BroadPhase {
             }) => {
                 let grown = radius + self.config.margin;
                 match &mut self.cache {
+                    // No margin: the sphere just checked is the one the octree stores.
+                    None if self.config.margin == 0.0 => {
+                        self.octree.update_checked(key, center, radius)?;
+                    }
                     None => self.octree.update(key, center, grown)?,
                     Some(cache) => {
                         let exact = PrimBox::from_center_radius(center, grown);

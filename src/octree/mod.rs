@@ -218,6 +218,17 @@ impl Octree {
     /// only stores the new sphere.
     pub fn update(&mut self, key: ProxyKey, center: Vec3, radius: f32) -> Result<(), Error> {
         geom::check_sphere(center, radius)?;
+        self.update_checked(key, center, radius)
+    }
+
+    /// [`Octree::update`] for a sphere its caller has already checked (`check_sphere`).
+    #[inline]
+    pub(crate) fn update_checked(
+        &mut self,
+        key: ProxyKey,
+        center: Vec3,
+        radius: f32,
+    ) -> Result<(), Error> {
         let id = *self.ids.get(key).ok_or(Error::UnknownProxy)?;
         let (aabb, qmin, qmax, node, outside) = self.locate(center, radius);
         let i = id as usize;
