@@ -274,7 +274,7 @@ impl Octree {
                 }
             }
             if deeper[level as usize] {
-                visited += self.descend(level, [x, y, z], own, hot, &loose.run_of, &mut t, work);
+                visited += self.descend((level, [x, y, z]), own, hot, &loose.run_of, &mut t, work);
             }
         }
         if cross {
@@ -289,11 +289,9 @@ impl Octree {
     /// The cross-level pairs of the spheres `own` of the node at cell `xyz` of `level`: every
     /// sphere placed below `level` in the subtrees of the 27 cells around `xyz`, pruned by the
     /// union of `own`'s ranges. Returns the number of nodes visited.
-    #[allow(clippy::too_many_arguments)]
     fn descend<F: FnMut(ProxyKey, ProxyKey)>(
         &self,
-        level: u32,
-        xyz: [u32; 3],
+        (level, xyz): (u32, [u32; 3]),
         own: &[Hot],
         hot: &[Hot],
         run_of: &[[u32; 2]],
