@@ -204,7 +204,7 @@ impl Octree {
     ) -> Result<(), Error> {
         geom::check_sphere(center, radius)?;
         if self.ids.contains_key(key) {
-            return self.update(key, center, radius);
+            return self.update_checked(key, center, radius);
         }
         if self.objs.len() >= (u32::MAX - 1) as usize {
             return Err(Error::Full);
