@@ -139,6 +139,8 @@ struct Work {
     bins: Vec<u8>,
     tmp_refs: Vec<PrimBox>,
     tmp_ids: Vec<u32>,
+    /// [`partition_bins`]' lists of the misplaced positions left and right of the split.
+    wrong: [Vec<u32>; 2],
 }
 
 /// A chosen split: `refs[..mid]` go left; the bounds of both halves.
@@ -307,7 +309,7 @@ fn split(
         };
     }
     match config.split {
-        SplitMethod::Sah if n <= nb => sweep_split(config, refs, ids, bounds, axis),
+        SplitMethod::Sah if n <= nb => sweep_split(config, work, refs, ids, bounds, axis),
         // One copy per axis, so the hot loops read the coordinate straight from memory.
         SplitMethod::Sah => match axis {
             0 => sah_split::<0>(config, work, refs, ids, bounds),
@@ -385,6 +387,7 @@ fn sah_split<const AXIS: usize>(
         buckets: sets,
         bin_sets_min,
         bins,
+        wrong,
         ..
     } = work;
     if bins.len() < n {
@@ -456,7 +459,7 @@ fn sah_split<const AXIS: usize>(
         // every primitive bins alike and no plane separates them. Split in halves instead.
         return Some(halves(refs, n / 2));
     }
-    partition_bins(refs, ids, bins, best_plane as u8, mid);
+    partition_bins(refs, ids, bins, best_plane as u8, mid, wrong);
     Some(Split {
         mid,
         left: best_left.bounds,
@@ -483,6 +486,7 @@ fn merge(a: &Bucket, b: &Bucket) -> Bucket {
 /// rule as the binned version, which would spend more time on its buckets than on the node).
 fn sweep_split(
     config: &BvhConfig,
+    work: &mut Work,
     refs: &mut [PrimBox],
     ids: &mut [u32],
     bounds: &Bounds,
@@ -490,7 +494,7 @@ fn sweep_split(
 ) -> Option<Split> {
     let n = refs.len();
     debug_assert!(n <= MAX_BUCKETS);
-    sort_by_axis(refs, ids, axis);
+    sort_by_axis(refs, ids, axis, &mut work.tmp_refs, &mut work.tmp_ids);
     // The sweeps track the boxes only (the centroid bounds matter for the chosen halves
     // alone, computed once at the end): `right_area[i]` is the area right of split `i`.
     let mut right_area = [0.0f32; MAX_BUCKETS];
@@ -514,29 +518,49 @@ fn sweep_split(
     Some(halves(refs, best_mid))
 }
 
-/// Sorts `refs` (and `ids` alongside) by centroid along `axis`, stably, by insertion: the few
-/// entries of a node that `sweep_split` takes (at most `sah_buckets`) are sorted in place
-/// faster than the general sort would gather them, and not moved at all when they already lie
-/// in order, as they do in a rebuild of a tree whose boxes barely moved. Keys are sums of
-/// checked finite coordinates (at worst ±∞), so `<` orders them totally.
-fn sort_by_axis(refs: &mut [PrimBox], ids: &mut [u32], axis: usize) {
-    let mut keys = [0.0f32; MAX_BUCKETS];
-    let keys = &mut keys[..refs.len()];
+/// Sorts `refs` (and `ids` alongside) by centroid along `axis`, stably, by rank: the rank of
+/// entry `i` is the number of entries that precede it in the sorted order (smaller keys, and
+/// equal keys of smaller index), counted by comparisons without branches, and each entry is
+/// then stored once at its rank. The few entries of a node that `sweep_split` takes (at most
+/// `sah_buckets`) lie in random order in a first build, where an insertion sort mispredicts
+/// at every step; when they already lie in order, as in a rebuild of a tree whose boxes barely
+/// moved, one pass over the keys finds so and nothing moves. The keys are the centroid sums' bits mapped to integers in
+/// the order of `f32::total_cmp`, so the ranks are a permutation whatever the floats are.
+fn sort_by_axis(
+    refs: &mut [PrimBox],
+    ids: &mut [u32],
+    axis: usize,
+    tmp_refs: &mut Vec<PrimBox>,
+    tmp_ids: &mut Vec<u32>,
+) {
+    let n = refs.len();
+    debug_assert!(n <= MAX_BUCKETS);
+    let mut keys = [0u32; MAX_BUCKETS];
     for (key, r) in keys.iter_mut().zip(refs.iter()) {
-        *key = r.c2()[axis];
+        let bits = r.c2()[axis].to_bits();
+        // Negative floats reversed below the positive ones: `total_cmp`'s order, unsigned.
+        *key = bits ^ (((bits as i32 >> 31) as u32) | 0x8000_0000);
     }
-    for i in 1..keys.len() {
-        let (key, r, id) = (keys[i], refs[i], ids[i]);
-        let mut j = i;
-        while j > 0 && key < keys[j - 1] {
-            keys[j] = keys[j - 1];
-            refs[j] = refs[j - 1];
-            ids[j] = ids[j - 1];
-            j -= 1;
-        }
-        if j < i {
-            (keys[j], refs[j], ids[j]) = (key, r, id);
-        }
+    let keys = &keys[..n];
+    if keys.windows(2).all(|w| w[0] <= w[1]) {
+        return;
+    }
+    let mut rank = [0u8; MAX_BUCKETS];
+    for (i, &key) in keys.iter().enumerate() {
+        let before = keys[..i].iter().map(|&k| u32::from(k <= key)).sum::<u32>()
+            + keys[i + 1..]
+                .iter()
+                .map(|&k| u32::from(k < key))
+                .sum::<u32>();
+        rank[i] = before as u8;
+    }
+    tmp_refs.clear();
+    tmp_refs.extend_from_slice(refs);
+    tmp_ids.clear();
+    tmp_ids.extend_from_slice(ids);
+    for ((r, &id), &k) in tmp_refs.iter().zip(tmp_ids.iter()).zip(&rank) {
+        refs[k as usize] = *r;
+        ids[k as usize] = id;
     }
 }
 
@@ -586,29 +610,58 @@ fn halves(refs: &[PrimBox], mid: usize) -> Split {
 }
 
 /// Moves the `mid` primitives whose bucket `bins[k]` is at most `plane` (and their ids) to the
-/// front. Each misplaced one on the left is swapped with the next misplaced one on the right,
-/// which the counts guarantee exists. Runs of 32 already in place, which a rebuild of a tree
-/// whose boxes barely moved is made of, are skipped by one vectorised maximum over their bytes.
-fn partition_bins(refs: &mut [PrimBox], ids: &mut [u32], bins: &[u8], plane: u8, mid: usize) {
+/// front. The misplaced ones are listed first, on each side of `mid`, by a pass over the bucket
+/// bytes that stores every position and advances the list's end by the comparison (no branch
+/// to mispredict when the buckets lie at random, as in a first build); the counts guarantee
+/// the two lists are equally long, and their entries are swapped pairwise in increasing order.
+/// Runs of 32 already in place, which a rebuild of a tree whose boxes barely moved is made of,
+/// are skipped by one vectorised maximum (left) or minimum (right) over their bytes.
+fn partition_bins(
+    refs: &mut [PrimBox],
+    ids: &mut [u32],
+    bins: &[u8],
+    plane: u8,
+    mid: usize,
+    wrong: &mut [Vec<u32>; 2],
+) {
     const RUN: usize = 32;
-    let mut j = mid;
+    let n = bins.len();
+    let [wrong_left, wrong_right] = wrong;
+    if wrong_left.len() < mid {
+        wrong_left.resize(mid, 0);
+    }
+    if wrong_right.len() < n - mid {
+        wrong_right.resize(n - mid, 0);
+    }
+    let mut left = 0;
     for start in (0..mid).step_by(RUN) {
-        let run = start..(start + RUN).min(mid);
-        if bins[run.clone()].iter().fold(0, |m, &b| m.max(b)) <= plane {
+        let run = &bins[start..(start + RUN).min(mid)];
+        if run.iter().fold(0, |m, &b| m.max(b)) <= plane {
             continue;
         }
-        for i in run {
-            if bins[i] > plane {
-                while bins[j] > plane {
-                    j += 1;
-                }
-                refs.swap(i, j);
-                ids.swap(i, j);
-                j += 1;
-            }
+        for (k, &b) in run.iter().enumerate() {
+            // `left <= start + k < mid`: in bounds.
+            wrong_left[left] = (start + k) as u32;
+            left += usize::from(b > plane);
         }
     }
-    debug_assert!(bins[j..].iter().all(|&b| b > plane));
+    let mut right = 0;
+    for start in (mid..n).step_by(RUN) {
+        let run = &bins[start..(start + RUN).min(n)];
+        if run.iter().fold(u8::MAX, |m, &b| m.min(b)) > plane {
+            continue;
+        }
+        for (k, &b) in run.iter().enumerate() {
+            // `right <= start + k − mid < n − mid`: in bounds.
+            wrong_right[right] = (start + k) as u32;
+            right += usize::from(b <= plane);
+        }
+    }
+    debug_assert_eq!(left, right);
+    for (&i, &j) in wrong_left[..left].iter().zip(&wrong_right[..right]) {
+        refs.swap(i as usize, j as usize);
+        ids.swap(i as usize, j as usize);
+    }
 }
 
 /// Moves the refs satisfying `left` (and their ids) to the front (Hoare's scheme: each
@@ -688,7 +741,7 @@ mod tests {
         let bins: Vec<u8> = xs.iter().map(|&x| x as u8).collect();
         let mid = bins.iter().filter(|&&b| b <= plane).count();
         let (mut r, mut ids) = refs(&xs);
-        partition_bins(&mut r, &mut ids, &bins, plane, mid);
+        partition_bins(&mut r, &mut ids, &bins, plane, mid, &mut Default::default());
         assert!(r[..mid].iter().all(|r| r.min.x <= 4.0));
         assert!(r[mid..].iter().all(|r| r.min.x > 4.0));
         assert!(r.iter().zip(&ids).all(|(r, &i)| r.min.x == xs[i as usize]));
@@ -698,13 +751,48 @@ mod tests {
     fn sort_by_axis_is_stable_and_keeps_ids() {
         let xs = [3.0, 1.0, 3.0, 0.0, 1.0, 3.0, -2.0];
         let (mut r, mut ids) = refs(&xs);
-        sort_by_axis(&mut r, &mut ids, 0);
+        sort_by_axis(&mut r, &mut ids, 0, &mut Vec::new(), &mut Vec::new());
         assert_eq!(ids, [6, 3, 1, 4, 0, 2, 5]);
         assert!(r.iter().zip(&ids).all(|(r, &i)| r.min.x == xs[i as usize]));
         // Already sorted: nothing moves.
         let before = ids.clone();
-        sort_by_axis(&mut r, &mut ids, 0);
+        sort_by_axis(&mut r, &mut ids, 0, &mut Vec::new(), &mut Vec::new());
         assert_eq!(ids, before);
+    }
+
+    #[test]
+    fn sort_by_axis_equals_a_stable_sort() {
+        // Random sizes up to the most buckets, keys with many ties, signs mixed, zeros of
+        // both signs and infinities (overflowed sums): the same order as a stable sort.
+        let mut rng = Rng::new(3);
+        let pool = [
+            -f32::INFINITY,
+            -2.5,
+            -1.0,
+            -0.0,
+            0.0,
+            0.5,
+            1.0,
+            7.0,
+            f32::INFINITY,
+        ];
+        for _ in 0..2000 {
+            let n = 1 + rng.below(MAX_BUCKETS as u32) as usize;
+            let xs: Vec<f32> = (0..n).map(|_| pool[rng.below(9) as usize]).collect();
+            let refs: Vec<PrimBox> = xs
+                .iter()
+                .map(|&x| PrimBox {
+                    min: Vec3A::new(0.0, x, 0.0),
+                    max: Vec3A::new(1.0, x, 1.0),
+                })
+                .collect();
+            let (mut r, mut ids) = (refs.clone(), (0..n as u32).collect::<Vec<_>>());
+            sort_by_axis(&mut r, &mut ids, 1, &mut Vec::new(), &mut Vec::new());
+            let mut want: Vec<u32> = (0..n as u32).collect();
+            want.sort_by(|&a, &b| (2.0 * xs[a as usize]).total_cmp(&(2.0 * xs[b as usize])));
+            assert_eq!(ids, want, "{xs:?}");
+            assert!(r.iter().zip(&ids).all(|(r, &i)| *r == refs[i as usize]));
+        }
     }
 
     /// Large nodes bin into `BIN_SETS` interleaved bucket copies, small ones into one: both
