@@ -1,16 +1,18 @@
 //! Times one scene step for profiling: `cargo run --release --example profile_step --
-//! --scene gas|clustered --n 100000 --steps 30 --depth D --what octree|broadphase`.
+//! --scene gas|clustered|churn --n 100000 --steps 30 --depth D --what octree|broadphase|feed`.
 //!
 //! Runs 5 warm-up steps, then `--steps` measured ones, and prints the median ns/object/step,
 //! the pair count of the last step and (for `octree`) the tree's stats. Each step advances the
 //! scene by `DT`, applies every sphere's new centre and collects the pairs; with `octree` the
 //! pairs are `Octree::pairs_into` (unsorted), with `broadphase` the whole `BroadPhase::step`
-//! (sorted list plus added / removed). The depth defaults to `depth_for` (strict) or
+//! (sorted list plus added / removed). `feed` runs the scene's frames (with `churn`'s removes
+//! and inserts) through `scene::Feed` into a `BroadPhase`, as `vs_rapier` does, and times
+//! only `Feed::apply` and `BroadPhase::step`, not the scene's motion. The depth defaults to `depth_for` (strict) or
 //! `depth_for_loose` (loose). Under callgrind, `--toggle-collect=*measured*` counts
 //! only the measured steps.
 
 use broadleaf::octree::{Octree, Placement};
-use broadleaf::scene::{DT, Gas};
+use broadleaf::scene::{Churn, DT, Feed, Frame, Gas, Scene};
 use broadleaf::{BroadPhase, Config, Pair, ProxyKey};
 use std::hint::black_box;
 use std::time::Instant;
@@ -66,7 +68,7 @@ fn measured_step(run: &mut dyn FnMut() -> usize) -> usize {
 fn main() {
     let args = parse();
     let mut gas = match args.scene.as_str() {
-        "gas" => Gas::new(args.n, 1),
+        "gas" | "churn" => Gas::new(args.n, 1),
         "clustered" => Gas::clustered(args.n, 1),
         other => panic!("unknown scene {other}"),
     };
@@ -128,6 +130,33 @@ fn main() {
                 black_box((s.added.len(), s.removed.len()));
                 s.pairs.len()
             });
+        }
+        "feed" => {
+            let mut scene: Box<dyn Scene> = match args.scene.as_str() {
+                "churn" => Box::new(Churn::new(args.n, 1)),
+                _ => Box::new(gas.clone()),
+            };
+            let mut bp = BroadPhase::new(Config {
+                bounds: scene.bounds(),
+                octree_depth: depth,
+                octree_placement: args.placement,
+                ..Config::default()
+            });
+            let (mut feed, mut spawns, mut frame) =
+                (Feed::new(false), Vec::new(), Frame::default());
+            scene.spawns(&mut spawns);
+            feed.spawn(&mut bp, &spawns).expect("valid scene");
+            for i in 0..WARMUP + args.steps {
+                scene.advance(&mut frame);
+                let t = Instant::now();
+                pair_count = black_box(measured_step(&mut || {
+                    feed.apply(&mut bp, &frame).expect("valid frame");
+                    bp.step().pairs.len()
+                }));
+                if i >= WARMUP {
+                    times.push(t.elapsed().as_nanos() as f64 / n as f64);
+                }
+            }
         }
         other => panic!("unknown --what {other}"),
     }
