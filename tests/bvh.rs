@@ -571,3 +571,46 @@ fn a_long_line_builds_refits_and_traverses_iteratively() {
         assert_eq!(hit, Some((keys[0], 5.0)));
     }
 }
+
+/// Leaves of more than 64 boxes (a `max_leaf_size` above 64) take the leaf × leaf loop
+/// without the bit mask of the boxes near the other leaf: both loops must give brute force's
+/// pairs, self and cross, before and after the boxes move.
+#[test]
+fn big_leaves_pair_like_brute_force() {
+    let mut rng = Rng::new(23);
+    for (max_leaf_size, traversal_cost) in [(255, 64.0), (70, 64.0), (64, 64.0), (16, 8.0)] {
+        let cfg = BvhConfig {
+            max_leaf_size,
+            traversal_cost,
+            sah_buckets: 64,
+            ..BvhConfig::default()
+        };
+        let mut model: Vec<(ProxyKey, Aabb)> = Vec::new();
+        let boxes: Vec<Aabb> = (0..900).map(|_| random_box(&mut rng, 14.0)).collect();
+        let (mut bvh, keys) = Bvh::from_aabbs(cfg, &boxes).unwrap();
+        model.extend(keys.iter().copied().zip(boxes.iter().copied()));
+        let statics: Vec<Aabb> = (0..300).map(|_| random_box(&mut rng, 14.0)).collect();
+        let (other, other_keys) = Bvh::from_aabbs(cfg, &statics).unwrap();
+        let other_model: Vec<(ProxyKey, Aabb)> = other_keys
+            .iter()
+            .copied()
+            .zip(statics.iter().copied())
+            .collect();
+        let s = bvh.stats();
+        if max_leaf_size == 255 {
+            assert!(
+                s.primitives / s.leaves > 64,
+                "leaves of {max_leaf_size}: {} boxes in {} leaves",
+                s.primitives,
+                s.leaves
+            );
+        }
+        check_all(&mut bvh, &model, &other, &other_model, &mut rng);
+        for (k, b) in &mut model {
+            *b = random_box(&mut rng, 14.0);
+            bvh.update(*k, *b).unwrap();
+        }
+        bvh.refit();
+        check_all(&mut bvh, &model, &other, &other_model, &mut rng);
+    }
+}

@@ -183,20 +183,45 @@ fn cross_step(
     }
 }
 
-/// Every overlapping pair of the primitives of leaf `na` (in `ta`) × leaf `nb` (in `tb`); a
-/// box of `na` that misses `nb`'s box pairs with nothing there and is skipped.
+/// Every overlapping pair of the primitives of leaf `na` (in `ta`) × leaf `nb` (in `tb`). A
+/// box of either leaf that misses the other leaf's box pairs with nothing there: `nb`'s boxes
+/// that meet `na`'s box are noted in a bit mask first (no branches), then each box of `na`
+/// that meets `nb`'s box is tested against those alone. Two leaves whose boxes only touch at
+/// a corner thus cost one pass over each, not the product. (Leaves of more than 64 boxes, which
+/// only a `max_leaf_size` above 64 makes, skip the mask.)
 #[inline]
 fn leaf_pairs(ta: &Tree, na: &Node, tb: &Tree, nb: &Node, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
-    let b_box = nb.bounds();
+    let (a_box, b_box) = (na.bounds(), nb.bounds());
     let (ra, rb) = (na.range(), nb.range());
     let (boxes_b, keys_b) = (&tb.boxes[rb.clone()], &tb.keys[rb]);
+    let mut near_a = u64::MAX;
+    if boxes_b.len() <= 64 {
+        near_a = 0;
+        for (k, bj) in boxes_b.iter().enumerate() {
+            near_a |= u64::from(bj.overlaps(&a_box)) << k;
+        }
+        if near_a == 0 {
+            return;
+        }
+    }
     for (bi, &ki) in ta.boxes[ra.clone()].iter().zip(&ta.keys[ra]) {
         if !bi.overlaps(&b_box) {
             continue;
         }
-        for (bj, &kj) in boxes_b.iter().zip(keys_b) {
-            if bi.overlaps(bj) {
-                f(ki, kj);
+        if boxes_b.len() <= 64 {
+            let mut m = near_a;
+            while m != 0 {
+                let k = m.trailing_zeros() as usize;
+                if bi.overlaps(&boxes_b[k]) {
+                    f(ki, keys_b[k]);
+                }
+                m &= m - 1;
+            }
+        } else {
+            for (bj, &kj) in boxes_b.iter().zip(keys_b) {
+                if bi.overlaps(bj) {
+                    f(ki, kj);
+                }
             }
         }
     }
