@@ -36,9 +36,17 @@ impl Bvh {
                 let boxes = &t.boxes[range.clone()];
                 let keys = &t.keys[range];
                 for (i, (bi, &ki)) in boxes.iter().zip(keys).enumerate() {
-                    for (bj, &kj) in boxes[i + 1..].iter().zip(&keys[i + 1..]) {
-                        if bi.overlaps(bj) {
-                            f(ki, kj);
+                    let rest = &boxes[i + 1..];
+                    if rest.len() <= 64 {
+                        // The tests into a mask, the pairs from its bits (see `leaf_pairs`).
+                        for k in bits(mask_of(rest, bi)) {
+                            f(ki, keys[i + 1 + k]);
+                        }
+                    } else {
+                        for (bj, &kj) in rest.iter().zip(&keys[i + 1..]) {
+                            if bi.overlaps(bj) {
+                                f(ki, kj);
+                            }
                         }
                     }
                 }
@@ -184,47 +192,67 @@ fn cross_step(
 }
 
 /// Every overlapping pair of the primitives of leaf `na` (in `ta`) × leaf `nb` (in `tb`). A
-/// box of either leaf that misses the other leaf's box pairs with nothing there: `nb`'s boxes
-/// that meet `na`'s box are noted in a bit mask first (no branches), then each box of `na`
-/// that meets `nb`'s box is tested against those alone. Two leaves whose boxes only touch at
-/// a corner thus cost one pass over each, not the product. (Leaves of more than 64 boxes, which
-/// only a `max_leaf_size` above 64 makes, skip the mask.)
+/// box of either leaf that misses the other leaf's box pairs with nothing there, so the boxes
+/// of each leaf that meet the other leaf's box are noted in a bit mask first, and only those
+/// are tested against each other: two leaves that overlap at a corner cost one pass over each,
+/// not the product. Every test's result goes into a bit mask too, and the pairs are read from
+/// the set bits, so the loops branch on their counts, not on the tests (whose outcomes the
+/// branch predictor cannot guess). Leaves of more than 64 boxes, which only a `max_leaf_size`
+/// above 64 makes, take the plain loop.
 #[inline]
 fn leaf_pairs(ta: &Tree, na: &Node, tb: &Tree, nb: &Node, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
     let (a_box, b_box) = (na.bounds(), nb.bounds());
     let (ra, rb) = (na.range(), nb.range());
+    let (boxes_a, keys_a) = (&ta.boxes[ra.clone()], &ta.keys[ra]);
     let (boxes_b, keys_b) = (&tb.boxes[rb.clone()], &tb.keys[rb]);
-    let mut near_a = u64::MAX;
-    if boxes_b.len() <= 64 {
-        near_a = 0;
-        for (k, bj) in boxes_b.iter().enumerate() {
-            near_a |= u64::from(bj.overlaps(&a_box)) << k;
-        }
-        if near_a == 0 {
-            return;
-        }
-    }
-    for (bi, &ki) in ta.boxes[ra.clone()].iter().zip(&ta.keys[ra]) {
-        if !bi.overlaps(&b_box) {
-            continue;
-        }
-        if boxes_b.len() <= 64 {
-            let mut m = near_a;
-            while m != 0 {
-                let k = m.trailing_zeros() as usize;
-                if bi.overlaps(&boxes_b[k]) {
-                    f(ki, keys_b[k]);
-                }
-                m &= m - 1;
-            }
-        } else {
-            for (bj, &kj) in boxes_b.iter().zip(keys_b) {
-                if bi.overlaps(bj) {
-                    f(ki, kj);
+    if boxes_a.len() > 64 || boxes_b.len() > 64 {
+        for (bi, &ki) in boxes_a.iter().zip(keys_a) {
+            if bi.overlaps(&b_box) {
+                for (bj, &kj) in boxes_b.iter().zip(keys_b) {
+                    if bi.overlaps(bj) {
+                        f(ki, kj);
+                    }
                 }
             }
         }
+        return;
     }
+    let near_a = mask_of(boxes_b, &a_box);
+    if near_a == 0 {
+        return;
+    }
+    for i in bits(mask_of(boxes_a, &b_box)) {
+        let bi = &boxes_a[i];
+        let mut hits = 0;
+        for k in bits(near_a) {
+            hits |= u64::from(bi.overlaps(&boxes_b[k])) << k;
+        }
+        for k in bits(hits) {
+            f(keys_a[i], keys_b[k]);
+        }
+    }
+}
+
+/// Bit `k` set iff `boxes[k]` overlaps `b` (at most 64 boxes), computed without branches.
+#[inline]
+fn mask_of(boxes: &[PrimBox], b: &PrimBox) -> u64 {
+    debug_assert!(boxes.len() <= 64);
+    boxes
+        .iter()
+        .enumerate()
+        .fold(0, |m, (k, bk)| m | u64::from(bk.overlaps(b)) << k)
+}
+
+/// The positions of the set bits of `m`, lowest first.
+#[inline]
+fn bits(mut m: u64) -> impl Iterator<Item = usize> {
+    core::iter::from_fn(move || {
+        (m != 0).then(|| {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            k
+        })
+    })
 }
 
 /// Fills `order` with the indices `range`, sorted by `boxes[i].min.x`.
