@@ -135,6 +135,13 @@ mod bvh_benches {
                     black_box(bvh.sah_cost())
                 });
             });
+            // A new tree: `n` inserts and the first build, from the boxes' random order.
+            group.bench_with_input(BenchmarkId::new("from_aabbs", n), &n, |b, _| {
+                b.iter(|| {
+                    let (bvh, keys) = Bvh::from_aabbs(BvhConfig::default(), &boxes).unwrap();
+                    black_box((bvh.sah_cost(), keys.len()))
+                });
+            });
         }
         group.finish();
     }

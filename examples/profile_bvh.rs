@@ -5,7 +5,9 @@
 //! prints the median build time. Each rebuild after the first starts from the tree order of
 //! the one before (the boxes did not move, so no box changes place); `--shuffle true` hands
 //! the keys a random permutation of the boxes before each rebuild (untimed), so every timed
-//! rebuild starts from random order, as a first build does. `--what step` runs the `bodies` scene through a
+//! rebuild starts from random order, as a first build does. `--what first` times
+//! `Bvh::from_aabbs` itself (a new tree: `n` inserts, then the first build from the boxes'
+//! random order) `steps` times. `--what step` runs the `bodies` scene through a
 //! `BroadPhase` (spawn, then per step `Feed::apply` + `BroadPhase::step`) and prints the
 //! median ns/object/step, the pair count and the dynamic tree's shape. `--warmup W` steps are
 //! run (and not timed) first.
@@ -107,6 +109,29 @@ fn build(args: &Args) {
     );
 }
 
+/// `Bvh::from_aabbs` over the scene's boxes in their random order, timed whole.
+fn first(args: &Args) {
+    let scene = Bodies::new(args.n, 1);
+    let boxes: Vec<Aabb> = scene.dynamic.iter().map(|o| o.aabb()).collect();
+    let mut ms = Vec::with_capacity(args.steps);
+    let mut cost = 0.0;
+    for _ in 0..args.steps {
+        let t = Instant::now();
+        let (bvh, keys) = Bvh::from_aabbs(args.config, &boxes).expect("valid boxes");
+        ms.push(t.elapsed().as_secs_f64() * 1e3);
+        cost = bvh.sah_cost();
+        drop((bvh, keys));
+    }
+    println!(
+        "first build n={} (from_aabbs: inserts + build) median {:.2} ms (min {:.2}) over {} builds; cost {:.1}",
+        args.n,
+        median(ms.clone()),
+        ms.iter().copied().fold(f64::INFINITY, f64::min),
+        args.steps,
+        cost
+    );
+}
+
 fn step(args: &Args) {
     let mut scene = Bodies::new(args.n, 2);
     let mut bp = BroadPhase::new(Config {
@@ -189,8 +214,9 @@ fn main() {
     let args = parse();
     match args.what.as_str() {
         "build" => build(&args),
+        "first" => first(&args),
         "step" => step(&args),
         "pairs" => pairs(&args),
-        other => panic!("--what {other}: use build, step or pairs"),
+        other => panic!("--what {other}: use build, first, step or pairs"),
     }
 }

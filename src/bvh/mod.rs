@@ -208,6 +208,13 @@ impl Bvh {
     pub fn from_aabbs(config: BvhConfig, aabbs: &[Aabb]) -> Result<(Bvh, Vec<ProxyKey>), Error> {
         let mut bvh = Bvh::new(config)?;
         aabbs.iter().try_for_each(check_aabb)?;
+        // Sized once: growing by doubling would copy every array a few times over, and fault
+        // in fresh pages for each copy.
+        let n = aabbs.len();
+        bvh.slots = SlotMap::with_capacity_and_key(n);
+        bvh.ids = SecondaryMap::with_capacity(n);
+        bvh.keys.reserve_exact(n);
+        bvh.boxes.reserve_exact(n);
         let keys = aabbs
             .iter()
             .map(|aabb| bvh.insert(*aabb))
