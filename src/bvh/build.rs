@@ -524,8 +524,9 @@ fn sweep_split(
 /// then stored once at its rank. The few entries of a node that `sweep_split` takes (at most
 /// `sah_buckets`) lie in random order in a first build, where an insertion sort mispredicts
 /// at every step; when they already lie in order, as in a rebuild of a tree whose boxes barely
-/// moved, one pass over the keys finds so and nothing moves. The keys are the centroid sums' bits mapped to integers in
-/// the order of `f32::total_cmp`, so the ranks are a permutation whatever the floats are.
+/// moved, one pass over the keys finds so and nothing moves. The keys are the centroid sums'
+/// bits mapped to integers in the order of `f32::total_cmp`, so the ranks are a permutation
+/// whatever the floats are.
 fn sort_by_axis(
     refs: &mut [PrimBox],
     ids: &mut [u32],
