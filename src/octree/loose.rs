@@ -20,7 +20,9 @@
 //!   `(−1, 1)`, `(0, 1)`, `(1, 1)`. The three cells of a row are one stretch of the sorted
 //!   spheres, found by two pointers into the sorted runs per row; the keys they look for grow
 //!   with the node's key, so each pointer passes over the runs once per pass, and no neighbour
-//!   is looked up in the node storage;
+//!   is looked up in the node storage. A run of a few spheres first lists the spheres of the
+//!   five short stretches (most hold 0–2) and tests each own sphere against the list in one
+//!   loop: a loop per stretch mispredicted its end about once per stretch;
 //! - if some sphere lives deeper, the pairs with every sphere deeper than the node in the
 //!   subtrees of the 27 cells around it, found by descending the occupied subtrees (child
 //!   masks) and pruning every node whose loose range misses the union of the run's ranges
@@ -40,6 +42,14 @@ use crate::ProxyKey;
 
 /// The four forward neighbour rows `(dy, dz)` of a cell (see the module docs).
 const ROWS: [[i32; 2]; 4] = [[1, 0], [-1, 1], [0, 1], [1, 1]];
+
+/// Runs of at most this many spheres test their forward neighbours through one list.
+const NEAR_OWN: usize = 4;
+/// Neighbour ranges of at most this many spheres go into that list, longer ones are tested
+/// on their own.
+const NEAR_RANGE: usize = 4;
+/// The list's room: every range at its longest, and the slack of the last range's writes.
+const NEAR_CAP: usize = (1 + ROWS.len()) * NEAR_RANGE + NEAR_RANGE;
 
 /// Buffers of the loose pair pass, reused by every pass; they never shrink.
 #[derive(Clone, Debug, Default)]
@@ -248,13 +258,13 @@ impl Octree {
                         as u64
                 });
             }
-            // The next cell of the row: the next run, if its key is one more.
-            if x + 1 < side && run_key[r + 1] == key + 1 {
-                t.between(own, spheres(r + 1, r + 2), work);
-            }
-            // Cells `x − 1 ..= x + 1` of a row are one stretch of the sorted spheres: from the
-            // first run at or after the key of cell `x − 1` to the first after `x + 1` (both
-            // clamped to the row).
+            // The next cell of the row (the next run, if its key is one more), then the cells
+            // `x − 1 ..= x + 1` of each forward row, which are one stretch of the sorted
+            // spheres: from the first run at or after the key of cell `x − 1` to the first
+            // after `x + 1` (both clamped to the row). Each is a range of `hot`, often empty.
+            let next = usize::from(x + 1 < side && run_key[r + 1] == key + 1);
+            let mut ranges = [[0u32; 2]; 1 + ROWS.len()];
+            ranges[0] = [run_start[r + 1], run_start[(r + 1 + next).min(runs)]];
             let (back, ahead) = (u64::from(x > 0), 1 + u64::from(x + 1 < side));
             let inside = [
                 y + 1 < side,
@@ -269,8 +279,36 @@ impl Octree {
                 let cell = key.wrapping_add(offsets[k]);
                 seek(&mut first[k], cell - back);
                 seek(&mut past[k], cell + ahead);
-                if first[k] < past[k] {
-                    t.between(own, spheres(first[k], past[k]), work);
+                ranges[1 + k] = [run_start[first[k]], run_start[past[k]]];
+            }
+            if own.len() <= NEAR_OWN {
+                // A few own spheres: the short ranges' spheres are listed first, with no
+                // branch on their lengths, and each own sphere is tested against the list in
+                // one loop (one loop end to mispredict instead of one per range).
+                let mut near = [0u32; NEAR_CAP];
+                let mut len = 0;
+                for &[lo, hi] in &ranges {
+                    let count = hi.saturating_sub(lo) as usize;
+                    if count <= NEAR_RANGE {
+                        for (j, slot) in near[len..len + NEAR_RANGE].iter_mut().enumerate() {
+                            *slot = lo + j as u32;
+                        }
+                        len += count;
+                    } else {
+                        t.between(own, &hot[lo as usize..hi as usize], work);
+                    }
+                }
+                t.tests += (own.len() * len) as u64;
+                for a in own {
+                    for &b in &near[..len] {
+                        t.emit_if(a, &hot[b as usize]);
+                    }
+                }
+            } else {
+                for &[lo, hi] in &ranges {
+                    if lo < hi {
+                        t.between(own, &hot[lo as usize..hi as usize], work);
+                    }
                 }
             }
             if deeper[level as usize] {
