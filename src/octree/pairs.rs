@@ -472,7 +472,10 @@ impl Octree {
             emit,
         };
         s.path.clear();
-        s.anc.clear();
+        // `s.anc[..anc_len]` is the stack (set at each node from its path); the buffer beyond
+        // is room that only grows, so the copies below store into it without first growing
+        // the vector each time.
+        let mut anc_len;
         s.path.push(Level {
             code: 0,
             own: (0, 0),
@@ -493,7 +496,7 @@ impl Octree {
                 m -= 1;
             }
             s.path.truncate(m + 1);
-            s.anc.truncate(s.path[m].cands.1 as usize);
+            anc_len = s.path[m].cands.1 as usize;
             let corner = [
                 compact3(prefix),
                 compact3(prefix >> 1),
@@ -520,22 +523,28 @@ impl Octree {
                 }
                 let code = prefix >> (3 * shift);
                 let bit = 1u8 << (code & 7);
-                let start = s.anc.len() as u32;
+                // The candidates whose octants hold the child, copied without a branch on
+                // which do: each is stored at the end, and the end advances if it counts.
+                let start = anc_len;
+                let room = start + (c1 - c0) + (o1 - o0);
+                if s.anc.len() < room {
+                    s.anc.resize(room, Hot::EMPTY);
+                }
+                let mut end = start;
                 for k in c0..c1 {
-                    if s.anc_oct[k] & bit != 0 {
-                        let h = s.anc[k];
-                        s.anc.push(h);
-                    }
+                    s.anc[end] = s.anc[k];
+                    end += usize::from(s.anc_oct[k] & bit != 0);
                 }
                 for k in o0..o1 {
-                    if s.hot_oct[k] & bit != 0 {
-                        s.anc.push(s.hot[k]);
-                    }
+                    s.anc[end] = s.hot[k];
+                    end += usize::from(s.hot_oct[k] & bit != 0);
                 }
+                anc_len = end;
+                let start = start as u32;
                 s.path.push(Level {
                     code,
                     own: (0, 0),
-                    cands: (start, s.anc.len() as u32),
+                    cands: (start, anc_len as u32),
                     octs: false,
                 });
             }
