@@ -617,15 +617,18 @@ impl Octree {
         }
         let d = self.depth;
         group.clear();
+        // Without a branch per axis: bit `a` of `straddles` is set if the sphere straddles
+        // the axis-`a` mid plane of its node (`(q ^ q') >> (shift − 1) != 0`, written as
+        // `(q ^ q') << 1 >> shift`, and masked off at the deepest level, `shift == 0`, where
+        // there is no mid plane), and the group is the lowest set bit, 2 if none.
         group.extend(hot.iter().zip(node_key.iter()).map(|(h, &key)| {
             let shift = d - (key & 15) as u32;
-            if shift == 0 {
-                2
-            } else {
-                (0..3)
-                    .find(|&a| (h.qmin[a] ^ h.qmax[a]) >> (shift - 1) != 0)
-                    .unwrap_or(2) as u8
-            }
+            let deeper = u32::from(shift != 0);
+            let straddles = (0..3).fold(0u32, |m, a| {
+                let x = u32::from(h.qmin[a] ^ h.qmax[a]);
+                m | ((u32::from((x << 1) >> shift != 0) & deeper) << a)
+            });
+            (straddles | 4).trailing_zeros() as u8
         }));
     }
 
