@@ -7,9 +7,9 @@
 //! pairs are `Octree::pairs_into` (unsorted), with `broadphase` the whole `BroadPhase::step`
 //! (sorted list plus added / removed). `feed` runs the scene's frames (with `churn`'s removes
 //! and inserts) through `scene::Feed` into a `BroadPhase`, as `vs_rapier` does, and times
-//! only `Feed::apply` and `BroadPhase::step`, not the scene's motion. The depth defaults to `depth_for` (strict) or
-//! `depth_for_loose` (loose). Under callgrind, `--toggle-collect=*measured*` counts
-//! only the measured steps.
+//! only `Feed::apply` and `BroadPhase::step`, not the scene's motion. The depth defaults to
+//! `depth_for` (strict) or `depth_for_loose` (loose). Under callgrind,
+//! `--toggle-collect=*measured*` counts only the measured steps.
 
 use broadleaf::octree::{Octree, Placement};
 use broadleaf::scene::{Churn, DT, Feed, Frame, Gas, Scene};

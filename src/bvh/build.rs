@@ -189,15 +189,16 @@ impl Bvh {
             &mut self.leaf_of,
         );
         // Renumber: primitive index = position in tree order, so a leaf's range indexes
-        // `boxes` and `keys` directly and traversals read contiguous memory. The new position
-        // of each old primitive is noted first, then the old keys are read in their own
-        // order and stored at their new places: stores to scattered places cost about half
-        // what loads from them do (a first build's keys lie in insertion order, so its map
-        // updates below go in order too). A rebuild of a tree whose boxes barely moved leaves
-        // most primitives in place, and their entries in `ids` need no update.
-        // Both buffers are overwritten whole below (with no tombstones every old index gets a
-        // new one; the live keys fill `0..n`), so they are only resized, which writes nothing
-        // when the length stays: a fill of ~12 MB was a tenth of an in-order 1M rebuild.
+        // `boxes` and `keys` directly and traversals read contiguous memory.
+        // - The new position of each old primitive is noted first, then the old keys are read
+        //   in their own order and stored at their new places: stores to scattered places
+        //   cost about half what loads from them do (a first build's keys lie in insertion
+        //   order, so its map updates go in order too).
+        // - A rebuild of a tree whose boxes barely moved leaves most primitives in place, and
+        //   their entries in `ids` need no update.
+        // - Both buffers are overwritten whole (with no tombstones every old index gets a new
+        //   one; the live keys fill `0..n`), so they are only resized, which writes nothing
+        //   when the length stays: a fill of ~12 MB was a tenth of an in-order 1M rebuild.
         if self.tombstones != 0 {
             s.new_pos.clear();
         }
