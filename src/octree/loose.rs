@@ -22,7 +22,10 @@
 //!   with the node's key, so each pointer passes over the runs once per pass, and no neighbour
 //!   is looked up in the node storage. A run of a few spheres first lists the spheres of the
 //!   five short stretches (most hold 0–2) and tests each own sphere against the list in one
-//!   loop: a loop per stretch mispredicted its end about once per stretch;
+//!   loop: a loop per stretch mispredicted its end about once per stretch. A run of many
+//!   spheres (a crowded level: a settled pile holds ~8 per node) lists only the stretches'
+//!   spheres that reach the union of its own boxes, one test each, and tests its spheres
+//!   against those: in a pile about a third of them;
 //! - if some sphere lives deeper, the pairs with every sphere deeper than the node in the
 //!   subtrees of the 27 cells around it, found by descending the occupied subtrees (child
 //!   masks) and pruning every node whose loose range misses the union of the run's ranges
@@ -64,6 +67,9 @@ pub(super) struct Scratch {
     /// By node slot ([`super::place::Nodes::slot`]): the node's run `[start, end)` during a
     /// pass, `[0, 0]` otherwise. Grows with the node pages.
     run_of: Vec<[u32; 2]>,
+    /// The neighbours of a crowded run that reach its union box, as positions in the
+    /// sorted spheres.
+    dense: Vec<u32>,
 }
 
 /// The level and cell of a loose tree's node key (`Octree::walk_key`) in a tree of depth `d`.
@@ -189,10 +195,11 @@ impl Octree {
         if cross && loose.run_of.len() < self.nodes.head_len() {
             loose.run_of.resize(self.nodes.head_len(), [0, 0]);
         }
-        let (run_key, run_start, run_slot) = (
+        let (run_key, run_start, run_slot, dense) = (
             &mut loose.run_key,
             &mut loose.run_start,
             &mut loose.run_slot,
+            &mut loose.dense,
         );
         run_key.clear();
         run_start.clear();
@@ -305,9 +312,42 @@ impl Octree {
                     }
                 }
             } else {
+                // Many own spheres (a crowded level, like a settled pile): the ranges'
+                // spheres that reach the union of the own boxes are listed first, by one test
+                // each and a store that the test's outcome keeps; only they meet every own
+                // sphere. Ranges long enough to sweep are swept instead.
+                let (mut umin, mut umax) = (own[0].min, own[0].max);
+                for h in &own[1..] {
+                    umin = umin.min(h.min);
+                    umax = umax.max(h.max);
+                }
+                let union = Hot {
+                    min: umin,
+                    max: umax,
+                    ..Hot::EMPTY
+                };
+                let total: u32 = ranges.iter().map(|&[lo, hi]| hi.saturating_sub(lo)).sum();
+                if dense.len() < total as usize {
+                    dense.resize(total as usize, 0);
+                }
+                let mut len = 0;
                 for &[lo, hi] in &ranges {
-                    if lo < hi {
+                    let count = hi.saturating_sub(lo) as usize;
+                    if own.len() * count > SHORT_CROSS {
                         t.between(own, &hot[lo as usize..hi as usize], work);
+                        continue;
+                    }
+                    t.tests += count as u64;
+                    for (b, h) in (lo..hi).zip(&hot[lo as usize..hi as usize]) {
+                        // `len <= ` the entries of the ranges so far `< total`: in bounds.
+                        dense[len] = b;
+                        len += usize::from(h.overlaps(&union));
+                    }
+                }
+                t.tests += (own.len() * len) as u64;
+                for a in own {
+                    for &b in &dense[..len] {
+                        t.emit_if(a, &hot[b as usize]);
                     }
                 }
             }

@@ -73,7 +73,7 @@ const _: () = assert!(core::mem::size_of::<Hot>() == 48);
 
 impl Hot {
     /// A placeholder for buffers about to be overwritten.
-    const EMPTY: Hot = Hot {
+    pub(super) const EMPTY: Hot = Hot {
         min: Vec3A::ZERO,
         max: Vec3A::ZERO,
         qmin: [0; 3],
