@@ -333,13 +333,14 @@ impl Octree {
                 let mut len = 0;
                 for &[lo, hi] in &ranges {
                     let count = hi.saturating_sub(lo) as usize;
+                    let range = &hot[lo as usize..lo as usize + count];
                     if own.len() * count > SHORT_CROSS {
-                        t.between(own, &hot[lo as usize..hi as usize], work);
+                        t.between(own, range, work);
                         continue;
                     }
                     t.tests += count as u64;
-                    for (b, h) in (lo..hi).zip(&hot[lo as usize..hi as usize]) {
-                        // `len <= ` the entries of the ranges so far `< total`: in bounds.
+                    for (b, h) in (lo..).zip(range) {
+                        // `len` counts at most the entries before this one: below `total`.
                         dense[len] = b;
                         len += usize::from(h.overlaps(&union));
                     }
