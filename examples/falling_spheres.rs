@@ -8,6 +8,7 @@
 //! cargo run --release --example falling_spheres -- --n 2000 --steps 300 --index bvh --verify
 //! ```
 
+use broadleaf::octree::Placement;
 use broadleaf::sim::{DropConfig, IndexKind, World};
 use broadleaf::{Aabb, Pair, Vec3, brute};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -19,11 +20,12 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 const USAGE: &str = "\
-usage: falling_spheres [--n N] [--steps S] [--index octree|bvh] [--skin S] [--verify]
-                       [--out PATH] [--png PATH] [--frames F] [--seed SEED]
+usage: falling_spheres [--n N] [--steps S] [--index octree|bvh] [--placement strict|loose]
+                       [--skin S] [--verify] [--out PATH] [--png PATH] [--frames F] [--seed SEED]
   --n N          spheres to drop (default 4000)
   --steps S      steps of 1/60 s (default 480)
   --index KIND   where the spheres live: octree (default) or bvh
+  --placement P  the octree's placement: strict (default, RTCD 7.3) or loose
   --skin S       the broadphase's pair cache skin in metres (Config::skin; default 0: off)
   --verify       check every step's pairs against brute force over the same boxes
   --out PATH     animated GIF to write (default falling_spheres.gif)
@@ -44,6 +46,7 @@ struct Args {
     n: usize,
     steps: usize,
     index: IndexKind,
+    placement: Placement,
     skin: f32,
     verify: bool,
     out: PathBuf,
@@ -57,6 +60,7 @@ fn parse_args() -> Result<Args, String> {
         n: 4000,
         steps: 480,
         index: IndexKind::Octree,
+        placement: Placement::Strict,
         skin: 0.0,
         verify: false,
         out: PathBuf::from("falling_spheres.gif"),
@@ -78,6 +82,13 @@ fn parse_args() -> Result<Args, String> {
                     "octree" => IndexKind::Octree,
                     "bvh" => IndexKind::Bvh,
                     other => return Err(format!("--index {other}: expected octree or bvh")),
+                }
+            }
+            "--placement" => {
+                args.placement = match value()?.as_str() {
+                    "strict" => Placement::Strict,
+                    "loose" => Placement::Loose,
+                    other => return Err(format!("--placement {other}: expected strict or loose")),
                 }
             }
             "--verify" => args.verify = true,
@@ -118,6 +129,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut config = DropConfig::new(args.n, RADIUS, args.seed);
     config.world.index = args.index;
     config.world.broadphase.skin = args.skin;
+    config.world.broadphase.octree_placement = args.placement;
     let scene = config.build()?;
     let mut world = scene.world;
     let view = View::new(&world, scene.interior);
@@ -128,9 +140,10 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         scene.interior.extent().x,
         scene.interior.extent().z,
         args.steps,
-        match args.index {
-            IndexKind::Octree => "octree",
-            IndexKind::Bvh => "BVH",
+        match (args.index, args.placement) {
+            (IndexKind::Octree, Placement::Strict) => "octree (strict placement)",
+            (IndexKind::Octree, Placement::Loose) => "octree (loose placement)",
+            (IndexKind::Bvh, _) => "BVH",
         }
     );
 

@@ -1,6 +1,7 @@
 //! The physics loop end to end: 1000 spheres dropped into a box come to rest inside it, the run
-//! is bit-for-bit repeatable, and the octree and BVH paths see the same pairs at every step.
+//! is bit-for-bit repeatable, and the octree (both placements) and BVH paths see the same pairs at every step.
 
+use broadleaf::octree::Placement;
 use broadleaf::sim::{DropConfig, IndexKind, SphereDrop, World};
 use broadleaf::{Pair, brute};
 
@@ -12,8 +13,13 @@ const DT: f32 = 1.0 / 60.0;
 const STEPS: usize = 360;
 
 fn drop_scene(index: IndexKind) -> SphereDrop {
+    drop_scene_placed(index, Placement::Strict)
+}
+
+fn drop_scene_placed(index: IndexKind, placement: Placement) -> SphereDrop {
     let mut config = DropConfig::new(N, RADIUS, SEED);
     config.world.index = index;
+    config.world.broadphase.octree_placement = placement;
     config.build().unwrap()
 }
 
@@ -167,16 +173,24 @@ fn a_thousand_dropped_spheres_settle_inside_the_box_deterministically() {
 #[test]
 fn octree_and_bvh_paths_give_the_same_pairs_at_every_step() {
     let mut octree = drop_scene(IndexKind::Octree);
+    let mut loose = drop_scene_placed(IndexKind::Octree, Placement::Loose);
     let mut bvh = drop_scene(IndexKind::Bvh);
     let mut total = 0usize;
     for step in 0..STEPS {
         octree.world.step(DT).unwrap();
+        loose.world.step(DT).unwrap();
         bvh.world.step(DT).unwrap();
         let (po, pb) = (pairs_by_id(&octree.world), pairs_by_id(&bvh.world));
         assert_eq!(po, pb, "step {step}");
+        assert_eq!(pairs_by_id(&loose.world), pb, "step {step}");
         assert_eq!(
             octree.world.pairs(),
             brute_pairs(&octree.world),
+            "step {step}"
+        );
+        assert_eq!(
+            loose.world.pairs(),
+            brute_pairs(&loose.world),
             "step {step}"
         );
         assert_eq!(bvh.world.pairs(), brute_pairs(&bvh.world), "step {step}");
@@ -184,4 +198,20 @@ fn octree_and_bvh_paths_give_the_same_pairs_at_every_step() {
     }
     assert!(total > STEPS * N, "the spheres did meet: {total} pairs");
     assert_eq!(position_bits(&octree.world), position_bits(&bvh.world));
+    assert_eq!(position_bits(&loose.world), position_bits(&bvh.world));
+}
+
+#[test]
+fn the_drop_scene_sizes_the_octree_for_its_placement() {
+    // 4000 spheres: the container is 20.75 m wide and 24.75 m tall (walls included), so strict
+    // cells of at least two diameters along the tallest side stop at level 3 (3.1 m), and
+    // loose cells of at least one diameter along the narrowest at level 4 (1.3 m).
+    for (placement, depth) in [(Placement::Strict, 3), (Placement::Loose, 4)] {
+        let mut config = DropConfig::new(4000, RADIUS, SEED);
+        config.world.broadphase.octree_placement = placement;
+        let scene = config.build().unwrap();
+        let c = scene.world.broadphase().config();
+        assert_eq!(c.octree_depth, depth, "{placement:?}");
+        assert_eq!(c.octree_depth, placement.depth_for(&c.bounds, RADIUS));
+    }
 }

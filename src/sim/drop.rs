@@ -1,7 +1,6 @@
 //! The standard scene: spheres dropped on a jittered grid into an open box sized for them.
 
 use super::{Material, World, WorldConfig};
-use crate::octree::MAX_DEPTH;
 use crate::scene::Rng;
 use crate::{Aabb, Error, Vec3};
 
@@ -28,7 +27,10 @@ pub struct DropConfig {
     pub wall_thickness: f32,
     /// The pile's expected height over the container's width (it sets the width); `> 0`.
     pub pile_aspect: f32,
-    /// Octree depth is chosen so the deepest cells are at least this many diameters wide.
+    /// Octree depth is chosen so the deepest cells are at least this many diameters wide
+    /// along the container's longest side; with [`Placement::Loose`](crate::octree::Placement::Loose)
+    /// (`world.broadphase.octree_placement`), half as many along its shortest side, as
+    /// [`crate::octree::depth_for_loose`] does (a loose cell holds spheres up to its width).
     pub min_cell_diameters: f32,
     /// Seed of the jitter.
     pub seed: u64,
@@ -114,9 +116,14 @@ impl DropConfig {
         let mut world_config = self.world;
         world_config.broadphase.bounds = outer;
         let cell = self.min_cell_diameters * 2.0 * r;
-        let extent = outer.extent().max_element();
-        world_config.broadphase.octree_depth = if cell > 0.0 && extent > cell {
-            ((extent / cell).log2().floor() as u32).min(MAX_DEPTH)
+        // Strict cells of at least `cell` (along the longest side) and loose ones of at least
+        // `cell / 2` (along the shortest) are the ones the placements pick for spheres of
+        // radius `cell / 4`.
+        world_config.broadphase.octree_depth = if cell > 0.0 {
+            world_config
+                .broadphase
+                .octree_placement
+                .depth_for(&outer, cell / 4.0)
         } else {
             0
         };
