@@ -1,5 +1,6 @@
 //! The physics loop end to end: 1000 spheres dropped into a box come to rest inside it, the run
-//! is bit-for-bit repeatable, and the octree (both placements) and BVH paths see the same pairs at every step.
+//! is bit-for-bit repeatable, and the octree (both placements) and BVH paths see the same pairs
+//! at every step.
 
 use broadleaf::octree::Placement;
 use broadleaf::sim::{DropConfig, IndexKind, SphereDrop, World};

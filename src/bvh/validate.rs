@@ -10,8 +10,8 @@ impl Bvh {
     /// child at `n + 1`, second child after it, `parent` pointing back); every node box
     /// contains its children's boxes and every leaf box its primitives' current boxes; every
     /// tree primitive lies in exactly one leaf and `leaf_of` names it; keys and the key map
-    /// agree; tombstones hold [`Aabb::EMPTY`] and live boxes are finite and not inverted.
-    /// O(n); for tests and debugging.
+    /// agree; tombstones hold [`Aabb::EMPTY`](crate::Aabb::EMPTY) and live boxes are finite
+    /// and not inverted. O(n); for tests and debugging.
     pub fn validate(&self) {
         let n_nodes = self.nodes.len();
         assert_eq!(

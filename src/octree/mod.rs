@@ -8,7 +8,7 @@
 //!   whose split planes its AABB does not straddle. Spheres on the root's planes stay near the
 //!   root, so a sphere is tested against the filtered straddlers of all its ancestors. Pairs
 //!   come from a pass that radix-sorts the spheres into depth-first node order and streams over
-//!   the node runs with a filtered ancestor stack ([`pairs`]).
+//!   the node runs with a filtered ancestor stack (module `pairs`).
 //! - [`Placement::Loose`] (RTCD 7.3.6, looseness 2): a node's *loose bounds* are its cell grown
 //!   by half the cell size on every side, and a sphere lives at the deepest level whose cells
 //!   are at least its diameter, in the cell holding its centre; its box is then inside the
@@ -18,8 +18,8 @@
 //!   subtrees (`loose.rs`). Use [`depth_for_loose`] for the depth.
 //!
 //! Queries and rays follow the per-node lists through occupied subtrees, testing nodes by
-//! their cells (strict) or loose bounds (loose) ([`query`]); [`Octree::validate`] checks every
-//! invariant ([`validate`]).
+//! their cells (strict) or loose bounds (loose) (module `query`); [`Octree::validate`] checks
+//! every invariant (module `validate`).
 //!
 //! Memory: the tree is "preallocated" in the sense of implicit indexing (level `L` starts at
 //! node `(8^L − 1)/7`, a node's index within its level is its Morton code), but the per-node

@@ -28,8 +28,9 @@ pub struct DropConfig {
     /// The pile's expected height over the container's width (it sets the width); `> 0`.
     pub pile_aspect: f32,
     /// Octree depth is chosen so the deepest cells are at least this many diameters wide
-    /// along the container's longest side; with [`Placement::Loose`](crate::octree::Placement::Loose)
-    /// (`world.broadphase.octree_placement`), half as many along its shortest side, as
+    /// along the container's longest side; with a loose octree
+    /// ([`Placement::Loose`](crate::octree::Placement::Loose) in
+    /// `world.broadphase.octree_placement`), half as many along its shortest side, as
     /// [`crate::octree::depth_for_loose`] does (a loose cell holds spheres up to its width).
     pub min_cell_diameters: f32,
     /// Seed of the jitter.
