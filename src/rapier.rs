@@ -518,9 +518,9 @@ pub fn record_pile(n: usize, seed: u64, settle: usize, frames: usize) -> Recorde
     Recorded::new(bounds, r, recorded)
 }
 
-/// A [`Scene`] played in rapier: kinematic position-based bodies (fixed ones for static
-/// objects), one collider each with `ActiveCollisionTypes::all()`, driven by the scene's
-/// frames. Each collider's `user_data` is its scene id. Used by `vs_rapier` and the benches to
+/// A [`Scene`](crate::scene::Scene) played in rapier: kinematic position-based bodies (fixed
+/// ones for static objects), one collider each with `ActiveCollisionTypes::all()`, driven by
+/// the scene's frames. Each collider's `user_data` is its scene id. Used by `vs_rapier` and the benches to
 /// time rapier's broad phase on exactly the motion broadleaf sees.
 ///
 /// Per frame: [`SceneWorld::set_targets`], [`SceneWorld::step`] (whose pairs are those of the
