@@ -520,8 +520,8 @@ pub fn record_pile(n: usize, seed: u64, settle: usize, frames: usize) -> Recorde
 
 /// A [`Scene`](crate::scene::Scene) played in rapier: kinematic position-based bodies (fixed
 /// ones for static objects), one collider each with `ActiveCollisionTypes::all()`, driven by
-/// the scene's frames. Each collider's `user_data` is its scene id. Used by `vs_rapier` and the benches to
-/// time rapier's broad phase on exactly the motion broadleaf sees.
+/// the scene's frames. Each collider's `user_data` is its scene id. Used by `vs_rapier` and the
+/// benches to time rapier's broad phase on exactly the motion broadleaf sees.
 ///
 /// Per frame: [`SceneWorld::set_targets`], [`SceneWorld::step`] (whose pairs are those of the
 /// poses *before* the targets, see the module docs), then [`SceneWorld::apply_structure`].
