@@ -81,3 +81,26 @@ impl fmt::Display for Error {
 }
 
 impl std::error::Error for Error {}
+
+/// A refused batch ([`BroadPhase::update_spheres`](crate::BroadPhase::update_spheres),
+/// [`BroadPhase::update_bodies`](crate::BroadPhase::update_bodies)): the first bad entry's
+/// index and why. When a batch is refused, nothing of it was applied.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BatchError {
+    /// Index of the first refused entry in the batch.
+    pub index: usize,
+    /// Why that entry was refused.
+    pub error: Error,
+}
+
+impl fmt::Display for BatchError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "batch entry {}: {}", self.index, self.error)
+    }
+}
+
+impl std::error::Error for BatchError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        Some(&self.error)
+    }
+}

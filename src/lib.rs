@@ -90,7 +90,7 @@ pub mod sim;
 
 pub use broadphase::{BodyKind, BroadPhase, Config, Shape, StepPairs};
 pub use bvh::{Bvh, BvhConfig, SplitMethod};
-pub use error::Error;
+pub use error::{BatchError, Error};
 pub use geom::Aabb;
 pub use glam::Vec3;
 pub use octree::{Octree, Placement};

@@ -7,7 +7,7 @@ use crate::bvh::{Bvh, BvhConfig, PrimBox};
 use crate::geom::{self, check_aabb, check_sphere};
 use crate::octree::{Octree, Placement};
 use crate::pair::{self, Pair, PairSorter, ProxyKey};
-use crate::{Aabb, Error, Vec3};
+use crate::{Aabb, BatchError, Error, Vec3};
 use cache::PairCache;
 use slotmap::SlotMap;
 
@@ -430,6 +430,58 @@ impl BroadPhase {
                 *a = aabb;
                 Ok(())
             }
+            Some(Shape::Sphere { .. }) => Err(Error::WrongKind),
+            None => Err(Error::UnknownProxy),
+        }
+    }
+
+    /// Moves or resizes many spheres at once: `(key, center, radius)` per entry. The whole batch
+    /// is checked first; on the first bad entry (non-finite, negative radius, stale key, a
+    /// body's key) nothing is applied and the error names the entry. A key given twice is
+    /// fine: the last entry wins.
+    pub fn update_spheres(&mut self, updates: &[(ProxyKey, Vec3, f32)]) -> Result<(), BatchError> {
+        for (index, &(key, center, radius)) in updates.iter().enumerate() {
+            self.check_sphere_update(key, center, radius)
+                .map_err(|error| BatchError { index, error })?;
+        }
+        for &(key, center, radius) in updates {
+            let applied = self.update_sphere(key, center, radius);
+            debug_assert!(applied.is_ok(), "a checked entry was refused");
+        }
+        Ok(())
+    }
+
+    /// Sets many bodies' boxes at once: `(key, aabb)` per entry. The whole batch is checked
+    /// first; on the first bad entry (non-finite or inverted box, stale key, a sphere's key)
+    /// nothing is applied and the error names the entry. A key given twice is fine: the last
+    /// entry wins.
+    pub fn update_bodies(&mut self, updates: &[(ProxyKey, Aabb)]) -> Result<(), BatchError> {
+        for (index, (key, aabb)) in updates.iter().enumerate() {
+            self.check_body_update(*key, aabb)
+                .map_err(|error| BatchError { index, error })?;
+        }
+        for (key, aabb) in updates {
+            let applied = self.update_body(*key, *aabb);
+            debug_assert!(applied.is_ok(), "a checked entry was refused");
+        }
+        Ok(())
+    }
+
+    /// What [`BroadPhase::update_sphere`] would refuse, without changing anything.
+    fn check_sphere_update(&self, key: ProxyKey, center: Vec3, radius: f32) -> Result<(), Error> {
+        check_sphere(center, radius)?;
+        match self.proxies.get(key) {
+            Some(Shape::Sphere { .. }) => Ok(()),
+            Some(Shape::Body { .. }) => Err(Error::WrongKind),
+            None => Err(Error::UnknownProxy),
+        }
+    }
+
+    /// What [`BroadPhase::update_body`] would refuse, without changing anything.
+    fn check_body_update(&self, key: ProxyKey, aabb: &Aabb) -> Result<(), Error> {
+        check_aabb(aabb)?;
+        match self.proxies.get(key) {
+            Some(Shape::Body { .. }) => Ok(()),
             Some(Shape::Sphere { .. }) => Err(Error::WrongKind),
             None => Err(Error::UnknownProxy),
         }
