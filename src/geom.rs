@@ -2,7 +2,7 @@
 //! point runs before it touches a structure.
 
 use crate::Error;
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 /// A closed axis-aligned box: a point on a face is inside, and boxes that touch overlap.
 ///
@@ -147,6 +147,67 @@ impl Aabb {
         (t_near <= t_far).then_some(t_near)
     }
 }
+
+/// A box in SIMD lanes, 32 bytes: the crate's one box type for hot loops. Two of them are
+/// tested for overlap with two 4-lane compares and no branch.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
+pub(crate) struct SimdBox {
+    pub(crate) min: Vec3A,
+    pub(crate) max: Vec3A,
+}
+
+impl SimdBox {
+    /// The empty box (`min = +∞`, `max = −∞`): it overlaps nothing.
+    pub(crate) const EMPTY: SimdBox = SimdBox {
+        min: Vec3A::INFINITY,
+        max: Vec3A::NEG_INFINITY,
+    };
+
+    #[inline]
+    pub(crate) fn new(aabb: &Aabb) -> Self {
+        SimdBox {
+            min: aabb.min.into(),
+            max: aabb.max.into(),
+        }
+    }
+
+    /// The box `center ± radius`, lane for lane the same floats as
+    /// [`Aabb::from_center_radius`].
+    #[inline]
+    pub(crate) fn from_center_radius(center: Vec3, radius: f32) -> Self {
+        let (c, r) = (Vec3A::from(center), Vec3A::splat(radius));
+        SimdBox {
+            min: c - r,
+            max: c + r,
+        }
+    }
+
+    /// True if `other` lies inside `self`, as [`Aabb::contains`].
+    #[inline]
+    pub(crate) fn contains(&self, other: &SimdBox) -> bool {
+        (self.min.cmple(other.min) & other.max.cmple(self.max)).all()
+    }
+
+    /// `max - min` per axis.
+    #[inline]
+    pub(crate) fn extent(&self) -> Vec3A {
+        self.max - self.min
+    }
+
+    #[inline]
+    pub(crate) fn aabb(&self) -> Aabb {
+        Aabb::new(self.min.into(), self.max.into())
+    }
+
+    /// Closed overlap, as [`Aabb::overlaps`].
+    #[inline]
+    pub(crate) fn overlaps(&self, other: &SimdBox) -> bool {
+        (self.min.cmple(other.max) & other.min.cmple(self.max)).all()
+    }
+}
+
+const _: () = assert!(core::mem::size_of::<SimdBox>() == 32);
 
 /// The smallest `t ∈ [0, max_t]` with `|origin + t·dir − center| ≤ radius`, or `None`.
 /// `dir` need not be unit length (`t` is in units of `dir`); a zero `dir` hits only when the

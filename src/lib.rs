@@ -87,6 +87,7 @@ pub mod pair;
 pub mod rapier;
 pub mod scene;
 pub mod sim;
+mod sweep;
 
 pub use broadphase::{BodyKind, BroadPhase, Config, Shape, StepPairs};
 pub use bvh::{Bvh, BvhConfig, SplitMethod};

@@ -87,63 +87,8 @@ impl Node {
     }
 }
 
-/// A primitive's current box in SIMD lanes, 32 bytes: the pair and query loops test two of
-/// them with two 4-lane compares.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct PrimBox {
-    pub(crate) min: Vec3A,
-    pub(crate) max: Vec3A,
-}
-
-impl PrimBox {
-    /// The box of a tombstone, [`Aabb::EMPTY`]: it overlaps nothing.
-    pub(crate) const EMPTY: PrimBox = PrimBox {
-        min: Vec3A::INFINITY,
-        max: Vec3A::NEG_INFINITY,
-    };
-
-    #[inline]
-    pub(crate) fn new(aabb: &Aabb) -> Self {
-        PrimBox {
-            min: aabb.min.into(),
-            max: aabb.max.into(),
-        }
-    }
-
-    /// The box `center ± radius`, lane for lane the same floats as
-    /// [`Aabb::from_center_radius`].
-    #[inline]
-    pub(crate) fn from_center_radius(center: Vec3, radius: f32) -> Self {
-        let (c, r) = (Vec3A::from(center), Vec3A::splat(radius));
-        PrimBox {
-            min: c - r,
-            max: c + r,
-        }
-    }
-
-    /// True if `other` lies inside `self`, as [`Aabb::contains`].
-    #[inline]
-    pub(crate) fn contains(&self, other: &PrimBox) -> bool {
-        (self.min.cmple(other.min) & other.max.cmple(self.max)).all()
-    }
-
-    /// `max - min` per axis.
-    #[inline]
-    pub(crate) fn extent(&self) -> Vec3A {
-        self.max - self.min
-    }
-
-    #[inline]
-    pub(crate) fn aabb(&self) -> Aabb {
-        Aabb::new(self.min.into(), self.max.into())
-    }
-
-    /// Closed overlap, as [`Aabb::overlaps`].
-    #[inline]
-    pub(crate) fn overlaps(&self, other: &PrimBox) -> bool {
-        (self.min.cmple(other.max) & other.min.cmple(self.max)).all()
-    }
-}
+/// A primitive's current box in SIMD lanes: the crate's one hot-loop box type.
+pub(crate) use crate::geom::SimdBox as PrimBox;
 
 /// Entries a traversal keeps inline before it spills to the heap. A tree of 2⁶⁰ leaves built
 /// balanced needs about one entry per level, so only degenerate deep trees spill.
