@@ -8,7 +8,7 @@
 //! cargo run --release --example falling_spheres -- --n 2000 --steps 300 --index bvh --verify
 //! ```
 
-use broadleaf::octree::Placement;
+use broadleaf::octree::{Octree, Placement};
 use broadleaf::sim::{DropConfig, IndexKind, World};
 use broadleaf::{Aabb, Pair, Vec3, brute};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -305,17 +305,26 @@ type SphereView = (Vec3, f32, u32);
 type CellView = (u32, Aabb);
 
 /// Each sphere as `(centre, radius, octree level)` and the occupied octree cells as
-/// `(level, cell box)`, straight from the broadphase's octree. With `--index bvh` the octree
-/// holds no sphere: every level is [`NO_LEVEL`] (drawn as BVH) and no cell is occupied.
+/// `(level, cell box)`: the picture files the spheres in a standalone [`Octree`] with the
+/// broadphase's bounds, depth and placement (the broadphase itself keeps a sorted grid).
 fn octree_view(world: &World) -> (Vec<SphereView>, Vec<CellView>) {
-    let octree = world.broadphase().octree();
+    let config = world.broadphase().config();
+    let octree =
+        Octree::with_placement(config.bounds, config.octree_depth, config.octree_placement);
+    let Ok(mut octree) = octree else {
+        return (Vec::new(), Vec::new());
+    };
     let spheres = world
-        .sphere_keys()
+        .positions()
         .iter()
-        .enumerate()
-        .map(|(i, &key)| {
-            let level = octree.level_of(key).unwrap_or(NO_LEVEL);
-            (world.positions()[i], world.radii()[i], level)
+        .zip(world.radii())
+        .map(|(&center, &radius)| {
+            let level = octree
+                .insert(center, radius)
+                .ok()
+                .and_then(|key| octree.level_of(key))
+                .unwrap_or(NO_LEVEL);
+            (center, radius, level)
         })
         .collect();
     let mut cells = Vec::new();

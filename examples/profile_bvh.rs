@@ -156,7 +156,7 @@ fn step(args: &Args) {
             ns.push(dt * 1e9 / objects);
         }
     }
-    let s = bp.dynamic_bvh().stats();
+    let s = bp.stats();
     println!(
         "step bodies n={} ({} objects) median {:.1} ns/object/step over {} steps; pairs {}",
         args.n,
@@ -166,8 +166,8 @@ fn step(args: &Args) {
         pairs
     );
     println!(
-        "dynamic bvh: nodes {} leaves {} depth {} cost ratio {:.3} rebuilds {} refits {}",
-        s.nodes, s.leaves, s.depth, s.cost_ratio, s.rebuilds, s.refits
+        "last step: {:?}, updated {}, enlarged {}, candidates {} (tested {})",
+        s.pass, s.updated, s.enlarged, s.candidates, s.candidates_tested
     );
 }
 

@@ -145,7 +145,7 @@ pub fn sort_dedup(pairs: &mut Vec<Pair>) {
 ///
 /// One merge pass: walk both lists in order; a pair smaller than the other list's head exists
 /// only on its own side, equal heads exist on both and advance together. O(|prev| + |cur|).
-pub fn diff(prev: &[Pair], cur: &[Pair], added: &mut Vec<Pair>, removed: &mut Vec<Pair>) {
+pub fn diff<T: Ord + Copy>(prev: &[T], cur: &[T], added: &mut Vec<T>, removed: &mut Vec<T>) {
     added.clear();
     removed.clear();
     let (mut i, mut j) = (0, 0);

@@ -16,15 +16,13 @@ const BOTH: [(Placement, f32); 4] = [
 ];
 
 fn broadphase(depth: u32, (placement, skin): (Placement, f32)) -> BroadPhase {
-    let bp = BroadPhase::new(Config {
+    BroadPhase::new(Config {
         bounds: Aabb::new(Vec3::splat(-10.0), Vec3::splat(10.0)),
         octree_depth: depth,
         octree_placement: placement,
         skin,
         ..Config::default()
-    });
-    assert_eq!(bp.octree().placement(), placement);
-    bp
+    })
 }
 
 fn check(bp: &mut BroadPhase) -> Vec<Pair> {
@@ -59,7 +57,6 @@ fn far_away_spheres_are_kept_and_paired() {
                 pairs.contains(&Pair::new(a, b)),
                 "touching far spheres pair"
             );
-            assert!(bp.octree().stats().overflow >= 4);
             // Moving between far away and inside keeps them paired correctly.
             bp.update_sphere(a, Vec3::ZERO, 1.0).unwrap();
             bp.update_sphere(b, Vec3::new(0.0, 2.0, 0.0), 1.0).unwrap();
@@ -124,9 +121,6 @@ fn ten_thousand_spheres_at_one_point_report_every_pair() {
                 .iter()
                 .all(|p| sorted.binary_search(&p.a).is_ok() && sorted.binary_search(&p.b).is_ok())
         );
-        // The pass tests each pair about once: no blow-up beyond the pairs themselves.
-        let tests = bp.octree().stats().aabb_tests;
-        assert!(tests <= 2 * (N * N) as u64, "{tests} AABB tests");
     }
 }
 

@@ -90,7 +90,6 @@ fn check_step(bp: &mut BroadPhase, model: &[(ProxyKey, Shape)], prev: &[Pair]) -
 
 fn run(depth: u32, margin: f32, placement: Placement, skin: f32, ops: &[Op]) {
     let mut bp = BroadPhase::try_new(config(depth, margin, placement, skin)).unwrap();
-    assert_eq!(bp.octree().placement(), placement);
     let mut model: Vec<(ProxyKey, Shape)> = Vec::new();
     let mut prev = Vec::new();
     for op in ops {

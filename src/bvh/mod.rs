@@ -241,6 +241,7 @@ impl Bvh {
 
     /// [`Bvh::insert`] under a key minted by the caller (`BroadPhase`). A key already live in
     /// this tree is refused with `UnknownProxy` (it names no new proxy).
+    #[cfg(test)]
     pub(crate) fn insert_keyed(&mut self, key: ProxyKey, aabb: Aabb) -> Result<(), Error> {
         check_aabb(&aabb)?;
         self.check_room()?;

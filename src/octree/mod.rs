@@ -196,6 +196,7 @@ impl Octree {
     /// Inserts a sphere under a key minted by the caller (the `BroadPhase` owns the key
     /// space). Same checks as [`Octree::insert`]; a key that is already live is updated
     /// instead. A tree fed through this function must not also mint keys with `insert`.
+    #[cfg(test)]
     pub(crate) fn insert_keyed(
         &mut self,
         key: ProxyKey,

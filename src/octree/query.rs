@@ -186,26 +186,6 @@ impl Octree {
         );
     }
 
-    /// [`Octree::cast_ray_all`] against the spheres' boxes instead of the balls (`t` is where
-    /// the segment enters the box): for callers that hold a shape inside each box and re-test
-    /// it themselves.
-    pub(crate) fn cast_ray_all_boxes(
-        &self,
-        origin: Vec3,
-        dir: Vec3,
-        max_t: f32,
-        mut f: impl FnMut(ProxyKey, f32),
-    ) {
-        let inv = geom::inverse_dir(dir);
-        self.cast_ray_all_with(
-            origin,
-            dir,
-            max_t,
-            |c, r| Aabb::from_center_radius(c, r).ray_entry(origin, inv, max_t),
-            &mut f,
-        );
-    }
-
     /// Calls `f(key, t)` for every sphere `(c, r)` of a cell the segment enters for which
     /// `hit(c, r)` gives a `t`.
     fn cast_ray_all_with(

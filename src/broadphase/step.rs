@@ -1,0 +1,423 @@
+//! One step: which pass runs, and the passes.
+//!
+//! The **full pass** sorts every exact box into the grid and sweeps it: its cost follows the
+//! number of proxies. The **incremental pass** needs the grid to hold *fat* boxes (each exact
+//! box grown by a margin that follows how far that proxy moves per step) and the sorted list of
+//! *candidates*, the pairs of overlapping fat boxes. Since an exact box lies in its fat box,
+//! every overlapping pair is a candidate. A step then
+//! 1. drops the candidates of proxies that were removed or left their fat box ("escaped"),
+//! 2. queries the grid with each escaped proxy's new fat box for its new candidates (entries
+//!    off their column since the last build — "dirty" — are swept among themselves instead),
+//! 3. merges old and new candidates in one pass, re-testing the exact boxes of those that name
+//!    a proxy updated this step and keeping the others' last outcome.
+//!
+//! Its cost follows what moved. Each step estimates both costs from what it is about to do
+//! (movers, escapes, candidates, dirty entries) and runs the cheaper pass, so the cost never
+//! jumps when a world wakes up or settles. Dirty entries cost a little every step until the
+//! grid is sorted again; that is done once their accumulated cost passes a build's.
+
+use super::grid::DEAD;
+use super::radix::{bits_of, sort_u64};
+use super::*;
+use crate::sweep;
+
+/// Set on a candidate whose exact boxes overlapped at the last step.
+pub(super) const HIT: u64 = 1 << 63;
+
+/// Estimated costs, in nanoseconds per unit of work on the machine the defaults were measured
+/// on; only their ratios matter.
+mod cost {
+    /// The full pass, per proxy (sort, sweep, pair sort, lists).
+    pub(super) const FULL: f64 = 45.0;
+    /// Carrying one candidate through the merge without testing it.
+    pub(super) const CARRY: f64 = 1.5;
+    /// Re-testing one candidate's exact boxes.
+    pub(super) const TEST: f64 = 4.0;
+    /// One escaped proxy's grid query.
+    pub(super) const QUERY: f64 = 400.0;
+    /// One dirty entry, per step, in the dirty sweep.
+    pub(super) const DIRTY: f64 = 25.0;
+    /// Re-sorting the grid, per proxy.
+    pub(super) const RESORT: f64 = 25.0;
+}
+
+/// The incremental regime is entered when its estimated cost is below this fraction of the
+/// full pass: the margin pays for the rebuild that enters it.
+const ENTER_FRACTION: f64 = 0.5;
+
+/// A proxy's fat margin covers this many steps of its last measured motion.
+const LOOKAHEAD_STEPS: f32 = 3.0;
+/// The smallest fat margin, as a fraction of the box's largest extent: resting proxies keep a
+/// box this much larger than exact, so jitter does not make them escape.
+const MIN_MARGIN: f32 = 1.0 / 64.0;
+/// The largest fat margin, as a fraction of the box's largest extent: a teleport must not
+/// leave a huge fat box behind.
+const MAX_MARGIN: f32 = 0.5;
+
+/// The fat margin of a box of largest extent `size` moving `speed` metres per step.
+#[inline]
+pub(super) fn margin(speed: f32, size: f32) -> f32 {
+    (speed * LOOKAHEAD_STEPS)
+        .min(size * MAX_MARGIN)
+        .max(size * MIN_MARGIN)
+}
+
+/// The packed pair of two distinct slots: the smaller in the high half.
+#[inline]
+pub(super) fn pack(a: u32, b: u32) -> u64 {
+    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+    (u64::from(lo) << 32) | u64::from(hi)
+}
+
+#[inline]
+fn unpack(p: u64) -> (usize, usize) {
+    (((p >> 32) as u32 & !(1 << 31)) as usize, p as u32 as usize)
+}
+
+/// What a step will do.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Plan {
+    Unchanged,
+    Full,
+    Rebuild,
+    Incremental,
+}
+
+/// What the cost estimates learn from the steps they watch.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Costs {
+    /// Escapes per mover in recent incremental steps (a running average).
+    escape_rate: f64,
+    /// Candidates per proxy at the last count.
+    cand_per_proxy: f64,
+    /// Cost spent on dirty entries since the grid was last sorted.
+    dirty_spent: f64,
+}
+
+impl Default for Costs {
+    fn default() -> Self {
+        Costs {
+            escape_rate: 0.25,
+            cand_per_proxy: 3.0,
+            dirty_spent: 0.0,
+        }
+    }
+}
+
+impl BroadPhase {
+    /// Chooses the pass from the work at hand.
+    pub(super) fn plan(&self) -> Plan {
+        let movers = self.movers.len();
+        if movers == 0 && self.removals == 0 {
+            return Plan::Unchanged;
+        }
+        let n = self.store.len() as f64;
+        let full = n * cost::FULL;
+        if self.cached {
+            let inc = self.incremental_cost(movers as f64, self.escaped.len() as f64);
+            if inc > full {
+                Plan::Full
+            } else {
+                Plan::Incremental
+            }
+        } else {
+            let escapes = movers as f64 * self.costs.escape_rate;
+            let inc = self.incremental_cost(movers as f64, escapes);
+            if inc < full * ENTER_FRACTION {
+                Plan::Rebuild
+            } else {
+                Plan::Full
+            }
+        }
+    }
+
+    /// The estimated cost of an incremental step with `movers` updated and `escapes` escaped.
+    fn incremental_cost(&self, movers: f64, escapes: f64) -> f64 {
+        let cands = if self.cached {
+            self.cand.len() as f64
+        } else {
+            self.store.len() as f64 * self.costs.cand_per_proxy
+        };
+        cands * cost::CARRY
+            + movers * self.costs.cand_per_proxy * 2.0 * cost::TEST
+            + escapes * cost::QUERY
+            + self.dirty.len() as f64 * cost::DIRTY
+    }
+
+    /// Runs `plan`, then clears the step's marks.
+    pub(super) fn run(&mut self, plan: Plan) {
+        let updated = self.movers.len() + self.removals;
+        let enlarged = self.escaped.len();
+        self.stats = StepStats {
+            pass: match plan {
+                Plan::Unchanged => Pass::Unchanged,
+                Plan::Full => Pass::Full,
+                Plan::Rebuild => Pass::Rebuild,
+                Plan::Incremental => Pass::Incremental,
+            },
+            updated,
+            enlarged: if self.cached { enlarged } else { 0 },
+            ..StepStats::default()
+        };
+        match plan {
+            Plan::Unchanged => {
+                self.added.clear();
+                self.removed.clear();
+            }
+            Plan::Full => self.full(false),
+            Plan::Rebuild => self.full(true),
+            Plan::Incremental => {
+                self.incremental();
+                let n = self.store.len() as f64;
+                if self.costs.dirty_spent > n * cost::RESORT {
+                    self.resort();
+                }
+            }
+        }
+        self.stats.pairs = self.pairs.len();
+        self.stats.candidates = if self.cached { self.cand.len() } else { 0 };
+        for &s in &self.movers {
+            self.store.flags[s as usize] &= !(flag::MOVED | flag::ESCAPED);
+        }
+        self.movers.clear();
+        self.escaped.clear();
+        self.removals = 0;
+        self.store.release_quarantine();
+        self.keep_headroom();
+    }
+
+    /// Grows the lists whose length swings from step to step ahead of their peaks, so that a
+    /// world in steady state stops allocating after its first few swings.
+    fn keep_headroom(&mut self) {
+        fn ahead<T>(v: &mut Vec<T>) {
+            let want = v.len() + v.len() / 2;
+            if v.capacity() < v.len() + v.len() / 4 {
+                v.reserve(want - v.len());
+            }
+        }
+        ahead(&mut self.cand);
+        ahead(&mut self.next);
+        ahead(&mut self.fresh);
+        ahead(&mut self.packed);
+        ahead(&mut self.prev_packed);
+        ahead(&mut self.pairs);
+        ahead(&mut self.dirty);
+        ahead(&mut self.dirty_boxes);
+        ahead(&mut self.dirty_sorted);
+        let n = self.store.len();
+        for v in [&mut self.added_packed, &mut self.removed_packed] {
+            if v.capacity() < n / 8 {
+                v.reserve(n / 8);
+            }
+        }
+        for v in [&mut self.added, &mut self.removed] {
+            if v.capacity() < n / 8 {
+                v.reserve(n / 8);
+            }
+        }
+    }
+
+    /// The full pass: every box sorted into the grid and swept. With `fat`, the boxes are
+    /// first replaced by fat ones and the pairs found are the new candidate list.
+    fn full(&mut self, fat: bool) {
+        core::mem::swap(&mut self.prev_packed, &mut self.packed);
+        if self.cached || fat {
+            for i in 0..self.grid.len() {
+                let w = self.grid.slots[i];
+                if w == DEAD {
+                    continue;
+                }
+                let s = w & !STATIC_BIT;
+                let exact = self.store.exact[s as usize];
+                self.grid.boxes[i] = if fat { self.fat_box(s, &exact) } else { exact };
+            }
+        }
+        self.grid.build(&mut self.store.pos);
+        self.clear_dirty();
+        let fresh = &mut self.fresh;
+        fresh.clear();
+        self.grid.for_each_pair(|a, b| {
+            if a & b & STATIC_BIT == 0 {
+                fresh.push(pack(a & !STATIC_BIT, b & !STATIC_BIT));
+            }
+        });
+        let bits = 32 + bits_of(self.store.slots() as u64);
+        sort_u64(&mut self.fresh, &mut self.sort_buf, bits);
+        self.packed.clear();
+        if fat {
+            self.cand.clear();
+            let exact = &self.store.exact;
+            for &c in &self.fresh {
+                let (a, b) = unpack(c);
+                let hit = exact[a].overlaps(&exact[b]);
+                self.cand.push(c | if hit { HIT } else { 0 });
+                if hit {
+                    self.packed.push(c);
+                }
+            }
+            self.stats.candidates_tested = self.fresh.len();
+            let n = self.store.len().max(1) as f64;
+            self.costs.cand_per_proxy = self.cand.len() as f64 / n;
+            self.cached = true;
+        } else {
+            core::mem::swap(&mut self.packed, &mut self.fresh);
+            self.cand.clear();
+            self.cached = false;
+        }
+        self.emit();
+    }
+
+    /// Re-sorts the grid with the fat boxes it holds (candidates stay valid): no more dirty
+    /// entries.
+    fn resort(&mut self) {
+        self.grid.build(&mut self.store.pos);
+        self.clear_dirty();
+    }
+
+    fn clear_dirty(&mut self) {
+        for &s in &self.dirty {
+            self.store.flags[s as usize] &= !flag::DIRTY;
+        }
+        self.dirty.clear();
+        self.costs.dirty_spent = 0.0;
+    }
+
+    /// The incremental pass (see the module docs).
+    fn incremental(&mut self) {
+        core::mem::swap(&mut self.prev_packed, &mut self.packed);
+        self.fresh.clear();
+        self.query_escaped();
+        self.sweep_dirty();
+        let bits = 32 + bits_of(self.store.slots() as u64);
+        sort_u64(&mut self.fresh, &mut self.sort_buf, bits);
+        self.merge_candidates();
+        let movers = self.movers.len().max(1) as f64;
+        let rate = self.escaped.len() as f64 / movers;
+        self.costs.escape_rate = 0.75 * self.costs.escape_rate + 0.25 * rate;
+        self.emit();
+    }
+
+    /// New candidates of each escaped proxy with the built, clean entries of the grid.
+    fn query_escaped(&mut self) {
+        let (store, grid, fresh) = (&self.store, &self.grid, &mut self.fresh);
+        for &e in &self.escaped {
+            let es = e as usize;
+            if store.flags[es] & flag::GONE != 0 {
+                continue;
+            }
+            let fat = grid.boxes[store.pos[es] as usize];
+            let statics = if store.kind[es] == Kind::Static {
+                STATIC_BIT
+            } else {
+                0
+            };
+            grid.query(&fat, |w| {
+                let s = w & !STATIC_BIT;
+                if s != e && store.flags[s as usize] & flag::DIRTY == 0 && w & statics == 0 {
+                    fresh.push(pack(e, s));
+                }
+            });
+        }
+    }
+
+    /// New candidates among the dirty entries (each pair with at least one escaped side).
+    fn sweep_dirty(&mut self) {
+        let (store, grid) = (&self.store, &self.grid);
+        self.dirty_boxes.clear();
+        for &d in &self.dirty {
+            let ds = d as usize;
+            if store.flags[ds] & flag::GONE == 0 {
+                let b = grid.boxes[store.pos[ds] as usize];
+                self.dirty_boxes.push((b.min.x, d));
+            }
+        }
+        self.costs.dirty_spent += self.dirty_boxes.len() as f64 * cost::DIRTY;
+        if self.escaped.is_empty() {
+            return;
+        }
+        self.dirty_boxes
+            .sort_unstable_by(|p, q| p.0.total_cmp(&q.0).then(p.1.cmp(&q.1)));
+        self.dirty_sorted.clear();
+        self.dirty_sorted.extend(
+            self.dirty_boxes
+                .iter()
+                .map(|&(_, d)| grid.boxes[store.pos[d as usize] as usize]),
+        );
+        let (boxes, fresh) = (&self.dirty_boxes, &mut self.fresh);
+        sweep::self_pairs::<0>(&self.dirty_sorted, |i, j| {
+            let (a, b) = (boxes[i].1 as usize, boxes[j].1 as usize);
+            let escaped = (store.flags[a] | store.flags[b]) & flag::ESCAPED != 0;
+            let both_static = store.kind[a] == Kind::Static && store.kind[b] == Kind::Static;
+            if escaped && !both_static {
+                fresh.push(pack(a as u32, b as u32));
+            }
+        });
+    }
+
+    /// One pass over the old candidates (minus those of escaped or removed proxies) and the
+    /// new ones, re-testing what moved; writes the candidates and this step's pairs.
+    fn merge_candidates(&mut self) {
+        let (flags, exact) = (&self.store.flags, &self.store.exact);
+        let (next, packed) = (&mut self.next, &mut self.packed);
+        next.clear();
+        packed.clear();
+        let mut tested = 0;
+        let mut emit = |c: u64| {
+            let key = c & !HIT;
+            let (a, b) = unpack(key);
+            let hit = if (flags[a] | flags[b]) & (flag::MOVED | flag::ESCAPED) != 0 {
+                tested += 1;
+                exact[a].overlaps(&exact[b])
+            } else {
+                c & HIT != 0
+            };
+            next.push(key | if hit { HIT } else { 0 });
+            if hit {
+                packed.push(key);
+            }
+        };
+        let drop = flag::ESCAPED | flag::GONE;
+        let (old, new) = (&self.cand, &self.fresh);
+        let mut j = 0;
+        for &c in old {
+            let (a, b) = unpack(c & !HIT);
+            if (flags[a] | flags[b]) & drop != 0 {
+                continue;
+            }
+            while j < new.len() && new[j] < c & !HIT {
+                emit(new[j]);
+                j += 1;
+            }
+            emit(c);
+        }
+        for &c in &new[j..] {
+            emit(c);
+        }
+        core::mem::swap(&mut self.cand, &mut self.next);
+        self.stats.candidates_tested = tested;
+    }
+
+    /// `added` / `removed` from the packed lists, and the three key lists.
+    fn emit(&mut self) {
+        crate::pair::diff(
+            &self.prev_packed,
+            &self.packed,
+            &mut self.added_packed,
+            &mut self.removed_packed,
+        );
+        let store = &self.store;
+        let to_pair = |&p: &u64| {
+            let (a, b) = unpack(p);
+            Pair {
+                a: store.key(a as u32),
+                b: store.key(b as u32),
+            }
+        };
+        self.pairs.clear();
+        self.pairs.extend(self.packed.iter().map(to_pair));
+        self.added.clear();
+        self.added.extend(self.added_packed.iter().map(to_pair));
+        self.removed.clear();
+        self.removed.extend(self.removed_packed.iter().map(to_pair));
+    }
+}

@@ -1,0 +1,178 @@
+//! Dense proxy storage: one slot per proxy, structure-of-arrays, with the slotmap-compatible
+//! keys made and checked here, at the API boundary, and nowhere else.
+//!
+//! A slot's version is odd while it is live and even while it is free (slotmap's rule, so a
+//! key is `KeyData::from_ffi(version << 32 | slot)`). A slot freed since the last step is
+//! quarantined until that step has reported its pairs as removed: the pair lists are kept as
+//! packed slot pairs, and a slot reused within the same step would make an old pair and a new
+//! one look alike.
+
+use super::{BodyKind, Shape};
+use crate::geom::SimdBox;
+use crate::pair::ProxyKey;
+use slotmap::{Key, KeyData};
+
+/// What a slot holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub(super) enum Kind {
+    Free,
+    Sphere,
+    Dynamic,
+    Static,
+}
+
+/// Per-slot flags of the current step, one byte.
+pub(super) mod flag {
+    /// Updated since the last step (its exact box must be re-tested against its candidates).
+    pub(crate) const MOVED: u8 = 1;
+    /// Its grid entry is not where the last build put it (box changed, or inserted since):
+    /// queries test it from the dirty list instead of its column.
+    pub(crate) const DIRTY: u8 = 2;
+    /// Its fat box was replaced since the last step: its candidates are found again.
+    pub(crate) const ESCAPED: u8 = 4;
+    /// Removed: its candidates are dropped at the next step; the slot is not reused before.
+    pub(crate) const GONE: u8 = 8;
+}
+
+/// The highest slot index: slots are packed two to a `u64` pair with the top bit spare.
+pub(super) const MAX_SLOTS: u32 = 1 << 31;
+
+/// The proxies, by slot.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Store {
+    /// Odd while live, even while free. 4 bytes per slot.
+    pub(super) version: Vec<u32>,
+    /// 1 byte per slot.
+    pub(super) kind: Vec<Kind>,
+    /// `flag::*` bits. 1 byte per slot.
+    pub(super) flags: Vec<u8>,
+    /// The shape as the user gave it. 32 bytes per slot.
+    pub(super) shape: Vec<Shape>,
+    /// The box pairs are computed on: the shape's box grown by `Config::margin`. 32 bytes.
+    pub(super) exact: Vec<SimdBox>,
+    /// Index of the slot's entry in the grid's arrays. 4 bytes.
+    pub(super) pos: Vec<u32>,
+    /// Distance the box moved per step, as last measured (metres, largest axis): sizes the fat
+    /// margin. 4 bytes.
+    pub(super) speed: Vec<f32>,
+    /// The step at which the slot was last updated or got its fat box. 4 bytes.
+    pub(super) stamp: Vec<u32>,
+    /// Free slots ready for reuse.
+    free: Vec<u32>,
+    /// Slots freed since the last step: reusable once that step has reported their pairs.
+    quarantine: Vec<u32>,
+    live: usize,
+}
+
+impl Store {
+    /// Live proxies.
+    pub(super) fn len(&self) -> usize {
+        self.live
+    }
+
+    /// Slot count (live and free): the bound of every per-slot array.
+    pub(super) fn slots(&self) -> usize {
+        self.version.len()
+    }
+
+    /// The slot `key` names, if it names a live proxy here.
+    #[inline]
+    pub(super) fn resolve(&self, key: ProxyKey) -> Option<u32> {
+        let ffi = key.data().as_ffi();
+        let (slot, version) = (ffi as u32, (ffi >> 32) as u32);
+        match self.version.get(slot as usize) {
+            Some(&v) if v == version && v & 1 == 1 => Some(slot),
+            _ => None,
+        }
+    }
+
+    /// The key of a live slot, or of the proxy a quarantined slot held last.
+    #[inline]
+    pub(super) fn key(&self, slot: u32) -> ProxyKey {
+        let v = self.version[slot as usize];
+        let live = v | 1;
+        let version = if v & 1 == 1 { live } else { v - 1 };
+        ProxyKey::from(KeyData::from_ffi(
+            (u64::from(version) << 32) | u64::from(slot),
+        ))
+    }
+
+    /// Takes a slot for a new proxy, or `None` when every slot index is in use.
+    pub(super) fn alloc(&mut self, shape: Shape, exact: SimdBox, step: u32) -> Option<u32> {
+        let kind = match shape {
+            Shape::Sphere { .. } => Kind::Sphere,
+            Shape::Body {
+                kind: BodyKind::Dynamic,
+                ..
+            } => Kind::Dynamic,
+            Shape::Body {
+                kind: BodyKind::Static,
+                ..
+            } => Kind::Static,
+        };
+        let slot = match self.free.pop() {
+            Some(slot) => slot,
+            None => {
+                let slot = u32::try_from(self.version.len())
+                    .ok()
+                    .filter(|&s| s < MAX_SLOTS)?;
+                self.version.push(0);
+                self.kind.push(Kind::Free);
+                self.flags.push(0);
+                self.shape.push(shape);
+                self.exact.push(exact);
+                self.pos.push(u32::MAX);
+                self.speed.push(0.0);
+                self.stamp.push(step);
+                slot
+            }
+        };
+        let s = slot as usize;
+        self.version[s] += 1;
+        self.kind[s] = kind;
+        // A slot still on the dirty list stays listed (and is marked dirty again on insert).
+        self.flags[s] &= flag::DIRTY;
+        self.shape[s] = shape;
+        self.exact[s] = exact;
+        self.speed[s] = 0.0;
+        self.stamp[s] = step;
+        self.live += 1;
+        Some(slot)
+    }
+
+    /// Frees a live slot; it stays quarantined until [`Store::release_quarantine`].
+    pub(super) fn free(&mut self, slot: u32) {
+        let s = slot as usize;
+        self.version[s] += 1;
+        self.kind[s] = Kind::Free;
+        self.flags[s] = (self.flags[s] & flag::DIRTY) | flag::GONE;
+        self.pos[s] = u32::MAX;
+        self.live -= 1;
+        self.quarantine.push(slot);
+    }
+
+    /// After a step: the slots freed before it become reusable, except those whose version
+    /// space is spent (they are retired, as slotmap does).
+    pub(super) fn release_quarantine(&mut self) {
+        for slot in self.quarantine.drain(..) {
+            if self.version[slot as usize] < u32::MAX - 2 {
+                self.free.push(slot);
+            }
+        }
+    }
+
+    /// Heap bytes held (capacity, not length).
+    pub(super) fn heap_bytes(&self) -> usize {
+        let cap = |n: usize, one: usize| n * one;
+        cap(self.version.capacity(), 4)
+            + cap(self.kind.capacity(), 1)
+            + cap(self.flags.capacity(), 1)
+            + cap(self.shape.capacity(), core::mem::size_of::<Shape>())
+            + cap(self.exact.capacity(), 32)
+            + cap(self.pos.capacity(), 4)
+            + cap(self.speed.capacity(), 4)
+            + cap(self.stamp.capacity(), 4)
+            + cap(self.free.capacity() + self.quarantine.capacity(), 4)
+    }
+}
