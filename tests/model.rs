@@ -346,3 +346,44 @@ fn foreign_keys_include_live_and_unknown_ones() {
     }
     model.check_step(&mut bp, "after foreign keys");
 }
+
+/// A sphere's pair box is `center ± (radius + margin)` rounded once (the contract's
+/// `Shape::grown_aabb`), not the sphere's box grown by the margin, which rounds twice: two
+/// spheres placed where the two roundings disagree on whether their boxes touch pair exactly
+/// as the once-rounded boxes say.
+#[test]
+fn sphere_margin_box_rounds_once() {
+    let mut found = 0;
+    for (i, m) in (1..600).flat_map(|i| [(i, 0.1f32), (i, 0.3), (i, 0.07)]) {
+        let r = i as f32 * 0.0137;
+        let reach = r + m;
+        // Centres `d` apart, a few ulps around the exact touch of the once-rounded boxes.
+        let mut d = (2.0 * reach).next_down().next_down().next_down();
+        for _ in 0..7 {
+            d = d.next_up();
+            let once = reach >= d - reach;
+            let twice = reach >= (d - r) - m;
+            if once == twice {
+                continue;
+            }
+            found += 1;
+            let mut bp = BroadPhase::new(Config {
+                margin: m,
+                ..Config::default()
+            });
+            let mut model = Model::new(m);
+            let sphere = |x: f32| ModelShape::Sphere {
+                center: Vec3::new(x, 0.0, 0.0),
+                radius: r,
+            };
+            model.insert(&mut bp, sphere(0.0));
+            model.insert(&mut bp, sphere(d));
+            let want = model.check_step(&mut bp, &format!("r {r}, margin {m}, d {d}"));
+            assert_eq!(want.pairs.len(), usize::from(once));
+        }
+    }
+    assert!(
+        found >= 20,
+        "only {found} spheres where the roundings disagree"
+    );
+}
