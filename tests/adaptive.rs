@@ -22,7 +22,8 @@ enum Role {
     Nudged,
     /// Moves by its velocity every step (1–5 cm), bouncing at the region's walls.
     Steady(Vec3),
-    /// Rests, and once in a while jumps anywhere (sometimes far outside `Config::bounds`).
+    /// Rests, and once in a while jumps anywhere (sometimes far outside `Config::bounds`, now
+    /// and then 1e30 m away).
     Teleporter,
     /// Rests for `period` steps, then moves 10 cm a step for three steps.
     Sleeper(usize),
@@ -74,12 +75,12 @@ fn next(rng: &mut Rng, step: usize, shape: &ModelShape, role: &mut Role) -> Opti
             Some(shape.moved(*v))
         }
         Role::Teleporter => rng.chance(0.05).then(|| {
-            let to = if rng.chance(0.2) {
-                Vec3::new(600.0, rng.range(-900.0, 900.0), -700.0)
-            } else {
-                rng.offset(REGION)
+            let to = match rng.below(20) {
+                0..=2 => Vec3::new(600.0, rng.range(-900.0, 900.0), -700.0),
+                3 => Vec3::new(-1e30, rng.range(-1.0, 1.0), 1e30),
+                _ => rng.offset(REGION),
             };
-            shape.moved(to - shape.center())
+            shape.teleported(to)
         }),
         Role::Sleeper(period) => {
             (step % *period < 3).then(|| shape.moved(Vec3::new(0.1, -0.05, 0.02)))

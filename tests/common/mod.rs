@@ -145,11 +145,22 @@ impl ModelShape {
         }
     }
 
-    /// This shape's centre.
+    /// This shape's centre (finite for any finite box).
     pub fn center(&self) -> Vec3 {
         match *self {
             Self::Sphere { center, .. } => center,
-            Self::Body { aabb, .. } => (aabb.min + aabb.max) * 0.5,
+            Self::Body { aabb, .. } => aabb.min * 0.5 + aabb.max * 0.5,
+        }
+    }
+
+    /// This shape with its centre at `to` (size and kind kept): a teleport that stays finite
+    /// from and to any finite place.
+    pub fn teleported(&self, to: Vec3) -> Self {
+        match *self {
+            Self::Sphere { radius, .. } => Self::Sphere { center: to, radius },
+            Self::Body { aabb, is_static } => {
+                Self::body(to, aabb.max * 0.5 - aabb.min * 0.5, is_static)
+            }
         }
     }
 
