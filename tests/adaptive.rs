@@ -136,7 +136,7 @@ fn resting_world(config: Config, n: usize, steps: usize, seed: u64) {
         let want = model.check_step(&mut bp, &format!("step {step}"));
         pairs_seen += want.pairs.len();
     }
-    // Not a vacuous world: a few pairs per proxy.
+    // Not a vacuous world: on average more than one pair per two proxies each step.
     assert!(
         pairs_seen > steps * n / 2,
         "{pairs_seen} pairs in {steps} steps"
