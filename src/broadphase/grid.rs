@@ -35,6 +35,8 @@ const MAX_CELLS: f32 = 32_768.0;
 const SAMPLES: usize = 1024;
 /// The fraction of sampled boxes that must fit the cell: the rest are large.
 const FIT_QUANTILE: f32 = 0.97;
+/// A ray piece's box is widened by this fraction of its coordinates against rounding.
+const RAY_SLACK: f32 = 1e-5;
 /// Dense column tables larger than this many columns per entry use a comparison sort.
 const MAX_COLUMNS_PER_ENTRY: usize = 4;
 
@@ -114,11 +116,13 @@ impl Frame {
         let (u, v) = self.uv();
         let ext = b.max - b.min;
         let fits = ext.max_element() <= FIT * self.cell;
-        let qu = (b.min[u] - self.origin_u) * self.inv_cell;
-        let qv = (b.min[v] - self.origin_v) * self.inv_cell;
-        // `!(x > y)` rather than `x <= y` keeps NaN-free infinities out as well.
-        let near = qu.abs() < MAX_CELLS && qv.abs() < MAX_CELLS;
-        (fits && near).then(|| (qu.floor() as i32, qv.floor() as i32))
+        // Shifted to be positive, truncation is the floor (and needs no libm call); the
+        // shift's rounding is far inside the slack `FIT` leaves.
+        let qu = (b.min[u] - self.origin_u) * self.inv_cell + MAX_CELLS;
+        let qv = (b.min[v] - self.origin_v) * self.inv_cell + MAX_CELLS;
+        let near = (0.0..2.0 * MAX_CELLS).contains(&qu) && (0.0..2.0 * MAX_CELLS).contains(&qv);
+        let shift = MAX_CELLS as i32;
+        (fits && near).then(|| (qu as i32 - shift, qv as i32 - shift))
     }
 
     /// The dense key of column `(cu, cv)`; `None` outside the occupied range and its border.
@@ -584,9 +588,13 @@ impl Grid {
         }
     }
 
-    /// Calls `visit(slot_word)` for every built entry whose box the ray may hit, in roughly
-    /// increasing distance; `visit` returns the closest hit so far (or `max_t`), and the walk
-    /// stops once nothing nearer can follow.
+    /// Calls `visit(slot_word)` for built entries whose box the ray may hit, in roughly
+    /// increasing distance (an entry may be visited more than once); `visit` returns the
+    /// closest hit so far, and the walk stops once nothing nearer can follow.
+    ///
+    /// The ray is cut into pieces of at most one cell on every axis, and each piece's box
+    /// queries the columns like any box query (with the same widening), so no column the ray
+    /// passes is missed at a cell boundary.
     pub(super) fn ray_candidates(
         &self,
         origin: Vec3A,
@@ -600,36 +608,66 @@ impl Grid {
                 best = best.min(visit(self.slots[i]));
             }
         }
-        if self.cols.is_empty() {
+        let Some((t0, t1)) = self.clip_ray(origin, dir, max_t) else {
             return;
-        }
-        let mut walk = ColumnWalk::new(&self.frame, origin, dir, best);
-        let mut recent = [u32::MAX; 8];
-        let mut r = 0;
-        while let Some((cu, cv, t_enter)) = walk.next() {
-            if t_enter > best {
+        };
+        let dt = self.frame.cell / dir.abs().max_element();
+        let mut k = 0u32;
+        loop {
+            let ta = t0 + dt * k as f32;
+            if ta.partial_cmp(&t1.min(best)).is_none_or(|o| o.is_gt()) {
                 break;
             }
-            for (du, dv) in [(0, 0), (-1, 0), (0, -1), (-1, -1)] {
-                let Some(key) = self.frame.key(cu + du, cv + dv) else {
-                    continue;
-                };
-                if recent.contains(&key) {
-                    continue;
+            let tb = (t0 + dt * (k + 1) as f32).min(t1).min(best);
+            let (p0, p1) = (origin + dir * ta, origin + dir * tb);
+            let slack = Vec3A::splat(RAY_SLACK) * p0.abs().max(p1.abs()).max(Vec3A::ONE);
+            let piece = SimdBox {
+                min: p0.min(p1) - slack,
+                max: p0.max(p1) + slack,
+            };
+            let mut test = |i: usize| {
+                if ray_box(origin, dir, &self.boxes[i], best).is_some() {
+                    best = best.min(visit(self.slots[i]));
                 }
-                recent[r % recent.len()] = key;
-                r += 1;
-                let Ok(c) = self.cols.binary_search(&key) else {
-                    continue;
-                };
-                for i in self.column_range(c) {
-                    if ray_box(origin, dir, &self.boxes[i], best).is_some() {
-                        best = best.min(visit(self.slots[i]));
-                    }
-                }
+            };
+            match self.frame.axis {
+                0 => self.visit_columns::<0>(&piece, &mut test),
+                1 => self.visit_columns::<1>(&piece, &mut test),
+                _ => self.visit_columns::<2>(&piece, &mut test),
             }
-            walk.limit(best);
+            if tb >= t1 || k == u32::MAX {
+                break;
+            }
+            k += 1;
         }
+    }
+
+    /// The parameter range in which the ray is over the occupied columns (two cells of slack
+    /// on each side: boxes reach a cell past their column), or `None` if it never is.
+    fn clip_ray(&self, origin: Vec3A, dir: Vec3A, max_t: f32) -> Option<(f32, f32)> {
+        if self.cols.is_empty() {
+            return None;
+        }
+        let fr = &self.frame;
+        let (u, v) = fr.uv();
+        let (mut t0, mut t1) = (0.0f32, max_t);
+        for (a, o, base, span) in [
+            (u, fr.origin_u, fr.base_u, fr.rows),
+            (v, fr.origin_v, fr.base_v, fr.width),
+        ] {
+            let lo = o + (base as f32 - 2.0) * fr.cell;
+            let hi = o + (base as f32 + span as f32 + 2.0) * fr.cell;
+            if dir[a] == 0.0 {
+                if !(lo..=hi).contains(&origin[a]) {
+                    return None;
+                }
+            } else {
+                let (a0, a1) = ((lo - origin[a]) / dir[a], (hi - origin[a]) / dir[a]);
+                t0 = t0.max(a0.min(a1));
+                t1 = t1.min(a0.max(a1));
+            }
+        }
+        (t0 <= t1).then_some((t0, t1))
     }
 
     /// Checks the built part: columns sorted and disjoint, entries in the column their box
@@ -711,95 +749,4 @@ pub(super) fn ray_box(origin: Vec3A, dir: Vec3A, b: &SimdBox, max_t: f32) -> Opt
         }
     }
     (lo <= hi).then_some(lo)
-}
-
-/// A 2-D walk over the columns a ray passes, in order of entry parameter (Amanatides–Woo).
-struct ColumnWalk {
-    cell: (i32, i32),
-    step: (i32, i32),
-    next_t: (f32, f32),
-    delta: (f32, f32),
-    t: f32,
-    end: f32,
-    done: bool,
-}
-
-impl ColumnWalk {
-    fn new(frame: &Frame, origin: Vec3A, dir: Vec3A, max_t: f32) -> Self {
-        let (u, v) = frame.uv();
-        let pos = |a: usize, o: f32, t: f32| (origin[a] + dir[a] * t - o) * frame.inv_cell;
-        // Start where the ray enters the occupied area (plus its border), if it starts outside.
-        let lo_u = (frame.base_u) as f32;
-        let hi_u = (frame.base_u + frame.rows as i32 + 2) as f32;
-        let lo_v = (frame.base_v) as f32;
-        let hi_v = (frame.base_v + frame.width as i32 + 1) as f32;
-        let mut t0 = 0.0f32;
-        let mut t1 = max_t;
-        for (a, o, lo, hi) in [
-            (u, frame.origin_u, lo_u, hi_u),
-            (v, frame.origin_v, lo_v, hi_v),
-        ] {
-            let p = (origin[a] - o) * frame.inv_cell;
-            let d = dir[a] * frame.inv_cell;
-            if d == 0.0 {
-                if p < lo || p > hi {
-                    t1 = -1.0;
-                }
-            } else {
-                let (a0, a1) = ((lo - p) / d, (hi - p) / d);
-                t0 = t0.max(a0.min(a1));
-                t1 = t1.min(a0.max(a1));
-            }
-        }
-        let done = t0.partial_cmp(&t1).is_none_or(|o| o.is_gt()) || !t0.is_finite();
-        let (pu, pv) = (pos(u, frame.origin_u, t0), pos(v, frame.origin_v, t0));
-        let axis = |p: f32, d: f32| -> (i32, i32, f32, f32) {
-            let c = p.floor();
-            let d = d * frame.inv_cell;
-            if d > 0.0 {
-                (c as i32, 1, t0 + (c + 1.0 - p) / d, 1.0 / d)
-            } else if d < 0.0 {
-                (c as i32, -1, t0 + (c - p) / d, -1.0 / d)
-            } else {
-                (c as i32, 0, f32::INFINITY, f32::INFINITY)
-            }
-        };
-        let (cu, su, nu, du) = axis(pu, dir[u]);
-        let (cv, sv, nv, dv) = axis(pv, dir[v]);
-        ColumnWalk {
-            cell: (cu, cv),
-            step: (su, sv),
-            next_t: (nu, nv),
-            delta: (du, dv),
-            t: t0,
-            end: t1,
-            done,
-        }
-    }
-
-    /// Stop past `t`.
-    fn limit(&mut self, t: f32) {
-        self.end = self.end.min(t);
-    }
-
-    /// The next cell and the parameter at which the ray enters it.
-    fn next(&mut self) -> Option<(i32, i32, f32)> {
-        if self.done || self.t > self.end {
-            return None;
-        }
-        let out = (self.cell.0, self.cell.1, self.t);
-        if self.next_t.0 <= self.next_t.1 {
-            self.t = self.next_t.0;
-            self.cell.0 = self.cell.0.saturating_add(self.step.0);
-            self.next_t.0 += self.delta.0;
-        } else {
-            self.t = self.next_t.1;
-            self.cell.1 = self.cell.1.saturating_add(self.step.1);
-            self.next_t.1 += self.delta.1;
-        }
-        if !self.t.is_finite() {
-            self.done = true;
-        }
-        Some(out)
-    }
 }

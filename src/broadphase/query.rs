@@ -20,7 +20,7 @@ impl BroadPhase {
         let (flags, exact) = (&self.store.flags, &self.store.exact);
         self.grid.query(&q, |w| {
             let s = (w & !STATIC_BIT) as usize;
-            if flags[s] & flag::DIRTY == 0 && exact[s].overlaps(&q) {
+            if flags[s] & (flag::DIRTY | flag::GONE) == 0 && exact[s].overlaps(&q) {
                 f(self.store.key(s as u32));
             }
         });
@@ -66,7 +66,7 @@ impl BroadPhase {
         let (o, d) = (Vec3A::from(origin), Vec3A::from(dir));
         self.grid.ray_candidates(o, d, max_t, |w| {
             let s = (w & !STATIC_BIT) as usize;
-            if flags[s] & flag::DIRTY == 0 {
+            if flags[s] & (flag::DIRTY | flag::GONE) == 0 {
                 test(s, &mut best);
             }
             best.map_or(max_t, |b| b.1)

@@ -313,7 +313,10 @@ impl BroadPhase {
             };
             grid.query(&fat, |w| {
                 let s = w & !STATIC_BIT;
-                if s != e && store.flags[s as usize] & flag::DIRTY == 0 && w & statics == 0 {
+                if s != e
+                    && store.flags[s as usize] & (flag::DIRTY | flag::GONE) == 0
+                    && w & statics == 0
+                {
                     fresh.push(pack(e, s));
                 }
             });

@@ -31,7 +31,8 @@ pub(super) mod flag {
     pub(crate) const DIRTY: u8 = 2;
     /// Its fat box was replaced since the last step: its candidates are found again.
     pub(crate) const ESCAPED: u8 = 4;
-    /// Removed: its candidates are dropped at the next step; the slot is not reused before.
+    /// Removed: its candidates are dropped at the next step, and its grid entry is skipped;
+    /// the slot is not reused before the next step.
     pub(crate) const GONE: u8 = 8;
 }
 
