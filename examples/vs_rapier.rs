@@ -39,7 +39,7 @@
 
 use broadleaf::rapier::{Comparison, SceneWorld, record_pile};
 use broadleaf::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Scene};
-use broadleaf::{BroadPhase, Config, Placement, brute};
+use broadleaf::{BroadPhase, Config, Passes, Placement, brute};
 use std::process::exit;
 use std::time::Instant;
 
@@ -59,6 +59,8 @@ struct Args {
     placement: Placement,
     /// `Config::skin`.
     skin: f32,
+    /// `Config::passes`.
+    passes: Passes,
     seed: u64,
     /// Several sizes of one scene instead of `n` (`--sizes 1000,10000,100000`).
     sizes: Vec<usize>,
@@ -70,7 +72,7 @@ struct Args {
 
 const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|all] [--n N] \
                      [--steps 30] [--warmup 5] [--index octree|bvh|auto] \
-                     [--placement strict|loose] [--skin 0] [--seed 1] \
+                     [--placement strict|loose] [--skin 0] [--passes adaptive|full|incremental] [--seed 1] \
                      [--sizes N1,N2,...] [--plot PATH.svg] [--interleave]";
 
 fn parse_args() -> Result<Args, String> {
@@ -82,6 +84,7 @@ fn parse_args() -> Result<Args, String> {
         index: Index::Auto,
         placement: Placement::Strict,
         skin: 0.0,
+        passes: Passes::Adaptive,
         seed: 1,
         sizes: Vec::new(),
         plot: None,
@@ -109,6 +112,14 @@ fn parse_args() -> Result<Args, String> {
                 args.sizes = value.split(',').map(number).collect::<Result<_, _>>()?;
             }
             "--plot" => args.plot = Some(value),
+            "--passes" => {
+                args.passes = match value.as_str() {
+                    "adaptive" => Passes::Adaptive,
+                    "full" => Passes::Full,
+                    "incremental" => Passes::Incremental,
+                    other => return Err(format!("--passes {other}: adaptive|full|incremental")),
+                };
+            }
             "--skin" => {
                 args.skin = value
                     .parse::<f32>()
@@ -164,13 +175,15 @@ struct Ours {
 }
 
 impl Ours {
-    fn new(bounds: broadleaf::Aabb, index: Index, placement: Placement, skin: f32) -> Self {
+    fn new(bounds: broadleaf::Aabb, index: Index, args: &Args) -> Self {
+        let placement = args.placement;
         Ours {
             bp: BroadPhase::new(Config {
                 bounds,
                 octree_depth: placement.depth_for(&bounds, GAS_RADIUS),
                 octree_placement: placement,
-                skin,
+                skin: args.skin,
+                passes: args.passes,
                 ..Config::default()
             }),
             feed: Feed::new(index == Index::Bvh),
@@ -198,7 +211,7 @@ struct Row {
 
 fn run(name: &str, n: usize, args: &Args) -> Row {
     let mut scene = make_scene(name, n, args.seed, args.warmup + args.steps).expect("known scene");
-    let mut ours = Ours::new(scene.bounds(), args.index, args.placement, args.skin);
+    let mut ours = Ours::new(scene.bounds(), args.index, args);
     let mut theirs = SceneWorld::new();
     let mut spawns = Vec::new();
     scene.spawns(&mut spawns);
@@ -263,6 +276,8 @@ fn run(name: &str, n: usize, args: &Args) -> Row {
             }
         }
     }
+    // On stderr, so the table stays as other tools read it: how the adaptive step went.
+    eprintln!("{name}: broadleaf's last step: {:?}", ours.bp.stats());
     // rapier detects the last frame's poses (and holds its inserts) in one more step.
     theirs.step();
     let (rapier_pairs, unmapped) = theirs.pairs(&ours.feed);

@@ -89,7 +89,7 @@ pub mod scene;
 pub mod sim;
 mod sweep;
 
-pub use broadphase::{BodyKind, BroadPhase, Config, Shape, StepPairs};
+pub use broadphase::{BodyKind, BroadPhase, Config, Pass, Passes, Shape, StepPairs, StepStats};
 pub use bvh::{Bvh, BvhConfig, SplitMethod};
 pub use error::{BatchError, Error};
 pub use geom::Aabb;

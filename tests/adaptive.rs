@@ -10,7 +10,7 @@
 
 mod common;
 
-use broadleaf::{Aabb, BroadPhase, Config, ProxyKey, Vec3};
+use broadleaf::{Aabb, BroadPhase, Config, Pass, Passes, ProxyKey, Vec3};
 use common::{Model, ModelShape, Rng};
 
 /// How a proxy of the resting world behaves.
@@ -207,6 +207,7 @@ fn rest_to_all_moving_and_back(config: Config) {
     }
     let phases = [(40, 0.0), (40, 1.0), (40, 0.01), (20, 1.0), (40, 0.0)];
     let mut step = 0;
+    let mut passes = Vec::new();
     for (steps, fraction) in phases {
         let moving = (movers.len() as f32 * fraction) as usize;
         for _ in 0..steps {
@@ -222,12 +223,27 @@ fn rest_to_all_moving_and_back(config: Config) {
             }
             let context = format!("step {step}, {fraction} moving");
             let want = model.check_step(&mut bp, &context);
+            passes.push(bp.stats().pass);
             assert!(want.pairs.len() > 1000, "{context}: too few pairs to test");
             if fraction == 0.0 && step % 40 > 0 {
                 assert!(want.added.is_empty() && want.removed.is_empty());
             }
             step += 1;
         }
+    }
+    // The default adapts: the resting and 1 % phases run the incremental pass, the all-moving
+    // phases the full one, and the switch happens both ways.
+    if config.passes == Passes::Adaptive && config.skin == 0.0 {
+        let switches = passes.windows(2).filter(|w| w[0] != w[1]).count();
+        assert!(
+            passes.contains(&Pass::Incremental),
+            "never incremental: {passes:?}"
+        );
+        assert!(
+            passes.contains(&Pass::Full),
+            "never the full pass: {passes:?}"
+        );
+        assert!(switches >= 4, "{switches} switches: {passes:?}");
     }
 }
 
@@ -379,5 +395,26 @@ fn repeated_updates_between_steps_only_the_last_counts() {
                 "{context}"
             );
         }
+    }
+}
+
+/// Each pass forced on its own gives the same exact lists: the incremental pass through
+/// bursts of all-moving steps, the full pass through the resting ones.
+#[test]
+fn each_pass_forced_equals_the_model_every_step() {
+    for passes in [Passes::Incremental, Passes::Full] {
+        rest_to_all_moving_and_back(Config {
+            passes,
+            ..Config::default()
+        });
+        resting_world(
+            Config {
+                passes,
+                ..Config::default()
+            },
+            2000,
+            60,
+            5,
+        );
     }
 }

@@ -33,8 +33,9 @@ const FIT: f32 = 0.875;
 const MAX_CELLS: f32 = 32_768.0;
 /// Boxes sampled to choose the axis and the cell size.
 const SAMPLES: usize = 1024;
-/// The fraction of sampled boxes that must fit the cell: the rest are large.
-const FIT_QUANTILE: f32 = 0.97;
+/// The fraction of sampled boxes that must fit the cell: the rest are large, and every query
+/// tests every large box, so they must stay few.
+const FIT_QUANTILE: f32 = 0.995;
 /// A ray piece's box is widened by this fraction of its coordinates against rounding.
 const RAY_SLACK: f32 = 1e-5;
 /// Dense column tables larger than this many columns per entry use a comparison sort.
@@ -58,8 +59,13 @@ pub(super) struct Grid {
     cols: Vec<u32>,
     /// Where each column's entries start; one more than `cols` (the end of the last).
     col_start: Vec<u32>,
+    /// Per dense key, its index in `cols` or `u32::MAX`; empty for sparse worlds (then
+    /// `cols` is searched).
+    col_of: Vec<u32>,
     /// The largest `max − min` on the sweep axis among the normal entries (f64: exact).
     reach: f64,
+    /// The same among the large entries (may be infinite).
+    large_reach: f64,
     /// Build scratch: each entry's dense column key.
     keys: Vec<u32>,
     /// Build scratch: the arrays being filled in sorted order.
@@ -136,15 +142,25 @@ impl Frame {
         Some((du as u32) * self.width + dv as u32)
     }
 
-    /// The column range (inclusive) a query box must visit on `u` and on `v`: columns whose
-    /// boxes can reach into it, widened by half a cell against rounding.
+    /// The column range (inclusive) a query box must visit on `u` and on `v`: the columns of
+    /// every fitting box that can overlap it. Such a box starts at most `FIT · cell` before
+    /// the query's `min`, so a full cell before it, mapped like the boxes were, is enough.
     fn reach_of(&self, q: &SimdBox) -> ((i32, i32), (i32, i32)) {
         let (u, v) = self.uv();
-        let lo = |x: f32, o: f32| ((x - o) * self.inv_cell - 1.5).floor() as i32;
-        let hi = |x: f32, o: f32| ((x - o) * self.inv_cell + 0.5).floor() as i32;
+        let map = |x: f32, o: f32| {
+            let q = ((x - o) * self.inv_cell + MAX_CELLS).clamp(0.0, 2.0 * MAX_CELLS - 1.0);
+            q as i32 - MAX_CELLS as i32
+        };
+        let c = self.cell;
         (
-            (lo(q.min[u], self.origin_u), hi(q.max[u], self.origin_u)),
-            (lo(q.min[v], self.origin_v), hi(q.max[v], self.origin_v)),
+            (
+                map(q.min[u] - c, self.origin_u),
+                map(q.max[u], self.origin_u),
+            ),
+            (
+                map(q.min[v] - c, self.origin_v),
+                map(q.max[v], self.origin_v),
+            ),
         )
     }
 }
@@ -164,6 +180,7 @@ impl Grid {
                 + self.keys.capacity()
                 + self.cols.capacity()
                 + self.col_start.capacity()
+                + self.col_of.capacity()
                 + self.counts.capacity()
                 + self.samples.capacity())
                 * 4
@@ -191,12 +208,13 @@ impl Grid {
     /// Sorts every live entry into its column, dropping dead ones, and writes each slot's new
     /// index to `pos`. The previous order seeds the sort, so a world that moved little since
     /// the last build is nearly sorted already.
-    pub(super) fn build(&mut self, pos: &mut [u32]) {
+    pub(super) fn build(&mut self, pos: Option<&mut [u32]>) {
         self.compact();
         self.choose_frame();
         let n = self.slots.len();
         let large = self.column_keys();
-        if self.dense_columns() <= (MAX_COLUMNS_PER_ENTRY * n).max(1 << 16) {
+        let dense = self.dense_columns() <= (MAX_COLUMNS_PER_ENTRY * n).max(1 << 16);
+        if dense {
             self.counting_sort(large);
         } else {
             self.comparison_sort(large);
@@ -208,8 +226,17 @@ impl Grid {
             1 => self.finish::<1>(),
             _ => self.finish::<2>(),
         }
-        for (i, &s) in self.slots.iter().enumerate() {
-            pos[(s & !STATIC_BIT) as usize] = i as u32;
+        if let Some(pos) = pos {
+            for (i, &s) in self.slots.iter().enumerate() {
+                pos[(s & !STATIC_BIT) as usize] = i as u32;
+            }
+        }
+        self.col_of.clear();
+        if dense {
+            self.col_of.resize(self.dense_columns(), u32::MAX);
+            for (c, &k) in self.cols.iter().enumerate() {
+                self.col_of[k as usize] = c as u32;
+            }
         }
     }
 
@@ -430,6 +457,10 @@ impl Grid {
         let (normal, sorted) = (self.normal, self.sorted);
         self.insertion_sort_or_sort::<A>(normal, sorted);
         self.reach = reach;
+        self.large_reach = self.boxes[normal..sorted]
+            .iter()
+            .map(|b| f64::from(b.max[A]) - f64::from(b.min[A]))
+            .fold(0.0, f64::max);
         self.mins.clear();
         self.mins.extend(self.boxes.iter().map(|b| b.min[A]));
     }
@@ -555,7 +586,18 @@ impl Grid {
             let (Some(lo), Some(hi)) = (f0.key(cu, v0), f0.key(cu, v1)) else {
                 continue;
             };
-            let mut c = self.cols.partition_point(|&k| k < lo);
+            let mut c = if self.col_of.is_empty() {
+                self.cols.partition_point(|&k| k < lo)
+            } else {
+                // The first occupied column at or after `lo` in this row, if any.
+                match (lo..=hi).find_map(|k| {
+                    let c = self.col_of[k as usize];
+                    (c != u32::MAX).then_some(c as usize)
+                }) {
+                    Some(c) => c,
+                    None => continue,
+                }
+            };
             while c < self.cols.len() && self.cols[c] <= hi {
                 let range = self.column_range(c);
                 let mins = &self.mins[range.clone()];
@@ -581,11 +623,52 @@ impl Grid {
             1 => self.visit_columns::<1>(q, |i| f(self.slots[i])),
             _ => self.visit_columns::<2>(q, |i| f(self.slots[i])),
         }
-        for i in self.normal..self.sorted {
+        // The large list is sorted by `min[A]`: only entries starting after `q.min[A]` minus
+        // the longest of them, and before `q.max[A]`, can overlap.
+        let large = &self.mins[self.normal..self.sorted];
+        let start = f64::from(q.min[self.frame.axis]) - self.large_reach;
+        let first = self.normal + large.partition_point(|&m| f64::from(m) < start);
+        for i in first..self.sorted {
+            if self.mins[i] > q.max[self.frame.axis] {
+                break;
+            }
             if self.boxes[i].overlaps(q) {
                 f(self.slots[i]);
             }
         }
+    }
+
+    /// Grows every buffer ahead of `n` entries (to half again as many) when it is close to
+    /// full, so that a grid refilled every step stops allocating once it has seen its peak.
+    pub(super) fn reserve_ahead(&mut self, n: usize) {
+        if self.boxes.capacity() >= n + n / 4 {
+            return;
+        }
+        let want = n + n / 2;
+        self.boxes.reserve(want.saturating_sub(self.boxes.len()));
+        self.slots.reserve(want.saturating_sub(self.slots.len()));
+        self.mins.reserve(want.saturating_sub(self.mins.len()));
+        self.keys.reserve(want.saturating_sub(self.keys.len()));
+        self.next_boxes
+            .reserve(want.saturating_sub(self.next_boxes.len()));
+        self.next_slots
+            .reserve(want.saturating_sub(self.next_slots.len()));
+        self.order.reserve(want.saturating_sub(self.order.len()));
+        self.cols.reserve(want.saturating_sub(self.cols.len()));
+        self.col_start
+            .reserve((want + 1).saturating_sub(self.col_start.len()));
+    }
+
+    /// Forgets every entry (keeps the buffers).
+    pub(super) fn clear(&mut self) {
+        self.boxes.clear();
+        self.slots.clear();
+        self.mins.clear();
+        self.cols.clear();
+        self.col_start.clear();
+        self.col_of.clear();
+        self.normal = 0;
+        self.sorted = 0;
     }
 
     /// Calls `visit(slot_word)` for built entries whose box the ray may hit, in roughly

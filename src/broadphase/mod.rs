@@ -108,11 +108,26 @@ pub struct Config {
     /// default) lets every proxy's margin follow how far it moves per step. The pairs are the
     /// same either way; only the cost changes.
     pub skin: f32,
+    /// Which passes a step may run: [`Passes::Adaptive`] (the default) picks the cheaper one
+    /// each step; the others force one, for comparisons and tests.
+    pub passes: Passes,
+}
+
+/// Which passes [`BroadPhase::step`] may run. The pair lists are the same whichever runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Passes {
+    /// Each step runs whichever pass its work estimate says is cheaper.
+    #[default]
+    Adaptive,
+    /// Every step runs the full pass (no fat boxes, no candidates).
+    Full,
+    /// Every step after the first runs the incremental pass.
+    Incremental,
 }
 
 impl Default for Config {
     /// Bounds ±512 m, octree depth 7, strict placement, margin 0, rebuild threshold 1.5,
-    /// adaptive fat margins (skin 0).
+    /// adaptive fat margins (skin 0), adaptive passes.
     fn default() -> Self {
         Self {
             bounds: Aabb::new(Vec3::splat(-512.0), Vec3::splat(512.0)),
@@ -121,6 +136,7 @@ impl Default for Config {
             margin: 0.0,
             rebuild_threshold: 1.5,
             skin: 0.0,
+            passes: Passes::Adaptive,
         }
     }
 }
@@ -217,6 +233,9 @@ pub struct BroadPhase {
     dirty: Vec<u32>,
     /// Proxies removed since the last step.
     removals: usize,
+    /// Proxies updated since the last step that move far enough per step to outgrow the
+    /// smallest fat margin: about one in `LOOKAHEAD_STEPS` of them escapes each step.
+    fast_movers: usize,
     /// Candidate pairs (packed slot pairs, `HIT` set if their exact boxes overlapped at the
     /// last step), sorted.
     cand: Vec<u64>,
@@ -229,8 +248,8 @@ pub struct BroadPhase {
     sort_buf: Vec<u64>,
     added_packed: Vec<u64>,
     removed_packed: Vec<u64>,
-    dirty_boxes: Vec<(f32, u32)>,
-    dirty_sorted: Vec<SimdBox>,
+    /// The dirty entries' fat boxes, sorted anew each incremental step.
+    side: Grid,
     /// The lists handed out by `step`.
     pairs: Vec<Pair>,
     added: Vec<Pair>,
@@ -267,6 +286,7 @@ impl BroadPhase {
                 d.rebuild_threshold
             },
             skin: nonneg(config.skin),
+            passes: config.passes,
         })
     }
 
@@ -286,6 +306,7 @@ impl BroadPhase {
             escaped: Vec::new(),
             dirty: Vec::new(),
             removals: 0,
+            fast_movers: 0,
             cand: Vec::new(),
             packed: Vec::new(),
             prev_packed: Vec::new(),
@@ -294,8 +315,7 @@ impl BroadPhase {
             sort_buf: Vec::new(),
             added_packed: Vec::new(),
             removed_packed: Vec::new(),
-            dirty_boxes: Vec::new(),
-            dirty_sorted: Vec::new(),
+            side: Grid::default(),
             pairs: Vec::new(),
             added: Vec::new(),
             removed: Vec::new(),
@@ -338,8 +358,7 @@ impl BroadPhase {
                     + self.removed_packed.capacity(),
                 8,
             )
-            + v(self.dirty_boxes.capacity(), 8)
-            + v(self.dirty_sorted.capacity(), 32)
+            + self.side.heap_bytes()
             + v(
                 self.pairs.capacity() + self.added.capacity() + self.removed.capacity(),
                 core::mem::size_of::<Pair>(),
@@ -469,7 +488,11 @@ impl BroadPhase {
             .max_element()
             * 0.5;
         let steps = self.now.wrapping_sub(self.store.stamp[s]).max(1);
-        self.store.speed[s] = moved / steps as f32;
+        let speed = moved / steps as f32;
+        self.store.speed[s] = speed;
+        if step::outgrows_min_margin(speed, exact.extent().max_element()) {
+            self.fast_movers += 1;
+        }
         self.store.stamp[s] = self.now;
         self.store.shape[s] = shape;
         self.store.exact[s] = exact;
@@ -523,7 +546,7 @@ impl BroadPhase {
             let s = slot as usize;
             let resting = self.now.wrapping_sub(self.store.stamp[s]) > 1;
             let speed = if resting { 0.0 } else { self.store.speed[s] };
-            step::margin(speed, exact.extent().max_element())
+            step::margin(speed, exact.extent().max_element()) * step::jitter(slot)
         };
         exact.grown(margin)
     }

@@ -19,7 +19,6 @@
 use super::grid::DEAD;
 use super::radix::{bits_of, sort_u64};
 use super::*;
-use crate::sweep;
 
 /// Set on a candidate whose exact boxes overlapped at the last step.
 pub(super) const HIT: u64 = 1 << 63;
@@ -27,18 +26,20 @@ pub(super) const HIT: u64 = 1 << 63;
 /// Estimated costs, in nanoseconds per unit of work on the machine the defaults were measured
 /// on; only their ratios matter.
 mod cost {
-    /// The full pass, per proxy (sort, sweep, pair sort, lists).
-    pub(super) const FULL: f64 = 45.0;
+    /// The full pass, per proxy (sort, sweep, lists).
+    pub(super) const FULL: f64 = 110.0;
+    /// The full pass, per pair found (its sort and the lists).
+    pub(super) const FULL_PAIR: f64 = 20.0;
     /// Carrying one candidate through the merge without testing it.
     pub(super) const CARRY: f64 = 1.5;
-    /// Re-testing one candidate's exact boxes.
-    pub(super) const TEST: f64 = 4.0;
-    /// One escaped proxy's grid query.
-    pub(super) const QUERY: f64 = 400.0;
-    /// One dirty entry, per step, in the dirty sweep.
-    pub(super) const DIRTY: f64 = 25.0;
+    /// Re-testing one candidate's exact boxes (two scattered reads).
+    pub(super) const TEST: f64 = 9.0;
+    /// One escaped proxy: its grid query, its new candidates' sort and merge.
+    pub(super) const QUERY: f64 = 1200.0;
+    /// One dirty entry, per step, in the dirty entries' own grid.
+    pub(super) const DIRTY: f64 = 50.0;
     /// Re-sorting the grid, per proxy.
-    pub(super) const RESORT: f64 = 25.0;
+    pub(super) const RESORT: f64 = 45.0;
 }
 
 /// The incremental regime is entered when its estimated cost is below this fraction of the
@@ -60,6 +61,22 @@ pub(super) fn margin(speed: f32, size: f32) -> f32 {
     (speed * LOOKAHEAD_STEPS)
         .min(size * MAX_MARGIN)
         .max(size * MIN_MARGIN)
+}
+
+/// A per-slot factor in `[1, 2)` on the fat margin. Proxies given fat boxes in the same step
+/// at the same speed would otherwise all leave them in the same later step (a burst of
+/// queries); spread margins spread the escapes.
+#[inline]
+pub(super) fn jitter(slot: u32) -> f32 {
+    let h = slot.wrapping_mul(0x9E37_79B9) >> 8;
+    1.0 + h as f32 / (1u32 << 24) as f32
+}
+
+/// True if a box of largest extent `size` moving `speed` per step gets a margin above the
+/// smallest: it will leave its fat box every few steps.
+#[inline]
+pub(super) fn outgrows_min_margin(speed: f32, size: f32) -> bool {
+    speed * LOOKAHEAD_STEPS > size * MIN_MARGIN
 }
 
 /// The packed pair of two distinct slots: the smaller in the high half.
@@ -86,8 +103,6 @@ pub(super) enum Plan {
 /// What the cost estimates learn from the steps they watch.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Costs {
-    /// Escapes per mover in recent incremental steps (a running average).
-    escape_rate: f64,
     /// Candidates per proxy at the last count.
     cand_per_proxy: f64,
     /// Cost spent on dirty entries since the grid was last sorted.
@@ -97,7 +112,6 @@ pub(super) struct Costs {
 impl Default for Costs {
     fn default() -> Self {
         Costs {
-            escape_rate: 0.25,
             cand_per_proxy: 3.0,
             dirty_spent: 0.0,
         }
@@ -111,8 +125,14 @@ impl BroadPhase {
         if movers == 0 && self.removals == 0 {
             return Plan::Unchanged;
         }
+        match self.config.passes {
+            Passes::Full => return Plan::Full,
+            Passes::Incremental if self.cached => return Plan::Incremental,
+            Passes::Incremental => return Plan::Rebuild,
+            Passes::Adaptive => {}
+        }
         let n = self.store.len() as f64;
-        let full = n * cost::FULL;
+        let full = n * cost::FULL + self.packed.len() as f64 * cost::FULL_PAIR;
         if self.cached {
             let inc = self.incremental_cost(movers as f64, self.escaped.len() as f64);
             if inc > full {
@@ -121,7 +141,8 @@ impl BroadPhase {
                 Plan::Incremental
             }
         } else {
-            let escapes = movers as f64 * self.costs.escape_rate;
+            // Margins are `LOOKAHEAD_STEPS` times the speed, times a jitter of 1.5 on average.
+            let escapes = self.fast_movers as f64 / (1.5 * f64::from(LOOKAHEAD_STEPS));
             let inc = self.incremental_cost(movers as f64, escapes);
             if inc < full * ENTER_FRACTION {
                 Plan::Rebuild
@@ -139,7 +160,7 @@ impl BroadPhase {
             self.store.len() as f64 * self.costs.cand_per_proxy
         };
         cands * cost::CARRY
-            + movers * self.costs.cand_per_proxy * 2.0 * cost::TEST
+            + (movers * self.costs.cand_per_proxy * 2.0).min(cands) * cost::TEST
             + escapes * cost::QUERY
             + self.dirty.len() as f64 * cost::DIRTY
     }
@@ -182,6 +203,7 @@ impl BroadPhase {
         self.movers.clear();
         self.escaped.clear();
         self.removals = 0;
+        self.fast_movers = 0;
         self.store.release_quarantine();
         self.keep_headroom();
     }
@@ -202,8 +224,7 @@ impl BroadPhase {
         ahead(&mut self.prev_packed);
         ahead(&mut self.pairs);
         ahead(&mut self.dirty);
-        ahead(&mut self.dirty_boxes);
-        ahead(&mut self.dirty_sorted);
+        self.side.reserve_ahead(self.dirty.len());
         let n = self.store.len();
         for v in [&mut self.added_packed, &mut self.removed_packed] {
             if v.capacity() < n / 8 {
@@ -232,7 +253,7 @@ impl BroadPhase {
                 self.grid.boxes[i] = if fat { self.fat_box(s, &exact) } else { exact };
             }
         }
-        self.grid.build(&mut self.store.pos);
+        self.grid.build(Some(&mut self.store.pos));
         self.clear_dirty();
         let fresh = &mut self.fresh;
         fresh.clear();
@@ -270,7 +291,7 @@ impl BroadPhase {
     /// Re-sorts the grid with the fat boxes it holds (candidates stay valid): no more dirty
     /// entries.
     fn resort(&mut self) {
-        self.grid.build(&mut self.store.pos);
+        self.grid.build(Some(&mut self.store.pos));
         self.clear_dirty();
     }
 
@@ -291,9 +312,6 @@ impl BroadPhase {
         let bits = 32 + bits_of(self.store.slots() as u64);
         sort_u64(&mut self.fresh, &mut self.sort_buf, bits);
         self.merge_candidates();
-        let movers = self.movers.len().max(1) as f64;
-        let rate = self.escaped.len() as f64 / movers;
-        self.costs.escape_rate = 0.75 * self.costs.escape_rate + 0.25 * rate;
         self.emit();
     }
 
@@ -323,36 +341,33 @@ impl BroadPhase {
         }
     }
 
-    /// New candidates among the dirty entries (each pair with at least one escaped side).
+    /// New candidates among the dirty entries (each pair with at least one escaped side): the
+    /// dirty entries' fat boxes are sorted into a grid of their own and swept.
     fn sweep_dirty(&mut self) {
-        let (store, grid) = (&self.store, &self.grid);
-        self.dirty_boxes.clear();
+        let (store, grid, side) = (&self.store, &self.grid, &mut self.side);
+        side.clear();
         for &d in &self.dirty {
             let ds = d as usize;
             if store.flags[ds] & flag::GONE == 0 {
-                let b = grid.boxes[store.pos[ds] as usize];
-                self.dirty_boxes.push((b.min.x, d));
+                let word = d | if store.kind[ds] == Kind::Static {
+                    STATIC_BIT
+                } else {
+                    0
+                };
+                side.push(grid.boxes[store.pos[ds] as usize], word);
             }
         }
-        self.costs.dirty_spent += self.dirty_boxes.len() as f64 * cost::DIRTY;
+        self.costs.dirty_spent += side.len() as f64 * cost::DIRTY;
         if self.escaped.is_empty() {
             return;
         }
-        self.dirty_boxes
-            .sort_unstable_by(|p, q| p.0.total_cmp(&q.0).then(p.1.cmp(&q.1)));
-        self.dirty_sorted.clear();
-        self.dirty_sorted.extend(
-            self.dirty_boxes
-                .iter()
-                .map(|&(_, d)| grid.boxes[store.pos[d as usize] as usize]),
-        );
-        let (boxes, fresh) = (&self.dirty_boxes, &mut self.fresh);
-        sweep::self_pairs::<0>(&self.dirty_sorted, |i, j| {
-            let (a, b) = (boxes[i].1 as usize, boxes[j].1 as usize);
-            let escaped = (store.flags[a] | store.flags[b]) & flag::ESCAPED != 0;
-            let both_static = store.kind[a] == Kind::Static && store.kind[b] == Kind::Static;
-            if escaped && !both_static {
-                fresh.push(pack(a as u32, b as u32));
+        side.build(None);
+        let fresh = &mut self.fresh;
+        side.for_each_pair(|a, b| {
+            let (sa, sb) = (a & !STATIC_BIT, b & !STATIC_BIT);
+            let escaped = (store.flags[sa as usize] | store.flags[sb as usize]) & flag::ESCAPED;
+            if escaped != 0 && a & b & STATIC_BIT == 0 {
+                fresh.push(pack(sa, sb));
             }
         });
     }
