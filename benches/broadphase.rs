@@ -3,8 +3,8 @@
 //! centre with `Octree::update`, and collects all pairs with `pairs_into` into a cleared,
 //! reused `Vec`. Throughput is spheres, so criterion's elements/s inverts to ns/object/step.
 
+use broadleaf::fixtures::scene::{DT, Gas};
 use broadleaf::octree::{Octree, Placement};
-use broadleaf::scene::{DT, Gas};
 use broadleaf::{Pair, ProxyKey};
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
@@ -56,7 +56,7 @@ fn octree_step(c: &mut Criterion) {
 // ---------------------------------------------------------------------------------------------
 mod bvh_benches {
     use broadleaf::bvh::{Bvh, BvhConfig};
-    use broadleaf::scene::{DT, GAS_SPEED, Rng};
+    use broadleaf::fixtures::scene::{DT, GAS_SPEED, Rng};
     use broadleaf::{Aabb, ProxyKey, Vec3};
     use criterion::{BatchSize, BenchmarkId, Criterion, Throughput};
     use std::hint::black_box;
@@ -192,8 +192,8 @@ mod bvh_benches {
 // Scenes: broadleaf's whole `BroadPhase` step next to rapier's broad phase, same motion.
 // ---------------------------------------------------------------------------------------------
 mod scene_benches {
+    use broadleaf::fixtures::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Scene, Spawn};
     use broadleaf::octree::Placement;
-    use broadleaf::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Scene, Spawn};
     use broadleaf::{BroadPhase, Config};
     use criterion::{BenchmarkId, Criterion, Throughput};
     use std::hint::black_box;
@@ -248,7 +248,7 @@ mod scene_benches {
     /// counter for each `PhysicsPipeline::step`.
     #[cfg(feature = "rapier")]
     fn rapier(scene: &mut dyn Scene, iters: u64) -> Duration {
-        let mut world = broadleaf::rapier::SceneWorld::new();
+        let mut world = broadleaf::fixtures::rapier_world::SceneWorld::new();
         let mut spawns: Vec<Spawn> = Vec::new();
         scene.spawns(&mut spawns);
         for s in &spawns {
@@ -270,7 +270,7 @@ mod scene_benches {
     /// backwards so that every timed step moves them however many steps criterion asks for.
     #[cfg(feature = "rapier")]
     mod pile {
-        use broadleaf::scene::{Frame, Object, Scene, Spawn};
+        use broadleaf::fixtures::scene::{Frame, Object, Scene, Spawn};
         use broadleaf::{Aabb, Vec3};
         use std::rc::Rc;
 
@@ -330,7 +330,7 @@ mod scene_benches {
 
         /// Records the pile (240 settling steps, then 120 frames).
         pub fn record() -> PingPong {
-            let rec = broadleaf::rapier::record_pile(10_000, 1, 240, 120);
+            let rec = broadleaf::fixtures::rapier_world::record_pile(10_000, 1, 240, 120);
             PingPong {
                 bounds: rec.bounds,
                 radius: rec.radius,

@@ -8,8 +8,8 @@
 //! cargo run --release --example falling_spheres -- --n 2000 --steps 300 --index bvh --verify
 //! ```
 
+use broadleaf::fixtures::sim::{DropConfig, IndexKind, World};
 use broadleaf::octree::{Octree, Placement};
-use broadleaf::sim::{DropConfig, IndexKind, World};
 use broadleaf::{Aabb, Pair, Vec3, brute};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeSet;

@@ -13,7 +13,7 @@
 //! run (and not timed) first.
 
 use broadleaf::bvh::{Bvh, BvhConfig};
-use broadleaf::scene::{Bodies, Feed, Frame, Rng, Scene};
+use broadleaf::fixtures::scene::{Bodies, Feed, Frame, Rng, Scene};
 use broadleaf::{Aabb, BroadPhase, Config};
 use std::time::Instant;
 

@@ -11,8 +11,8 @@
 //! `depth_for` (strict) or `depth_for_loose` (loose). Under callgrind,
 //! `--toggle-collect=*measured*` counts only the measured steps.
 
+use broadleaf::fixtures::scene::{Churn, DT, Feed, Frame, Gas, Scene};
 use broadleaf::octree::{Octree, Placement};
-use broadleaf::scene::{Churn, DT, Feed, Frame, Gas, Scene};
 use broadleaf::{BroadPhase, Config, Pair, ProxyKey};
 use std::hint::black_box;
 use std::time::Instant;

@@ -8,7 +8,7 @@
 //!
 //! `--scene` is `gas`, `clustered`, `bodies`, `churn`, `pile` or `all` (every scene at its
 //! default N: gas, clustered and churn 100 000, bodies and pile 10 000; `--n` overrides it for
-//! all). `pile` is recorded first from a dynamic rapier run (`broadleaf::rapier::record_pile`,
+//! all). `pile` is recorded first from a dynamic rapier run (`broadleaf::fixtures::rapier_world::record_pile`,
 //! 240 settling steps, untimed) and then replayed like the others. The scene's frames are
 //! generated first; then broadleaf runs all of them, then rapier does (`--interleave`
 //! alternates the two per step instead, so each also pays for the other evicting its caches).
@@ -37,8 +37,9 @@
 //! `ratio=<speed-up> missed=<n> extra=<n>`; for `--scene all` the ratio is the worst (smallest)
 //! speed-up of the scenes and `missed`/`extra` are summed over them.
 
-use broadleaf::rapier::{Comparison, SceneWorld, record_pile};
-use broadleaf::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Scene};
+use broadleaf::fixtures::rapier_world::{SceneWorld, record_pile};
+use broadleaf::fixtures::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Scene};
+use broadleaf::rapier::Comparison;
 use broadleaf::{BroadPhase, Config, Passes, Placement, brute};
 use std::process::exit;
 use std::time::Instant;

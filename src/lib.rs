@@ -80,13 +80,13 @@ mod broadphase;
 pub mod brute;
 pub mod bvh;
 mod error;
+#[cfg(feature = "fixtures")]
+pub mod fixtures;
 pub mod geom;
 pub mod octree;
 pub mod pair;
 #[cfg(feature = "rapier")]
 pub mod rapier;
-pub mod scene;
-pub mod sim;
 mod sweep;
 
 pub use broadphase::{BodyKind, BroadPhase, Config, Pass, Passes, Shape, StepPairs, StepStats};

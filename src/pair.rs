@@ -51,89 +51,6 @@ pub(crate) fn slot(k: ProxyKey) -> u32 {
     k.data().as_ffi() as u32
 }
 
-/// Sorts pair lists by `(a, b)`, exactly as `sort_unstable` would, reusing its buffers: after
-/// the first few steps sorting allocates nothing.
-#[derive(Clone, Debug, Default)]
-pub struct PairSorter {
-    /// The second buffer of the scatter pass.
-    scratch: Vec<Pair>,
-    /// Per slot index: where its bucket starts, then (after a scatter) where it ends.
-    starts: Vec<u32>,
-}
-
-/// Lists shorter than this are sorted by comparison.
-const COUNTING_MIN: usize = 256;
-
-impl PairSorter {
-    /// A sorter with empty buffers.
-    #[must_use]
-    pub fn new() -> Self {
-        Self::default()
-    }
-
-    /// Sorts `pairs` by `(a, b)`.
-    ///
-    /// Two stable counting sorts (LSD radix): by `b`'s slot index, then by `a`'s. Keys order
-    /// by `(slot index, version)`, and the live keys of one slot map have distinct slot
-    /// indices, so for them this is the full order: two streaming passes over the pairs and
-    /// two over the slot range, no comparisons. A last pass checks the order with one integer
-    /// compare per pair and falls back to a comparison sort when keys of one slot with
-    /// different versions left it wrong, so the result is exact for any keys.
-    pub fn sort(&mut self, pairs: &mut [Pair]) {
-        let n = pairs.len();
-        if n < COUNTING_MIN {
-            pairs.sort_unstable();
-            return;
-        }
-        let max = pairs
-            .iter()
-            .map(|p| slot(p.a).max(slot(p.b)))
-            .max()
-            .unwrap_or(0) as usize;
-        self.scratch.clear();
-        self.scratch.resize(n, pairs[0]);
-        counting_pass(pairs, &mut self.scratch, &mut self.starts, max, |p| {
-            slot(p.b)
-        });
-        counting_pass(&self.scratch, pairs, &mut self.starts, max, |p| slot(p.a));
-        if !pairs.windows(2).all(|w| rank(&w[0]) <= rank(&w[1])) {
-            pairs.sort_unstable();
-        }
-        debug_assert!(pairs.windows(2).all(|w| w[0] <= w[1]));
-    }
-}
-
-/// One stable counting sort of `from` into `to` by `digit` (at most `max`), with `starts`
-/// as the bucket table.
-#[inline]
-fn counting_pass(
-    from: &[Pair],
-    to: &mut [Pair],
-    starts: &mut Vec<u32>,
-    max: usize,
-    digit: impl Fn(&Pair) -> u32,
-) {
-    starts.clear();
-    starts.resize(max + 2, 0);
-    for p in from {
-        starts[digit(p) as usize + 1] += 1;
-    }
-    for i in 1..starts.len() {
-        starts[i] += starts[i - 1];
-    }
-    for p in from {
-        let s = &mut starts[digit(p) as usize];
-        to[*s as usize] = *p;
-        *s += 1;
-    }
-}
-
-/// The pair order `(a, b)` as one integer (see [`key_rank`]).
-#[inline]
-fn rank(p: &Pair) -> u128 {
-    (u128::from(key_rank(p.a)) << 64) | u128::from(key_rank(p.b))
-}
-
 /// Sorts a pair list by `(a, b)` and removes duplicates, in place.
 pub fn sort_dedup(pairs: &mut Vec<Pair>) {
     pairs.sort_unstable();
@@ -234,43 +151,6 @@ mod tests {
                 }
             }
         }
-    }
-
-    #[test]
-    fn pair_sorter_equals_sort_unstable() {
-        let mut sm = SlotMap::<ProxyKey, ()>::with_key();
-        let keys: Vec<_> = (0..3000).map(|_| sm.insert(())).collect();
-        let mut seed = 11u32;
-        let mut next = || {
-            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (seed >> 8) as usize
-        };
-        let mut sorter = PairSorter::new();
-        for len in [0, 1, 255, 256, 5000, 40_000] {
-            let mut pairs: Vec<Pair> = (0..len)
-                .filter_map(|_| {
-                    let (i, j) = (next() % keys.len(), next() % keys.len());
-                    (i != j).then(|| Pair::new(keys[i], keys[j]))
-                })
-                .collect();
-            let mut want = pairs.clone();
-            want.sort_unstable();
-            sorter.sort(&mut pairs);
-            assert_eq!(pairs, want);
-        }
-        // Keys of two slot maps may share a slot (same index, other version): still `Ord`.
-        let mut other = SlotMap::<ProxyKey, ()>::with_key();
-        other.insert(());
-        let stale = other.insert(());
-        other.remove(stale);
-        let bumped = other.insert(());
-        let mut pairs: Vec<Pair> = (0..300)
-            .map(|i| Pair::new(keys[i % 7 + 10], if i % 2 == 0 { keys[1] } else { bumped }))
-            .collect();
-        let mut want = pairs.clone();
-        want.sort_unstable();
-        sorter.sort(&mut pairs);
-        assert_eq!(pairs, want);
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! No allocation per step in steady state, and no memory growth under churn, measured with a
 //! counting global allocator (this test binary only; the library itself has no `unsafe`).
 
-use broadleaf::scene::{Churn, Feed, Frame, Gas, Scene};
+use broadleaf::fixtures::scene::{Churn, Feed, Frame, Gas, Scene};
 use broadleaf::{BroadPhase, Config, Placement};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::Mutex;

@@ -4,8 +4,8 @@
 
 use broadleaf::brute::{self, Proxy};
 use broadleaf::bvh::{Bvh, BvhConfig, SplitMethod};
+use broadleaf::fixtures::scene::Rng;
 use broadleaf::pair::sort_dedup;
-use broadleaf::scene::Rng;
 use broadleaf::{Aabb, Error, Pair, ProxyKey, Vec3};
 use proptest::prelude::*;
 

@@ -4,8 +4,8 @@
 //! events equal the set difference with the previous step, and `validate()` holds. Both octree
 //! placements.
 
+use broadleaf::fixtures::scene::{DT, Gas, Rng};
 use broadleaf::octree::depth_for_loose;
-use broadleaf::scene::{DT, Gas, Rng};
 use broadleaf::{
     Aabb, BodyKind, BroadPhase, Config, Pair, Placement, ProxyKey, Shape, Vec3, brute, pair,
 };

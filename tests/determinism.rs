@@ -3,7 +3,7 @@
 //! removes) must equal a golden value. The golden value was computed from the brute-force
 //! reference, so it also pins the exact pair set.
 
-use broadleaf::scene::{DT, Gas, Rng};
+use broadleaf::fixtures::scene::{DT, Gas, Rng};
 use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Pair, ProxyKey, Vec3};
 use slotmap::Key;
 

@@ -239,7 +239,7 @@ fn coincident_and_huge_spheres_pair_with_everything() {
 #[test]
 fn loose_mixed_radii_cross_levels_exactly() {
     let b = Aabb::new(Vec3::splat(-4.0), Vec3::splat(4.0));
-    let mut rng = broadleaf::scene::Rng::new(5);
+    let mut rng = broadleaf::fixtures::scene::Rng::new(5);
     for depth in [2, 4, 6] {
         let mut t = Octree::with_placement(b, depth, Placement::Loose).unwrap();
         let mut model = Model::new();

@@ -4,7 +4,7 @@
 //! pair set with brute force (or, for the crowd, with the complete set it must be), with the
 //! octree in both placements.
 
-use broadleaf::scene::Rng;
+use broadleaf::fixtures::scene::Rng;
 use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Pair, Placement, ProxyKey, Vec3, brute};
 
 /// Both placements, without and with the pair cache (skin 0.3).

@@ -241,7 +241,7 @@ fn query_aabb_equals_brute_force() {
     ];
     for (placement, skin) in settings {
         let mut bp = BroadPhase::new(config(3, 0.0, placement, skin));
-        let mut rng = broadleaf::scene::Rng::new(11);
+        let mut rng = broadleaf::fixtures::scene::Rng::new(11);
         let mut proxies = Vec::new();
         for i in 0..300 {
             let c = rng.vec3_in(Vec3::splat(-10.0), Vec3::splat(10.0));
@@ -296,7 +296,7 @@ fn queries_and_rays_see_exact_shapes_with_a_pair_cache() {
         (Placement::Loose, 2.0),
     ] {
         let mut bp = BroadPhase::new(config(3, 0.0, placement, skin));
-        let mut rng = broadleaf::scene::Rng::new(29);
+        let mut rng = broadleaf::fixtures::scene::Rng::new(29);
         let mut model: Vec<(ProxyKey, Shape)> = Vec::new();
         for i in 0..240 {
             let c = rng.vec3_in(Vec3::splat(-10.0), Vec3::splat(10.0));
@@ -381,9 +381,9 @@ fn pair_cache_patches_equal_brute_force_step_by_step() {
         (Placement::Loose, 1.0, 0.0),
     ] {
         let mut bp = BroadPhase::try_new(config(3, margin, placement, skin)).unwrap();
-        let mut rng = broadleaf::scene::Rng::new(41);
+        let mut rng = broadleaf::fixtures::scene::Rng::new(41);
         let mut model: Vec<(ProxyKey, Shape)> = Vec::new();
-        let add = |bp: &mut BroadPhase, rng: &mut broadleaf::scene::Rng| {
+        let add = |bp: &mut BroadPhase, rng: &mut broadleaf::fixtures::scene::Rng| {
             let c = rng.vec3_in(Vec3::splat(-9.0), Vec3::splat(9.0));
             let shape = match rng.below(6) {
                 0 => Shape::Body {

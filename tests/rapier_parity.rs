@@ -3,9 +3,9 @@
 //! `PhysicsPipeline::step` (the poses rapier detects collisions at).
 #![cfg(feature = "rapier")]
 
+use broadleaf::fixtures::scene::Rng;
 use broadleaf::pair::{self, Pair};
 use broadleaf::rapier::{Comparison, Mirror};
-use broadleaf::scene::Rng;
 use broadleaf::{Aabb, Config, Vec3};
 use rapier3d::prelude::*;
 
@@ -268,7 +268,7 @@ fn syncing_after_the_rapier_step_is_one_step_late() {
 /// The recorded `pile` scene: the balls end up at rest inside the scene's bounds.
 #[test]
 fn recorded_pile_settles_inside_its_bounds() {
-    let pile = broadleaf::rapier::record_pile(400, 3, 200, 4);
+    let pile = broadleaf::fixtures::rapier_world::record_pile(400, 3, 200, 4);
     assert_eq!(pile.frames.len(), 4);
     let inside = pile.bounds.grown(1e-3);
     for f in &pile.frames {

@@ -2,8 +2,8 @@
 //! is bit-for-bit repeatable, and the octree (both placements) and BVH paths see the same pairs
 //! at every step.
 
+use broadleaf::fixtures::sim::{DropConfig, IndexKind, SphereDrop, World};
 use broadleaf::octree::Placement;
-use broadleaf::sim::{DropConfig, IndexKind, SphereDrop, World};
 use broadleaf::{Pair, brute};
 
 const N: usize = 1000;

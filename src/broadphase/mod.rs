@@ -423,7 +423,7 @@ impl BroadPhase {
                 .map_err(|error| BatchError { index, error })?;
         }
         for &(key, center, radius) in updates {
-            let slot = key_slot(key);
+            let slot = crate::pair::slot(key);
             self.set_shape(slot, Shape::Sphere { center, radius });
         }
         Ok(())
@@ -439,7 +439,7 @@ impl BroadPhase {
                 .map_err(|error| BatchError { index, error })?;
         }
         for &(key, aabb) in updates {
-            let slot = key_slot(key);
+            let slot = crate::pair::slot(key);
             let kind = self.body_kind(slot);
             self.set_shape(slot, Shape::Body { aabb, kind });
         }
@@ -605,13 +605,6 @@ impl BroadPhase {
             removed: &self.removed,
         }
     }
-}
-
-/// The slot of a key already checked live.
-#[inline]
-fn key_slot(key: ProxyKey) -> u32 {
-    use slotmap::Key;
-    key.data().as_ffi() as u32
 }
 
 /// `aabb` grown by `margin`, with coordinates that overflowed clamped to `±f32::MAX`.
