@@ -157,6 +157,12 @@ fn main() {
                     times.push(t.elapsed().as_nanos() as f64 / n as f64);
                 }
             }
+            println!(
+                "memory: {:.1} heap bytes per proxy ({} proxies), last step {:?}",
+                bp.heap_bytes() as f64 / bp.len().max(1) as f64,
+                bp.len(),
+                bp.stats()
+            );
         }
         other => panic!("unknown --what {other}"),
     }
