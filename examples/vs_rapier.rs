@@ -654,6 +654,7 @@ fn plot_moving(rows: &[Row], path: &str) -> Plotted {
         .configure_mesh()
         .x_desc("objects moving per step, %")
         .y_desc("ns / object / step (all objects)")
+        .x_label_formatter(&|x| format!("{x:.0}"))
         .y_label_formatter(&|y| format!("{y}"))
         .draw()?;
     let mut groups: Vec<(String, usize)> = rows.iter().map(|r| (r.name.clone(), r.n)).collect();
