@@ -155,7 +155,10 @@ impl Octree {
     /// An empty octree with the given placement; same errors as [`Octree::new`].
     pub fn with_placement(bounds: Aabb, depth: u32, placement: Placement) -> Result<Octree, Error> {
         if depth > MAX_DEPTH {
-            return Err(Error::DepthOutOfRange(depth));
+            return Err(Error::DepthOutOfRange {
+                depth,
+                max: MAX_DEPTH,
+            });
         }
         geom::check_bounds(&bounds)?;
         let grid = depth + u32::from(placement == Placement::Loose);

@@ -42,7 +42,10 @@ fn rtcd_example_straddler_stays_at_root() {
 fn depth_out_of_range_and_bad_bounds_are_refused() {
     assert_eq!(
         Octree::new(unit(), MAX_DEPTH + 1).unwrap_err(),
-        Error::DepthOutOfRange(MAX_DEPTH + 1)
+        Error::DepthOutOfRange {
+            depth: MAX_DEPTH + 1,
+            max: MAX_DEPTH
+        }
     );
     let flat = Aabb::new(Vec3::ZERO, Vec3::new(1.0, 0.0, 1.0));
     assert!(matches!(
