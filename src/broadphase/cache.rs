@@ -19,7 +19,7 @@
 //! merges in on the fly (each side entry knows where it falls in the main list). When
 //! tombstones or side entries pass an eighth of the list, one merge compacts both.
 
-use crate::bvh::PrimBox;
+use crate::geom::SimdBox as PrimBox;
 use crate::pair::{Pair, slot};
 use crate::{Aabb, ProxyKey};
 

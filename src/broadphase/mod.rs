@@ -3,7 +3,8 @@
 
 mod cache;
 
-use crate::bvh::{Bvh, BvhConfig, PrimBox};
+use crate::bvh::{Bvh, BvhConfig};
+use crate::geom::SimdBox as PrimBox;
 use crate::geom::{self, check_aabb, check_sphere};
 use crate::octree::{Octree, Placement};
 use crate::pair::{self, Pair, PairSorter, ProxyKey};

@@ -1,9 +1,10 @@
 //! Full (re)build: binned SAH, `Middle` or `EqualCounts` top-down splits over a flat array of
 //! boxes partitioned in place, with an explicit work stack and buffers reused across builds.
 
-use super::node::{Node, PrimBox};
+use super::node::Node;
 use super::{Bvh, BvhConfig, NONE, SplitMethod};
-use crate::{Aabb, ProxyKey};
+use crate::ProxyKey;
+use crate::geom::{SimdBox, ordered_bits};
 use glam::Vec3A;
 use slotmap::Key;
 
@@ -22,73 +23,40 @@ const _: () = assert!(MAX_BUCKETS.is_power_of_two());
 /// where clearing and merging the copies would cost more than the stalls.
 const BIN_SETS_MIN: usize = 1024;
 
-impl PrimBox {
-    /// Twice the centroid, `min + max`: the build bins and splits on doubled centroids, which
-    /// orders and buckets them exactly as the centroids would be.
-    #[inline]
-    fn c2(&self) -> Vec3A {
-        self.min + self.max
-    }
-}
-
-/// The union of a set of boxes and the bounds of their doubled centroids. 64 bytes.
+/// The union of a set of boxes and the bounds of their doubled centroids
+/// ([`SimdBox::center2`]: the build bins and splits on doubled centroids, which order and bucket
+/// exactly as the centroids would). 64 bytes.
 #[derive(Clone, Copy, Debug)]
 struct Bounds {
-    min: Vec3A,
-    max: Vec3A,
-    cmin: Vec3A,
-    cmax: Vec3A,
+    boxes: SimdBox,
+    centroids: SimdBox,
 }
 
 impl Bounds {
     const EMPTY: Bounds = Bounds {
-        min: Vec3A::INFINITY,
-        max: Vec3A::NEG_INFINITY,
-        cmin: Vec3A::INFINITY,
-        cmax: Vec3A::NEG_INFINITY,
+        boxes: SimdBox::EMPTY,
+        centroids: SimdBox::EMPTY,
     };
 
     #[inline]
-    fn add(&mut self, r: &PrimBox) {
-        let c = r.c2();
-        self.min = self.min.min(r.min);
-        self.max = self.max.max(r.max);
-        self.cmin = self.cmin.min(c);
-        self.cmax = self.cmax.max(c);
+    fn add(&mut self, r: &SimdBox) {
+        self.boxes = self.boxes.union(r);
+        self.centroids = self.centroids.union_point(r.center2());
     }
 
     #[inline]
     fn union(&self, o: &Bounds) -> Bounds {
         Bounds {
-            min: self.min.min(o.min),
-            max: self.max.max(o.max),
-            cmin: self.cmin.min(o.cmin),
-            cmax: self.cmax.max(o.cmax),
+            boxes: self.boxes.union(&o.boxes),
+            centroids: self.centroids.union(&o.centroids),
         }
     }
 
-    /// Surface area of the box union; 0 when empty (as [`Aabb::surface_area`]).
-    #[inline]
-    fn area(&self) -> f32 {
-        area(self.min, self.max)
-    }
-
-    fn aabb(&self) -> Aabb {
-        Aabb::new(self.min.into(), self.max.into())
-    }
-
-    fn of(refs: &[PrimBox]) -> Bounds {
+    fn of(refs: &[SimdBox]) -> Bounds {
         let mut b = Bounds::EMPTY;
         refs.iter().for_each(|r| b.add(r));
         b
     }
-}
-
-/// Surface area of the box `min..max`; 0 when empty (as [`Aabb::surface_area`]).
-#[inline]
-fn area(min: Vec3A, max: Vec3A) -> f32 {
-    let d = (max - min).max(Vec3A::ZERO);
-    2.0 * (d.x * d.y + d.y * d.z + d.z * d.x)
 }
 
 /// A node still to be made: the primitive range `start..end`, the parent to link it to, and
@@ -139,7 +107,7 @@ struct Work {
     order: Vec<(f32, u32)>,
     /// `bins[k]`: the SAH bucket of the node's `k`-th primitive, from the binning pass.
     bins: Vec<u8>,
-    tmp_refs: Vec<PrimBox>,
+    tmp_refs: Vec<SimdBox>,
     tmp_ids: Vec<u32>,
     /// [`partition_bins`]' lists of the misplaced positions left and right of the split.
     wrong: [Vec<u32>; 2],
@@ -234,7 +202,7 @@ impl Bvh {
 fn build_nodes(
     config: &BvhConfig,
     s: &mut BuildScratch,
-    refs: &mut [PrimBox],
+    refs: &mut [SimdBox],
     nodes: &mut Vec<Node>,
     parent: &mut Vec<u32>,
     leaf_of: &mut [u32],
@@ -262,7 +230,7 @@ fn build_nodes(
         }
         parent.push(t.parent);
         let range = t.start as usize..t.end as usize;
-        let aabb = t.bounds.aabb();
+        let aabb = t.bounds.boxes.aabb();
         match split(
             config,
             work,
@@ -301,7 +269,7 @@ fn build_nodes(
 fn split(
     config: &BvhConfig,
     work: &mut Work,
-    refs: &mut [PrimBox],
+    refs: &mut [SimdBox],
     ids: &mut [u32],
     bounds: &Bounds,
 ) -> Option<Split> {
@@ -315,7 +283,7 @@ fn split(
     if small && config.split == SplitMethod::Sah && n as f32 <= config.traversal_cost {
         return None;
     }
-    let extent = bounds.cmax - bounds.cmin;
+    let extent = bounds.centroids.extent();
     let axis = extent.max_position();
     let nb = config.sah_buckets as usize;
     if !(extent[axis] > 0.0 && (nb as f32 / extent[axis]).is_finite()) {
@@ -336,8 +304,8 @@ fn split(
         },
         _ if small => None,
         SplitMethod::Middle => {
-            let mid_point = 0.5 * (bounds.cmin[axis] + bounds.cmax[axis]);
-            let mid = partition(refs, ids, |r| r.c2()[axis] < mid_point);
+            let mid_point = 0.5 * (bounds.centroids.min[axis] + bounds.centroids.max[axis]);
+            let mid = partition(refs, ids, |r| r.center2()[axis] < mid_point);
             if mid == 0 || mid == n {
                 Some(median_split(work, refs, ids, axis))
             } else {
@@ -366,13 +334,13 @@ fn split(
 fn sah_split<const AXIS: usize>(
     config: &BvhConfig,
     work: &mut Work,
-    refs: &mut [PrimBox],
+    refs: &mut [SimdBox],
     ids: &mut [u32],
     bounds: &Bounds,
 ) -> Option<Split> {
     let n = refs.len();
     let nb = config.sah_buckets as usize;
-    // `x = (c − lo)·scale ∈ [0, nb]` for a doubled centroid `c` (lane `AXIS` of `PrimBox::c2`,
+    // `x = (c − lo)·scale ∈ [0, nb]` for a doubled centroid `c` (lane `AXIS` of `center2`,
     // the sums the centroid bounds were taken over, so `x >= 0` exactly). Adding 1.5·2²³,
     // whose float spacing is 1, rounds `x` to the nearest integer; clamped to `nb − 1` (a NaN
     // from overflowed sums too: `min` returns its argument then) and read back from the bits,
@@ -383,22 +351,19 @@ fn sah_split<const AXIS: usize>(
     // (no bounds check); the lanes are computed together from the sum the centroid bounds
     // take anyway.
     const MAGIC: f32 = 12_582_912.0;
-    let lo = Vec3A::splat(bounds.cmin[AXIS]);
-    let scale = Vec3A::splat(nb as f32 / (bounds.cmax[AXIS] - bounds.cmin[AXIS]));
+    let lo = Vec3A::splat(bounds.centroids.min[AXIS]);
+    let scale = Vec3A::splat(nb as f32 / bounds.centroids.extent()[AXIS]);
     let (first, last) = (Vec3A::splat(MAGIC), Vec3A::splat(MAGIC + (nb - 1) as f32));
     // Count and bound a primitive in its bucket of `set`, and note the bucket for the partition.
-    let bin = |set: &mut [Bucket; MAX_BUCKETS], r: &PrimBox, bin: &mut u8| {
-        let c = r.c2();
+    let bin = |set: &mut [Bucket; MAX_BUCKETS], r: &SimdBox, bin: &mut u8| {
+        let c = r.center2();
         let rounded = ((c - lo) * scale + first).min(last).max(first);
         let k = rounded[AXIS].to_bits().wrapping_sub(MAGIC.to_bits()) as usize;
         debug_assert!(k < nb);
         *bin = k as u8;
         let b = &mut set[k & (MAX_BUCKETS - 1)];
         b.count += 1;
-        b.bounds.min = b.bounds.min.min(r.min);
-        b.bounds.max = b.bounds.max.max(r.max);
-        b.bounds.cmin = b.bounds.cmin.min(c);
-        b.bounds.cmax = b.bounds.cmax.max(c);
+        b.bounds.add(r);
     };
 
     let Work {
@@ -443,18 +408,18 @@ fn sah_split<const AXIS: usize>(
     // The sweeps track counts and box areas only: `right_cost[i]` is `N·S` of the buckets
     // right of plane `i`. The chosen plane's full bounds (centroids too) are merged at the end.
     let mut right_cost = [0.0f32; MAX_BUCKETS];
-    let (mut count, mut lo, mut hi) = (0, Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+    let (mut count, mut union) = (0, SimdBox::EMPTY);
     for i in (1..nb).rev() {
         let b = &buckets[i];
-        (count, lo, hi) = (count + b.count, lo.min(b.bounds.min), hi.max(b.bounds.max));
-        right_cost[i - 1] = count as f32 * area(lo, hi);
+        (count, union) = (count + b.count, union.union(&b.bounds.boxes));
+        right_cost[i - 1] = count as f32 * union.surface_area();
     }
     let (mut best_cost, mut best_plane) = (f32::INFINITY, 0);
-    let (mut count, mut lo, mut hi) = (0, Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+    let (mut count, mut union) = (0, SimdBox::EMPTY);
     for i in 0..nb - 1 {
         let b = &buckets[i];
-        (count, lo, hi) = (count + b.count, lo.min(b.bounds.min), hi.max(b.bounds.max));
-        let cost = count as f32 * area(lo, hi) + right_cost[i];
+        (count, union) = (count + b.count, union.union(&b.bounds.boxes));
+        let cost = count as f32 * union.surface_area() + right_cost[i];
         // `i == 0`: areas overflow to ∞ for huge boxes, and the best must still be a plane.
         if i == 0 || cost < best_cost {
             (best_cost, best_plane) = (cost, i);
@@ -488,7 +453,7 @@ fn sah_split<const AXIS: usize>(
 /// True if a leaf of `n` primitives costs no more than the best split (of cost `best` × S)
 /// and may hold them.
 fn leaf_is_cheaper(config: &BvhConfig, n: usize, bounds: &Bounds, best: f32) -> bool {
-    let area = bounds.area();
+    let area = bounds.boxes.surface_area();
     n <= config.max_leaf_size as usize && n as f32 * area <= config.traversal_cost * area + best
 }
 
@@ -505,7 +470,7 @@ fn merge(a: &Bucket, b: &Bucket) -> Bucket {
 fn sweep_split(
     config: &BvhConfig,
     work: &mut Work,
-    refs: &mut [PrimBox],
+    refs: &mut [SimdBox],
     ids: &mut [u32],
     bounds: &Bounds,
     axis: usize,
@@ -516,16 +481,16 @@ fn sweep_split(
     // The sweeps track the boxes only (the centroid bounds matter for the chosen halves
     // alone, computed once at the end): `right_area[i]` is the area right of split `i`.
     let mut right_area = [0.0f32; MAX_BUCKETS];
-    let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+    let mut union = SimdBox::EMPTY;
     for i in (1..n).rev() {
-        (lo, hi) = (lo.min(refs[i].min), hi.max(refs[i].max));
-        right_area[i - 1] = area(lo, hi);
+        union = union.union(&refs[i]);
+        right_area[i - 1] = union.surface_area();
     }
     let (mut best_cost, mut best_mid) = (f32::INFINITY, 1);
-    let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+    let mut union = SimdBox::EMPTY;
     for i in 0..n - 1 {
-        (lo, hi) = (lo.min(refs[i].min), hi.max(refs[i].max));
-        let cost = (i + 1) as f32 * area(lo, hi) + (n - i - 1) as f32 * right_area[i];
+        union = union.union(&refs[i]);
+        let cost = (i + 1) as f32 * union.surface_area() + (n - i - 1) as f32 * right_area[i];
         if i == 0 || cost < best_cost {
             (best_cost, best_mid) = (cost, i + 1);
         }
@@ -543,22 +508,20 @@ fn sweep_split(
 /// `sah_buckets`) lie in random order in a first build, where an insertion sort mispredicts
 /// at every step; when they already lie in order, as in a rebuild of a tree whose boxes barely
 /// moved, one pass over the keys finds so and nothing moves. The keys are the centroid sums'
-/// bits mapped to integers in the order of `f32::total_cmp`, so the ranks are a permutation
-/// whatever the floats are.
+/// bits mapped to integers in the order of `f32::total_cmp` ([`ordered_bits`]), so the ranks
+/// are a permutation whatever the floats are.
 fn sort_by_axis(
-    refs: &mut [PrimBox],
+    refs: &mut [SimdBox],
     ids: &mut [u32],
     axis: usize,
-    tmp_refs: &mut Vec<PrimBox>,
+    tmp_refs: &mut Vec<SimdBox>,
     tmp_ids: &mut Vec<u32>,
 ) {
     let n = refs.len();
     debug_assert!(n <= MAX_BUCKETS);
     let mut keys = [0u32; MAX_BUCKETS];
     for (key, r) in keys.iter_mut().zip(refs.iter()) {
-        let bits = r.c2()[axis].to_bits();
-        // Negative floats reversed below the positive ones: `total_cmp`'s order, unsigned.
-        *key = bits ^ (((bits as i32 >> 31) as u32) | 0x8000_0000);
+        *key = ordered_bits(r.center2()[axis]);
     }
     let keys = &keys[..n];
     if keys.windows(2).all(|w| w[0] <= w[1]) {
@@ -586,9 +549,9 @@ fn sort_by_axis(
 /// Reorders `refs` and `ids` so that position `k` holds what was at `order[k].1`.
 fn gather(
     order: &[(f32, u32)],
-    tmp_refs: &mut Vec<PrimBox>,
+    tmp_refs: &mut Vec<SimdBox>,
     tmp_ids: &mut Vec<u32>,
-    refs: &mut [PrimBox],
+    refs: &mut [SimdBox],
     ids: &mut [u32],
 ) {
     tmp_refs.clear();
@@ -600,7 +563,7 @@ fn gather(
 }
 
 /// Splits at the median centroid along `axis` (`select_nth_unstable_by`, O(n)).
-fn median_split(work: &mut Work, refs: &mut [PrimBox], ids: &mut [u32], axis: usize) -> Split {
+fn median_split(work: &mut Work, refs: &mut [SimdBox], ids: &mut [u32], axis: usize) -> Split {
     let mid = refs.len() / 2;
     let Work {
         order,
@@ -612,7 +575,7 @@ fn median_split(work: &mut Work, refs: &mut [PrimBox], ids: &mut [u32], axis: us
     order.extend(
         refs.iter()
             .enumerate()
-            .map(|(i, r)| (r.c2()[axis], i as u32)),
+            .map(|(i, r)| (r.center2()[axis], i as u32)),
     );
     order.select_nth_unstable_by(mid, |a, b| a.0.total_cmp(&b.0));
     gather(order, tmp_refs, tmp_ids, refs, ids);
@@ -620,7 +583,7 @@ fn median_split(work: &mut Work, refs: &mut [PrimBox], ids: &mut [u32], axis: us
 }
 
 /// The split `refs[..mid]` / `refs[mid..]` as they lie, with bounds computed by one pass.
-fn halves(refs: &[PrimBox], mid: usize) -> Split {
+fn halves(refs: &[SimdBox], mid: usize) -> Split {
     Split {
         mid,
         left: Bounds::of(&refs[..mid]),
@@ -636,7 +599,7 @@ fn halves(refs: &[PrimBox], mid: usize) -> Split {
 /// Runs of 32 already in place, which a rebuild of a tree whose boxes barely moved is made of,
 /// are skipped by one vectorised maximum (left) or minimum (right) over their bytes.
 fn partition_bins(
-    refs: &mut [PrimBox],
+    refs: &mut [SimdBox],
     ids: &mut [u32],
     bins: &[u8],
     plane: u8,
@@ -685,7 +648,7 @@ fn partition_bins(
 
 /// Moves the refs satisfying `left` (and their ids) to the front (Hoare's scheme: each
 /// misplaced pair is swapped once) and returns how many there are.
-fn partition(refs: &mut [PrimBox], ids: &mut [u32], left: impl Fn(&PrimBox) -> bool) -> usize {
+fn partition(refs: &mut [SimdBox], ids: &mut [u32], left: impl Fn(&SimdBox) -> bool) -> usize {
     let (mut i, mut j) = (0, refs.len());
     loop {
         while i < j && left(&refs[i]) {
@@ -707,14 +670,14 @@ fn partition(refs: &mut [PrimBox], ids: &mut [u32], left: impl Fn(&PrimBox) -> b
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Vec3;
     use crate::scene::Rng;
+    use crate::{Aabb, Vec3};
 
     /// Unit boxes with their min corner at `(x, 0, 0)`, and their ids `0..`.
-    fn refs(xs: &[f32]) -> (Vec<PrimBox>, Vec<u32>) {
+    fn refs(xs: &[f32]) -> (Vec<SimdBox>, Vec<u32>) {
         let refs = xs
             .iter()
-            .map(|&x| PrimBox {
+            .map(|&x| SimdBox {
                 min: Vec3A::new(x, 0.0, 0.0),
                 max: Vec3A::new(x + 1.0, 1.0, 1.0),
             })
@@ -731,7 +694,7 @@ mod tests {
     }
 
     fn same(a: &Bounds, b: &Bounds) -> bool {
-        a.min == b.min && a.max == b.max && a.cmin == b.cmin && a.cmax == b.cmax
+        a.boxes == b.boxes && a.centroids == b.centroids
     }
 
     #[test]
@@ -798,9 +761,9 @@ mod tests {
         for _ in 0..2000 {
             let n = 1 + rng.below(MAX_BUCKETS as u32) as usize;
             let xs: Vec<f32> = (0..n).map(|_| pool[rng.below(9) as usize]).collect();
-            let refs: Vec<PrimBox> = xs
+            let refs: Vec<SimdBox> = xs
                 .iter()
-                .map(|&x| PrimBox {
+                .map(|&x| SimdBox {
                     min: Vec3A::new(0.0, x, 0.0),
                     max: Vec3A::new(1.0, x, 1.0),
                 })
@@ -820,11 +783,11 @@ mod tests {
     fn interleaved_bucket_sets_bin_like_one() {
         let mut rng = Rng::new(5);
         let n = BIN_SETS_MIN + 3;
-        let boxes: Vec<PrimBox> = (0..n)
+        let boxes: Vec<SimdBox> = (0..n)
             .map(|_| {
                 let c = rng.vec3_in(Vec3::splat(-50.0), Vec3::new(80.0, 20.0, 20.0));
                 let h = Vec3::splat(rng.range(0.1, 2.0));
-                PrimBox::new(&Aabb::new(c - h, c + h))
+                SimdBox::new(&Aabb::new(c - h, c + h))
             })
             .collect();
         let config = BvhConfig::default();

@@ -33,13 +33,12 @@ mod query;
 mod refit;
 mod validate;
 
-use crate::geom::check_aabb;
+use crate::geom::{SimdBox, check_aabb};
 use crate::{Aabb, Error, ProxyKey};
 use node::Node;
 use slotmap::{Key, SecondaryMap, SlotMap};
 
 pub(crate) use build::BuildScratch;
-pub(crate) use node::PrimBox;
 
 /// "No index" in the `u32` side arrays.
 const NONE: u32 = u32::MAX;
@@ -157,7 +156,7 @@ pub struct Bvh {
     /// (a leaf's range indexes them directly), the rest are pending.
     keys: Vec<ProxyKey>,
     /// Primitive index → current box; [`Aabb::EMPTY`] for a tombstone.
-    boxes: Vec<PrimBox>,
+    boxes: Vec<SimdBox>,
     /// Primitives covered by the node array (live or tombstones).
     tree_len: usize,
     /// Tombstones among the first `tree_len` primitives.
@@ -261,7 +260,7 @@ impl Bvh {
     fn push_pending(&mut self, key: ProxyKey, aabb: Aabb) {
         self.ids.insert(key, self.boxes.len() as u32);
         self.keys.push(key);
-        self.boxes.push(PrimBox::new(&aabb));
+        self.boxes.push(SimdBox::new(&aabb));
     }
 
     /// Replaces the box of `key`. Queries and pairs see the new box at once; node boxes are
@@ -276,7 +275,7 @@ impl Bvh {
     #[inline]
     pub(crate) fn update_checked(&mut self, key: ProxyKey, aabb: &Aabb) -> Result<(), Error> {
         debug_assert!(check_aabb(aabb).is_ok());
-        let b = PrimBox::new(aabb);
+        let b = SimdBox::new(aabb);
         let id = *self.ids.get(key).ok_or(Error::UnknownProxy)? as usize;
         self.boxes[id] = b;
         if id < self.tree_len {
@@ -292,7 +291,7 @@ impl Bvh {
         self.slots.remove(key);
         if id < self.tree_len {
             self.keys[id] = ProxyKey::null();
-            self.boxes[id] = PrimBox::EMPTY;
+            self.boxes[id] = SimdBox::EMPTY;
             self.tombstones += 1;
         } else {
             // Pending: keep the pending region dense by moving the last one into the hole.

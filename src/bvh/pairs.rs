@@ -2,8 +2,9 @@
 //! lists against both (tree queries and sort-and-sweep on x).
 
 use super::Bvh;
-use super::node::{Node, PrimBox};
+use super::node::Node;
 use crate::ProxyKey;
+use crate::geom::SimdBox;
 
 impl Bvh {
     /// Calls `f(a, b)` once for every unordered pair of live primitives whose current boxes
@@ -122,7 +123,7 @@ impl Bvh {
 /// The slices of a tree that the descents read (tree primitives only, not the pending ones).
 struct Tree<'a> {
     nodes: &'a [Node],
-    boxes: &'a [PrimBox],
+    boxes: &'a [SimdBox],
     keys: &'a [ProxyKey],
 }
 
@@ -235,7 +236,7 @@ fn leaf_pairs(ta: &Tree, na: &Node, tb: &Tree, nb: &Node, f: &mut impl FnMut(Pro
 
 /// Bit `k` set iff `boxes[k]` overlaps `b` (at most 64 boxes), computed without branches.
 #[inline]
-fn mask_of(boxes: &[PrimBox], b: &PrimBox) -> u64 {
+fn mask_of(boxes: &[SimdBox], b: &SimdBox) -> u64 {
     debug_assert!(boxes.len() <= 64);
     boxes
         .iter()
@@ -256,7 +257,7 @@ fn bits(mut m: u64) -> impl Iterator<Item = usize> {
 }
 
 /// Fills `order` with the indices `range`, sorted by `boxes[i].min.x`.
-fn sort_by_min_x(order: &mut Vec<u32>, range: core::ops::Range<usize>, boxes: &[PrimBox]) {
+fn sort_by_min_x(order: &mut Vec<u32>, range: core::ops::Range<usize>, boxes: &[SimdBox]) {
     order.clear();
     order.extend(range.map(|i| i as u32));
     order.sort_unstable_by(|&i, &j| boxes[i as usize].min.x.total_cmp(&boxes[j as usize].min.x));
@@ -270,9 +271,9 @@ fn sort_by_min_x(order: &mut Vec<u32>, range: core::ops::Range<usize>, boxes: &[
 /// `max.x` finds them all; a pair is found from whichever of its two boxes is taken first.
 fn sweep_cross(
     xs: &[u32],
-    bx: &[PrimBox],
+    bx: &[SimdBox],
     ys: &[u32],
-    by: &[PrimBox],
+    by: &[SimdBox],
     mut f: impl FnMut(usize, usize),
 ) {
     let (mut i, mut j) = (0, 0);

@@ -1,6 +1,5 @@
 //! The whole-tree invariant check tests run after every mutation.
 
-use super::node::PrimBox;
 use super::{Bvh, NONE};
 use slotmap::Key;
 
@@ -97,7 +96,11 @@ impl Bvh {
         for (i, (key, aabb)) in self.keys.iter().zip(&self.boxes).enumerate() {
             if key.is_null() {
                 assert!(i < self.tree_len, "pending primitive {i} is a tombstone");
-                assert_eq!(*aabb, PrimBox::EMPTY, "tombstone {i} has a box");
+                assert_eq!(
+                    *aabb,
+                    crate::geom::SimdBox::EMPTY,
+                    "tombstone {i} has a box"
+                );
                 tombstones += 1;
                 continue;
             }
