@@ -2,7 +2,9 @@
 //! that gives the same set in O(n log n + pairs) for tests at scale. Public, so users can diff
 //! their own scenes with it.
 
-use crate::{Aabb, Pair, ProxyKey, Vec3, geom};
+use crate::geom::{self, SimdBox};
+use crate::sweep::{self, Ordered};
+use crate::{Aabb, Pair, ProxyKey, Vec3};
 
 /// One proxy as the reference sees it: its key, its (already grown) box, and whether it is
 /// static (static×static pairs are never reported).
@@ -60,19 +62,21 @@ pub fn pairs(proxies: &[Proxy]) -> Vec<Pair> {
 /// O(n log n + k) where k counts the x-overlapping candidates.
 #[must_use]
 pub fn sweep_pairs(proxies: &[Proxy]) -> Vec<Pair> {
-    let mut order: Vec<&Proxy> = proxies.iter().collect();
-    order.sort_by(|p, q| p.aabb.min.x.total_cmp(&q.aabb.min.x));
+    let boxes: Vec<SimdBox> = proxies.iter().map(|p| SimdBox::new(&p.aabb)).collect();
+    let mut order = Vec::new();
+    sweep::sort_entries(&mut order, &boxes, 0, |_| true);
+    let list = Ordered {
+        order: &order,
+        items: &boxes,
+        axis: 0,
+    };
     let mut out = Vec::new();
-    for (i, p) in order.iter().enumerate() {
-        for q in &order[i + 1..] {
-            if q.aabb.min.x > p.aabb.max.x {
-                break;
-            }
-            if !(p.is_static && q.is_static) && p.aabb.overlaps(&q.aabb) {
-                out.push(Pair::new(p.key, q.key));
-            }
+    sweep::self_pairs_of(&list, |i, j| {
+        let (p, q) = (&proxies[i], &proxies[j]);
+        if !(p.is_static && q.is_static) {
+            out.push(Pair::new(p.key, q.key));
         }
-    }
+    });
     crate::pair::sort_dedup(&mut out);
     out
 }

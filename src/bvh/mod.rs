@@ -173,8 +173,9 @@ pub struct Bvh {
     /// Scratch reused by every build and traversal.
     scratch: BuildScratch,
     pair_stack: Vec<(u32, u32)>,
-    sweep_a: Vec<u32>,
-    sweep_b: Vec<u32>,
+    /// Sweep orders of the pending boxes (`sweep::sort_entries`).
+    sweep_a: Vec<u64>,
+    sweep_b: Vec<u64>,
 }
 
 impl Bvh {

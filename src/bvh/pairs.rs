@@ -5,6 +5,7 @@ use super::Bvh;
 use super::node::Node;
 use crate::ProxyKey;
 use crate::geom::SimdBox;
+use crate::sweep::{self, Ordered};
 
 impl Bvh {
     /// Calls `f(a, b)` once for every unordered pair of live primitives whose current boxes
@@ -34,23 +35,7 @@ impl Bvh {
             let node = &t.nodes[a as usize];
             if node.is_leaf() {
                 let range = node.range();
-                let boxes = &t.boxes[range.clone()];
-                let keys = &t.keys[range];
-                for (i, (bi, &ki)) in boxes.iter().zip(keys).enumerate() {
-                    let rest = &boxes[i + 1..];
-                    if rest.len() <= 64 {
-                        // The tests into a mask, the pairs from its bits (see `leaf_pairs`).
-                        for k in bits(mask_of(rest, bi)) {
-                            f(ki, keys[i + 1 + k]);
-                        }
-                    } else {
-                        for (bj, &kj) in rest.iter().zip(&keys[i + 1..]) {
-                            if bi.overlaps(bj) {
-                                f(ki, kj);
-                            }
-                        }
-                    }
-                }
+                leaf_self_pairs(&t.boxes[range.clone()], &t.keys[range], &mut f);
             } else {
                 let (l, r) = node.children(a);
                 if t.nodes[l as usize]
@@ -69,19 +54,14 @@ impl Bvh {
             self.query_tree(&self.boxes[p], |i| f(self.keys[p], self.keys[i]));
         }
         let mut order = core::mem::take(&mut self.sweep_a);
-        sort_by_min_x(&mut order, self.tree_len..self.boxes.len(), &self.boxes);
-        for (n, &p) in order.iter().enumerate() {
-            let bp = &self.boxes[p as usize];
-            for &q in &order[n + 1..] {
-                let bq = &self.boxes[q as usize];
-                if bq.min.x > bp.max.x {
-                    break;
-                }
-                if bp.overlaps(bq) {
-                    f(self.keys[p as usize], self.keys[q as usize]);
-                }
-            }
-        }
+        let (boxes, keys) = (self.pending_boxes(), self.pending_keys());
+        sweep::sort_entries(&mut order, boxes, 0, |_| true);
+        let list = Ordered {
+            order: &order,
+            items: boxes,
+            axis: 0,
+        };
+        sweep::self_pairs_of(&list, |i, j| f(keys[i], keys[j]));
         self.sweep_a = order;
     }
 
@@ -110,11 +90,23 @@ impl Bvh {
         }
         let mut xs = core::mem::take(&mut self.sweep_a);
         let mut ys = core::mem::take(&mut self.sweep_b);
-        sort_by_min_x(&mut xs, self.tree_len..self.boxes.len(), &self.boxes);
-        sort_by_min_x(&mut ys, other.tree_len..other.boxes.len(), &other.boxes);
-        sweep_cross(&xs, &self.boxes, &ys, &other.boxes, |i, j| {
-            f(self.keys[i], other.keys[j]);
-        });
+        let (bx, kx) = (self.pending_boxes(), self.pending_keys());
+        let (by, ky) = (other.pending_boxes(), other.pending_keys());
+        sweep::sort_entries(&mut xs, bx, 0, |_| true);
+        sweep::sort_entries(&mut ys, by, 0, |_| true);
+        let (lx, ly) = (
+            Ordered {
+                order: &xs,
+                items: bx,
+                axis: 0,
+            },
+            Ordered {
+                order: &ys,
+                items: by,
+                axis: 0,
+            },
+        );
+        sweep::cross_pairs_of(&lx, &ly, |i, j| f(kx[i], ky[j]));
         self.sweep_a = xs;
         self.sweep_b = ys;
     }
@@ -192,6 +184,22 @@ fn cross_step(
     }
 }
 
+/// Every overlapping pair within one leaf. Each box's tests against the boxes after it go into a
+/// bit mask and the pairs are read from its set bits (see [`leaf_pairs`]); leaves of more than
+/// 65 boxes, which only a `max_leaf_size` above 64 makes, take the plain loop.
+#[inline]
+fn leaf_self_pairs(boxes: &[SimdBox], keys: &[ProxyKey], f: &mut impl FnMut(ProxyKey, ProxyKey)) {
+    if boxes.len() > 65 {
+        sweep::all_pairs(boxes, |i, j| f(keys[i], keys[j]));
+        return;
+    }
+    for (i, (bi, &ki)) in boxes.iter().zip(keys).enumerate() {
+        for k in bits(mask_of(&boxes[i + 1..], bi)) {
+            f(ki, keys[i + 1 + k]);
+        }
+    }
+}
+
 /// Every overlapping pair of the primitives of leaf `na` (in `ta`) × leaf `nb` (in `tb`). A
 /// box of either leaf that misses the other leaf's box pairs with nothing there, so the boxes
 /// of each leaf that meet the other leaf's box are noted in a bit mask first, and only those
@@ -254,54 +262,4 @@ fn bits(mut m: u64) -> impl Iterator<Item = usize> {
             k
         })
     })
-}
-
-/// Fills `order` with the indices `range`, sorted by `boxes[i].min.x`.
-fn sort_by_min_x(order: &mut Vec<u32>, range: core::ops::Range<usize>, boxes: &[SimdBox]) {
-    order.clear();
-    order.extend(range.map(|i| i as u32));
-    order.sort_unstable_by(|&i, &j| boxes[i as usize].min.x.total_cmp(&boxes[j as usize].min.x));
-}
-
-/// Every overlapping pair of `xs` × `ys` (index lists sorted by `min.x`), as `f(x, y)`.
-///
-/// Merge the two lists by `min.x` (ties: `xs` first). When a box is taken, every box of the
-/// other list it overlaps and that comes later in the merge lies at or after the other list's
-/// cursor and has `min.x <= its max.x`, so scanning from the cursor until `min.x` passes its
-/// `max.x` finds them all; a pair is found from whichever of its two boxes is taken first.
-fn sweep_cross(
-    xs: &[u32],
-    bx: &[SimdBox],
-    ys: &[u32],
-    by: &[SimdBox],
-    mut f: impl FnMut(usize, usize),
-) {
-    let (mut i, mut j) = (0, 0);
-    while i < xs.len() && j < ys.len() {
-        let x = xs[i] as usize;
-        let y = ys[j] as usize;
-        if bx[x].min.x <= by[y].min.x {
-            for &y2 in &ys[j..] {
-                let y2 = y2 as usize;
-                if by[y2].min.x > bx[x].max.x {
-                    break;
-                }
-                if bx[x].overlaps(&by[y2]) {
-                    f(x, y2);
-                }
-            }
-            i += 1;
-        } else {
-            for &x2 in &xs[i..] {
-                let x2 = x2 as usize;
-                if bx[x2].min.x > by[y].max.x {
-                    break;
-                }
-                if bx[x2].overlaps(&by[y]) {
-                    f(x2, y);
-                }
-            }
-            j += 1;
-        }
-    }
 }
