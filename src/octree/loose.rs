@@ -39,7 +39,7 @@
 
 use super::cell::Cell;
 use super::placement::LooseKey;
-use super::walk::{self, Hot, SHORT_CROSS, Sweeps, Tester, runs};
+use super::walk::{self, Hot, SHORT_CROSS, Sweeps, Tester, Walk, runs};
 use super::{MAX_DEPTH, Octree, PassCost};
 use crate::ProxyKey;
 use crate::geom::SimdBox;
@@ -106,17 +106,15 @@ impl Octree {
         s: &mut Scratch,
         emit: impl FnMut(ProxyKey, ProxyKey),
     ) -> PassCost {
-        if self.objs.is_empty() {
-            return PassCost::default();
-        }
-        self.sort_into_walk_order(ws);
-        let walk::Scratch {
+        let Some(Walk {
             hot,
             node_key,
-            keys,
+            t,
             sweeps,
-            ..
-        } = ws;
+        }) = self.begin_pass(ws, emit)
+        else {
+            return PassCost::default();
+        };
         let deeper = self.occupied_below();
         // Only a pass with cross-level pairs needs the runs by node slot.
         let d = self.grid.depth as usize;
@@ -136,11 +134,7 @@ impl Octree {
             run_key,
             run_start,
             run_of,
-            t: Tester {
-                keys,
-                tests: 0,
-                emit,
-            },
+            t,
             sweeps,
             dense,
             first: [0; ROWS.len()],
@@ -207,6 +201,25 @@ impl Scratch {
         if cross {
             for &slot in &self.run_slot {
                 self.run_of[slot as usize] = [0, 0];
+            }
+        }
+    }
+}
+
+/// Tests every sphere of `own` against the spheres `hot[k]` for `k` in `listed`.
+#[inline]
+fn test_listed<F: FnMut(ProxyKey, ProxyKey)>(
+    t: &mut Tester<'_, F>,
+    own: &[Hot],
+    hot: &[Hot],
+    listed: &[u32],
+) {
+    t.tests += (own.len() * listed.len()) as u64;
+    for a in own {
+        for &b in listed {
+            let b = &hot[b as usize];
+            if a.overlaps(b) {
+                t.emit(a, b);
             }
         }
     }
@@ -311,15 +324,7 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
                     .between(own, &hot[lo as usize..hi as usize], self.sweeps);
             }
         }
-        self.t.tests += (own.len() * len) as u64;
-        for a in own {
-            for &b in &self.near[..len] {
-                let b = &hot[b as usize];
-                if a.overlaps(b) {
-                    self.t.emit(a, b);
-                }
-            }
-        }
+        test_listed(&mut self.t, own, hot, &self.near[..len]);
     }
 
     /// The forward pairs of a run of many spheres (a crowded level): the stretches' spheres
@@ -352,15 +357,7 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
                 len += usize::from(h.bx.overlaps(&union));
             }
         }
-        self.t.tests += (own.len() * len) as u64;
-        for a in own {
-            for &b in &self.dense[..len] {
-                let b = &hot[b as usize];
-                if a.overlaps(b) {
-                    self.t.emit(a, b);
-                }
-            }
-        }
+        test_listed(&mut self.t, own, hot, &self.dense[..len]);
     }
 
     /// The cross-level pairs of the spheres `own` of the node at cell `xyz` of `level`: every

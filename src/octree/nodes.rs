@@ -15,6 +15,19 @@ const PAGE: usize = 1 << PAGE_BITS;
 /// popped last.
 const STACK: usize = 1 + 7 * MAX_DEPTH as usize + 8;
 
+/// The ancestors of `node`, parent first, each with the octant of its child on the path.
+fn ancestors(node: u32) -> impl Iterator<Item = (u32, u32)> {
+    let mut level = level_of(node);
+    let mut code = code_of(node, level);
+    core::iter::from_fn(move || {
+        (level > 0).then(|| {
+            let octant = code & 7;
+            (level, code) = (level - 1, code >> 3);
+            (node_index(level, code), octant)
+        })
+    })
+}
+
 /// Per-node list heads and child-occupancy masks, paged: `table[node >> PAGE_BITS]` is the
 /// page's position in `head`/`mask` plus one, or 0 while no node of the page was ever
 /// occupied (reads then see an empty node). Pages are never freed.
@@ -90,34 +103,24 @@ impl Nodes {
     /// Marks the path from `node` to the root as occupied; call after `node` became non-empty.
     /// Stops at the first ancestor that was already non-empty (its own ancestors are marked).
     pub(super) fn mark_occupied(&mut self, node: u32) {
-        let mut level = level_of(node);
-        let mut code = code_of(node, level);
-        while level > 0 {
-            let parent = node_index(level - 1, code >> 3);
+        for (parent, octant) in ancestors(node) {
             let was_empty = self.is_empty(parent);
             let s = self.slot_mut(parent);
-            self.mask[s] |= 1 << (code & 7);
+            self.mask[s] |= 1 << octant;
             if !was_empty {
                 return;
             }
-            level -= 1;
-            code >>= 3;
         }
     }
 
     /// Clears occupancy bits up from `node`; call after `node` became empty.
     pub(super) fn mark_empty(&mut self, node: u32) {
-        let mut level = level_of(node);
-        let mut code = code_of(node, level);
-        while level > 0 {
-            let parent = node_index(level - 1, code >> 3);
+        for (parent, octant) in ancestors(node) {
             let s = self.slot_mut(parent);
-            self.mask[s] &= !(1 << (code & 7));
+            self.mask[s] &= !(1 << octant);
             if !self.is_empty(parent) {
                 return;
             }
-            level -= 1;
-            code >>= 3;
         }
     }
 

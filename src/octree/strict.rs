@@ -41,7 +41,7 @@
 
 use super::cell::unmorton;
 use super::placement::StrictKey;
-use super::walk::{self, Hot, SHORT_SELF, Sweeps, Tester, is_short_cross, runs};
+use super::walk::{self, Hot, SHORT_SELF, Sweeps, Tester, Walk, is_short_cross, runs};
 use super::{Octree, PassCost};
 use crate::ProxyKey;
 use crate::sweep;
@@ -135,24 +135,17 @@ impl Octree {
         s: &mut Scratch,
         emit: impl FnMut(ProxyKey, ProxyKey),
     ) -> PassCost {
-        if self.objs.is_empty() {
-            return PassCost::default();
-        }
-        self.sort_into_walk_order(ws);
-        let walk::Scratch {
+        let Some(Walk {
             hot,
             node_key,
-            keys,
+            mut t,
             sweeps,
-            ..
-        } = ws;
+        }) = self.begin_pass(ws, emit)
+        else {
+            return PassCost::default();
+        };
         let d = self.grid.depth;
         s.start(hot, node_key, d);
-        let mut t = Tester {
-            keys,
-            tests: 0,
-            emit,
-        };
         let mut visited = 0;
         for (key, i, j) in runs(node_key) {
             let key = StrictKey(key);

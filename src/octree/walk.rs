@@ -134,6 +134,15 @@ fn radix_sort(items: &mut Vec<u64>, tmp: &mut Vec<u64>, counts: &mut Vec<u32>, l
     }
 }
 
+/// A pass's view of the walk order: the sorted spheres and their node keys, the tester that
+/// runs and counts the pass's box tests, and the sweep buffers.
+pub(super) struct Walk<'a, F> {
+    pub(super) hot: &'a [Hot],
+    pub(super) node_key: &'a [u64],
+    pub(super) t: Tester<'a, F>,
+    pub(super) sweeps: &'a mut Sweeps,
+}
+
 /// Runs and counts the box tests of one pass, mapping walk positions to proxy keys.
 pub(super) struct Tester<'a, F> {
     pub(super) keys: &'a [ProxyKey],
@@ -229,9 +238,28 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
 }
 
 impl Octree {
+    /// Sorts the spheres into walk order in `s` and returns a pass's view of it, with a tester
+    /// that hands the overlapping pairs to `emit`; `None` for an empty tree.
+    pub(super) fn begin_pass<'a, F>(&self, s: &'a mut Scratch, emit: F) -> Option<Walk<'a, F>> {
+        if self.objs.is_empty() {
+            return None;
+        }
+        self.sort_into_walk_order(s);
+        Some(Walk {
+            hot: &s.hot,
+            node_key: &s.node_key,
+            t: Tester {
+                keys: &s.keys,
+                tests: 0,
+                emit,
+            },
+            sweeps: &mut s.sweeps,
+        })
+    }
+
     /// Sorts the spheres by walk key and fills the walk-ordered arrays of `s`: box and cell
     /// range, walk key and proxy key.
-    pub(super) fn sort_into_walk_order(&self, s: &mut Scratch) {
+    fn sort_into_walk_order(&self, s: &mut Scratch) {
         let Scratch {
             items,
             items_tmp,
