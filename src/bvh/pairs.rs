@@ -3,9 +3,9 @@
 
 use super::Bvh;
 use super::node::Node;
-use crate::ProxyKey;
 use crate::geom::SimdBox;
 use crate::sweep::{self, Ordered};
+use crate::{Pair, ProxyKey};
 
 impl Bvh {
     /// Calls `f(a, b)` once for every unordered pair of live primitives whose current boxes
@@ -63,6 +63,13 @@ impl Bvh {
         };
         sweep::self_pairs_of(&list, |i, j| f(keys[i], keys[j]));
         self.sweep_a = order;
+    }
+
+    /// Appends every overlapping pair of [`Bvh::for_each_pair`], canonical (`a < b`) but
+    /// **unsorted**, to `out` (which is not cleared); sort with [`crate::pair::sort_dedup`] if
+    /// order matters.
+    pub fn pairs_into(&mut self, out: &mut Vec<Pair>) {
+        self.for_each_pair(|a, b| out.push(Pair::new(a, b)));
     }
 
     /// Calls `f(a, b)` once for every live primitive `a` of `self` and `b` of `other` whose
@@ -184,12 +191,15 @@ fn cross_step(
     }
 }
 
+/// The most boxes whose tests fit one mask (`u64`) of [`mask_of`].
+const MASK_BITS: usize = u64::BITS as usize;
+
 /// Every overlapping pair within one leaf. Each box's tests against the boxes after it go into a
 /// bit mask and the pairs are read from its set bits (see [`leaf_pairs`]); leaves of more than
-/// 65 boxes, which only a `max_leaf_size` above 64 makes, take the plain loop.
+/// `MASK_BITS + 1` boxes, which only a `max_leaf_size` above 64 makes, take the plain loop.
 #[inline]
 fn leaf_self_pairs(boxes: &[SimdBox], keys: &[ProxyKey], f: &mut impl FnMut(ProxyKey, ProxyKey)) {
-    if boxes.len() > 65 {
+    if boxes.len() > MASK_BITS + 1 {
         sweep::all_pairs(boxes, |i, j| f(keys[i], keys[j]));
         return;
     }
@@ -206,15 +216,15 @@ fn leaf_self_pairs(boxes: &[SimdBox], keys: &[ProxyKey], f: &mut impl FnMut(Prox
 /// are tested against each other: two leaves that overlap at a corner cost one pass over each,
 /// not the product. Every test's result goes into a bit mask too, and the pairs are read from
 /// the set bits, so the loops branch on their counts, not on the tests (whose outcomes the
-/// branch predictor cannot guess). Leaves of more than 64 boxes, which only a `max_leaf_size`
-/// above 64 makes, take the plain loop.
+/// branch predictor cannot guess). Leaves of more than [`MASK_BITS`] boxes, which only a
+/// `max_leaf_size` above 64 makes, take the plain loop.
 #[inline]
 fn leaf_pairs(ta: &Tree, na: &Node, tb: &Tree, nb: &Node, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
     let (a_box, b_box) = (na.bounds(), nb.bounds());
     let (ra, rb) = (na.range(), nb.range());
     let (boxes_a, keys_a) = (&ta.boxes[ra.clone()], &ta.keys[ra]);
     let (boxes_b, keys_b) = (&tb.boxes[rb.clone()], &tb.keys[rb]);
-    if boxes_a.len() > 64 || boxes_b.len() > 64 {
+    if boxes_a.len() > MASK_BITS || boxes_b.len() > MASK_BITS {
         for (bi, &ki) in boxes_a.iter().zip(keys_a) {
             if bi.overlaps(&b_box) {
                 for (bj, &kj) in boxes_b.iter().zip(keys_b) {
@@ -242,10 +252,11 @@ fn leaf_pairs(ta: &Tree, na: &Node, tb: &Tree, nb: &Node, f: &mut impl FnMut(Pro
     }
 }
 
-/// Bit `k` set iff `boxes[k]` overlaps `b` (at most 64 boxes), computed without branches.
+/// Bit `k` set iff `boxes[k]` overlaps `b` (at most [`MASK_BITS`] boxes), computed without
+/// branches.
 #[inline]
 fn mask_of(boxes: &[SimdBox], b: &SimdBox) -> u64 {
-    debug_assert!(boxes.len() <= 64);
+    debug_assert!(boxes.len() <= MASK_BITS);
     boxes
         .iter()
         .enumerate()
