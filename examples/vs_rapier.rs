@@ -39,9 +39,24 @@
 
 use broadleaf::rapier::{Comparison, SceneWorld, record_pile};
 use broadleaf::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Scene};
-use broadleaf::{BroadPhase, Config, Placement, brute};
+use broadleaf::{BroadPhase, Config, Pair, Placement, brute};
 use std::process::exit;
 use std::time::Instant;
+
+/// The pairs `bp` must report: brute force over its proxies' margin-grown boxes, static bodies
+/// flagged.
+fn brute_pairs(bp: &BroadPhase) -> Vec<Pair> {
+    let margin = bp.config().margin;
+    let proxies: Vec<brute::Proxy> = bp
+        .iter()
+        .map(|(key, shape)| brute::Proxy {
+            key,
+            aabb: shape.grown_aabb(margin),
+            is_static: shape.is_static(),
+        })
+        .collect();
+    brute::sweep_pairs(&proxies)
+}
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Index {
@@ -266,11 +281,7 @@ fn run(name: &str, n: usize, args: &Args) -> Row {
     // rapier detects the last frame's poses (and holds its inserts) in one more step.
     theirs.step();
     let (rapier_pairs, unmapped) = theirs.pairs(&ours.feed);
-    let mut cmp = Comparison::new(
-        &last_pairs,
-        &rapier_pairs,
-        &brute::broadphase_pairs(&ours.bp),
-    );
+    let mut cmp = Comparison::new(&last_pairs, &rapier_pairs, &brute_pairs(&ours.bp));
     cmp.unmapped = unmapped;
     Row {
         scene: name.to_string(),

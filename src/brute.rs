@@ -1,6 +1,6 @@
 //! The reference every test compares against: the O(n²) all-pairs test, plus a sort-and-sweep
 //! that gives the same set in O(n log n + pairs) for tests at scale. Public, so users can diff
-//! their own scenes with it.
+//! their own scenes with it. It knows boxes and keys only, none of the structures it checks.
 
 use crate::geom::{self, SimdBox};
 use crate::sweep::{self, Ordered};
@@ -19,17 +19,6 @@ pub struct Proxy {
 }
 
 impl Proxy {
-    /// A proxy of a `BroadPhase` shape: the box the broadphase pairs
-    /// ([`Shape::grown_aabb`](crate::Shape::grown_aabb)) and whether it is a static body.
-    #[must_use]
-    pub fn of(key: ProxyKey, shape: &crate::Shape, margin: f32) -> Self {
-        Self {
-            key,
-            aabb: shape.grown_aabb(margin),
-            is_static: shape.is_static(),
-        }
-    }
-
     /// A non-static proxy.
     #[must_use]
     pub fn new(key: ProxyKey, aabb: Aabb) -> Self {
@@ -79,18 +68,6 @@ pub fn sweep_pairs(proxies: &[Proxy]) -> Vec<Pair> {
     });
     crate::pair::sort_dedup(&mut out);
     out
-}
-
-/// The pair set a [`BroadPhase`](crate::BroadPhase) must report for its current proxies:
-/// [`sweep_pairs`] over their margin-grown boxes, static bodies flagged.
-#[must_use]
-pub fn broadphase_pairs(bp: &crate::BroadPhase) -> Vec<Pair> {
-    let margin = bp.config().margin;
-    let proxies: Vec<Proxy> = bp
-        .iter()
-        .map(|(key, shape)| Proxy::of(key, &shape, margin))
-        .collect();
-    sweep_pairs(&proxies)
 }
 
 /// Keys of every proxy whose box overlaps `aabb`, sorted.
