@@ -395,7 +395,7 @@ mod tests {
         assert_eq!(b.ray_entry(low_face, inverse_dir(-d), 10.0), None);
         assert_eq!(b.ray_entry(low_face, inverse_dir(d), 10.0), Some(1.0));
         // On the plane of one face but outside the box on another axis: a miss (a NaN from
-        // 0 · ∞ once leaked through glam's comparison-based min/max and made this a hit).
+        // 0 · ∞ must not leak through glam's comparison-based min/max and make this a hit).
         let outside = Aabb::new(Vec3::new(-2.0, -4.0, 1.0), Vec3::new(-1.0, 0.0, 5.0));
         assert_eq!(
             outside.ray_entry(Vec3::new(13.0, 3.0, 5.0), inverse_dir(d), 23.0),

@@ -25,6 +25,19 @@
 //! # Keys
 //! [`Bvh::insert`] mints keys from a slotmap owned by the tree; `BroadPhase` mints its own keys
 //! and hands them in. Use one way or the other on one tree, never both.
+//!
+//! # Conventions
+//! The same for [`Bvh`] and [`Octree`](crate::Octree):
+//! - **Constructors refuse, never correct.** [`Bvh::new`] and [`Bvh::from_aabbs`] return `Err`
+//!   naming the first bad field or box ([`Error::InvalidConfig`], [`Error::NonFinite`],
+//!   [`Error::InvertedAabb`]) and build nothing; no value is clamped or replaced.
+//! - **`validate` panics, `check` returns.** [`Bvh::validate`] checks every internal invariant
+//!   and panics on the first broken one (tests, debugging); [`BvhConfig::check`] tells a caller
+//!   whether a configuration is valid, as a `Result`.
+//! - **Pairs two ways.** [`Bvh::for_each_pair`] calls a closure per overlapping pair;
+//!   [`Bvh::pairs_into`] appends them to a `Vec<Pair>`, canonical and unsorted.
+//! - **Stats are cheap.** [`Bvh::stats`] walks the node array once (for the SAH cost and the
+//!   depth) and allocates nothing.
 
 mod build;
 mod node;

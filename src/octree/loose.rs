@@ -50,10 +50,12 @@ const ROWS: [[i32; 2]; 4] = [[1, 0], [-1, 1], [0, 1], [1, 1]];
 /// The forward stretches of a node: the rest of its own row, then one per row of [`ROWS`].
 const STRETCHES: usize = 1 + ROWS.len();
 
-/// Runs of at most this many spheres test their forward neighbours through one list.
+/// Runs of at most this many spheres test their forward neighbours through one list; longer
+/// runs first filter the neighbours by the union of their boxes, which costs a test per
+/// neighbour and pays once it saves more than that.
 const NEAR_OWN: usize = 4;
 /// Neighbour stretches of at most this many spheres go into that list, longer ones are tested
-/// on their own.
+/// on their own: most stretches of a level whose cells hold about one sphere hold 0–2.
 const NEAR_RANGE: usize = 4;
 /// The list's room: every stretch at its longest, and the slack of the last stretch's writes.
 const NEAR_CAP: usize = STRETCHES * NEAR_RANGE + NEAR_RANGE;

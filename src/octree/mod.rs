@@ -23,8 +23,8 @@
 //!
 //! The modules, each standing only on those before it: `cell` (implicit node indexing and
 //! Morton codes), `nodes` (paged per-node arrays and the one subtree walk), `placement` (both
-//! placement rules, the walk keys and the region a node's spheres reach: the only module that
-//! tells the placements apart), `walk` (the walk order, the test counter and the short and
+//! placement rules, the walk keys and the region a node's spheres reach: apart from
+//! [`Octree::for_each_pair`] choosing the pass, the only code that tells the placements apart), `walk` (the walk order, the test counter and the short and
 //! swept pair loops both passes use), then `strict` and `loose` (one pair pass each), `query`
 //! and `validate`.
 //!
@@ -34,6 +34,19 @@
 //! one of its nodes or below it. A depth-10 tree (1.2 G implicit nodes) therefore costs a
 //! 1.2 MB page table plus the pages its spheres touch, and a scene of 100k spheres at depth 5
 //! costs ten pages.
+//!
+//! # Conventions
+//! The same for [`Octree`] and [`Bvh`](crate::Bvh):
+//! - **Constructors refuse, never correct.** [`Octree::new`] and [`Octree::with_placement`]
+//!   return `Err` naming the first bad argument ([`Error::DepthOutOfRange`],
+//!   [`Error::InvalidBounds`]) and build nothing; no argument is clamped or replaced.
+//! - **`validate` panics, `check` returns.** [`Octree::validate`] checks every internal
+//!   invariant and panics on the first broken one (tests, debugging); a `check` method (such as
+//!   [`BvhConfig::check`](crate::BvhConfig::check)) tells a caller whether values it gives are
+//!   valid, as a `Result`.
+//! - **Pairs two ways.** [`Octree::for_each_pair`] calls a closure per overlapping pair;
+//!   [`Octree::pairs_into`] appends them to a `Vec<Pair>`, canonical and unsorted.
+//! - **Stats are cheap.** [`Octree::stats`] copies counters: no allocation, O(1).
 
 mod cell;
 mod loose;
@@ -52,7 +65,9 @@ use nodes::Nodes;
 use placement::Grid;
 use slotmap::{SecondaryMap, SlotMap};
 
-/// The deepest octree accepted by `Octree::new`: levels `0..=MAX_DEPTH`.
+/// The deepest octree accepted by `Octree::new`: levels `0..=MAX_DEPTH`. At depth 10 a cell's
+/// Morton code (10 bits per axis) still fits a `u32`, and so does the index of every node
+/// (1 227 133 513 of them).
 pub const MAX_DEPTH: u32 = 10;
 
 /// "No object" / "no node" in the flat arrays.

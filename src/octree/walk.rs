@@ -18,9 +18,12 @@ use core::borrow::Borrow;
 /// Lists with at most this many spheres are tested all against all; longer ones are swept:
 /// below it sorting the list costs more than the tests it saves.
 pub(super) const SHORT_SELF: usize = 16;
-/// Two lists with at most this many candidate pairs, or with a side of at most [`SHORT_SIDE`]
-/// spheres, are tested all against all; larger ones are swept.
+/// Two lists with at most this many candidate pairs are tested all against all; larger ones
+/// are swept: a sweep sorts both lists first, which only pays once the tests it skips
+/// outnumber the sort's steps.
 pub(super) const SHORT_CROSS: usize = 1024;
+/// Two lists with a side of at most this many spheres are tested all against all: each sphere
+/// of the other side then costs at most this many tests, less than its share of a sort.
 pub(super) const SHORT_SIDE: usize = 4;
 /// Bits per radix-sort digit: 2048 counters (8 KB) stay in the first-level cache.
 const RADIX_BITS: u32 = 11;
