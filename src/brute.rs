@@ -2,9 +2,10 @@
 //! that gives the same set in O(n log n + pairs) for tests at scale. Public, so users can diff
 //! their own scenes with it. It knows boxes and keys only, none of the structures it checks.
 
-use crate::geom::{self, SimdBox};
+use crate::geom::{self, Aabb, SimdBox};
+use crate::pair::{self, Pair, ProxyKey};
 use crate::sweep::{self, Ordered};
-use crate::{Aabb, Pair, ProxyKey, Vec3};
+use glam::Vec3;
 
 /// One proxy as the reference sees it: its key, its (already grown) box, and whether it is
 /// static (static×static pairs are never reported).
@@ -42,7 +43,7 @@ pub fn pairs(proxies: &[Proxy]) -> Vec<Pair> {
             }
         }
     }
-    crate::pair::sort_dedup(&mut out);
+    pair::sort_dedup(&mut out);
     out
 }
 
@@ -66,7 +67,7 @@ pub fn sweep_pairs(proxies: &[Proxy]) -> Vec<Pair> {
             out.push(Pair::new(p.key, q.key));
         }
     });
-    crate::pair::sort_dedup(&mut out);
+    pair::sort_dedup(&mut out);
     out
 }
 

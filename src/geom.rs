@@ -1,7 +1,7 @@
 //! Axis-aligned boxes, the ray–box slab test, ray–sphere, and the input checks every entry
 //! point runs before it touches a structure.
 
-use crate::Error;
+use crate::error::Error;
 use glam::{Vec3, Vec3A};
 
 /// A closed axis-aligned box: a point on a face is inside, and boxes that touch overlap.

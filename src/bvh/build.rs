@@ -4,8 +4,8 @@
 use super::node::Node;
 use super::split::{Bounds, Work, split};
 use super::{Bvh, BvhConfig, NONE};
-use crate::ProxyKey;
 use crate::geom::SimdBox;
+use crate::pair::ProxyKey;
 use slotmap::Key;
 
 /// A node still to be made: the primitive range `start..end`, the parent to link it to, and

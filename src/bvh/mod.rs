@@ -47,8 +47,9 @@ mod refit;
 mod split;
 mod validate;
 
-use crate::geom::{SimdBox, check_aabb};
-use crate::{Aabb, Error, ProxyKey};
+use crate::error::Error;
+use crate::geom::{Aabb, SimdBox, check_aabb};
+use crate::pair::ProxyKey;
 use node::Node;
 use slotmap::{Key, SecondaryMap, SlotMap};
 

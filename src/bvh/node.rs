@@ -1,8 +1,7 @@
 //! The 32-byte node of the depth-first array, and the inline stack of the `&self` traversals.
 
-use crate::geom::SimdBox;
-use crate::{Aabb, Vec3};
-use glam::{Vec3A, Vec4};
+use crate::geom::{Aabb, SimdBox};
+use glam::{Vec3, Vec3A, Vec4};
 
 /// One node of the depth-first array (pbrt's `LinearBVHNode`): a leaf holds the primitive
 /// range `first..first + count` (`count > 0`); an interior node has `count == 0`, its first

@@ -4,8 +4,8 @@
 use super::Bvh;
 use super::node::Node;
 use crate::geom::SimdBox;
+use crate::pair::{Pair, ProxyKey};
 use crate::sweep::{self, Ordered};
-use crate::{Pair, ProxyKey};
 
 impl Bvh {
     /// Calls `f(a, b)` once for every unordered pair of live primitives whose current boxes

@@ -4,8 +4,9 @@
 
 use super::Bvh;
 use super::node::{INLINE_STACK, Node, SmallStack};
-use crate::geom::{SimdBox, check_aabb, inverse_dir, ray_is_valid};
-use crate::{Aabb, ProxyKey, Vec3};
+use crate::geom::{Aabb, SimdBox, check_aabb, inverse_dir, ray_is_valid};
+use crate::pair::ProxyKey;
+use glam::Vec3;
 use slotmap::Key;
 
 impl Bvh {

@@ -3,8 +3,7 @@
 
 use super::node::Node;
 use super::{Bvh, NONE};
-use crate::Aabb;
-use crate::geom::SimdBox;
+use crate::geom::{Aabb, SimdBox};
 
 impl Bvh {
     /// Brings every node box to the exact union of its children, in one reverse sweep over the

@@ -41,8 +41,8 @@ use super::cell::Cell;
 use super::placement::LooseKey;
 use super::walk::{self, Hot, SHORT_CROSS, Sweeps, Tester, Walk, runs};
 use super::{MAX_DEPTH, Octree, PassCost};
-use crate::ProxyKey;
 use crate::geom::SimdBox;
+use crate::pair::ProxyKey;
 
 /// The four forward neighbour rows `(dy, dz)` of a cell (see the module docs).
 const ROWS: [[i32; 2]; 4] = [[1, 0], [-1, 1], [0, 1], [1, 1]];

@@ -59,8 +59,11 @@ mod walk;
 
 pub use placement::{depth_for, depth_for_loose};
 
-use crate::{Aabb, Error, Pair, ProxyKey, Vec3, geom};
+use crate::error::Error;
+use crate::geom::{self, Aabb};
+use crate::pair::{Pair, ProxyKey};
 use cell::level_of;
+use glam::Vec3;
 use nodes::Nodes;
 use placement::Grid;
 use slotmap::{SecondaryMap, SlotMap};

@@ -5,8 +5,8 @@
 
 use super::cell::{Cell, code_of, level_of, morton, node_index, unmorton};
 use super::{MAX_DEPTH, Placement};
-use crate::{Aabb, Vec3};
-use glam::Vec3A;
+use crate::geom::Aabb;
+use glam::{Vec3, Vec3A};
 
 impl Placement {
     /// A sensible octree depth for spheres of about `typical_radius` in `bounds` under this

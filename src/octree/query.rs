@@ -4,7 +4,9 @@
 
 use super::cell::Cell;
 use super::{NONE, Octree};
-use crate::{Aabb, ProxyKey, Vec3, geom};
+use crate::geom::{self, Aabb};
+use crate::pair::ProxyKey;
+use glam::Vec3;
 
 impl Octree {
     /// Depth-first over occupied nodes from the root: `enter(cell)` decides whether to visit a

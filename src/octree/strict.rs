@@ -43,7 +43,7 @@ use super::cell::unmorton;
 use super::placement::StrictKey;
 use super::walk::{self, Hot, SHORT_SELF, Sweeps, Tester, Walk, is_short_cross, runs};
 use super::{Octree, PassCost};
-use crate::ProxyKey;
+use crate::pair::ProxyKey;
 use crate::sweep;
 
 /// One level of the path from the root to the current node.

@@ -10,8 +10,8 @@
 
 use super::Octree;
 use super::placement::walk_key_bits;
-use crate::ProxyKey;
 use crate::geom::SimdBox;
+use crate::pair::ProxyKey;
 use crate::sweep::{self, Ordered};
 use core::borrow::Borrow;
 
