@@ -59,13 +59,30 @@
 use broadleaf::fixtures::rapier_world::{SceneWorld, record_pile};
 use broadleaf::fixtures::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Idle, Rng, Scene};
 use broadleaf::rapier::Comparison;
-use broadleaf::{Aabb, BroadPhase, Config, Passes, Placement, ProxyKey, Shape, Vec3, brute, geom};
+use broadleaf::{
+    Aabb, BroadPhase, Config, Pair, Passes, Placement, ProxyKey, Shape, Vec3, brute, geom,
+};
 use plotters::prelude::*;
 use rapier3d::parry::bounding_volume::BoundingVolume;
 use rapier3d::parry::query::Ray;
 use std::hint::black_box;
 use std::process::exit;
 use std::time::Instant;
+
+/// The pairs `bp` must report: brute force over its proxies' margin-grown boxes, static bodies
+/// flagged.
+fn brute_pairs(bp: &BroadPhase) -> Vec<Pair> {
+    let margin = bp.config().margin;
+    let proxies: Vec<brute::Proxy> = bp
+        .iter()
+        .map(|(key, shape)| brute::Proxy {
+            key,
+            aabb: shape.grown_aabb(margin),
+            is_static: shape.is_static(),
+        })
+        .collect();
+    brute::sweep_pairs(&proxies)
+}
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Index {
@@ -387,11 +404,7 @@ fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
     // rapier detects the last frame's poses (and holds its inserts) in one more step.
     theirs.step();
     let (rapier_pairs, unmapped) = theirs.pairs(&ours.feed);
-    let mut cmp = Comparison::new(
-        &last_pairs,
-        &rapier_pairs,
-        &brute::broadphase_pairs(&ours.bp),
-    );
+    let mut cmp = Comparison::new(&last_pairs, &rapier_pairs, &brute_pairs(&ours.bp));
     cmp.unmapped = unmapped;
     Row {
         scene: name.to_string(),

@@ -262,7 +262,17 @@ impl Mirror {
     /// broadphase's margin; the exact set with margin 0), by [`brute::sweep_pairs`].
     #[must_use]
     pub fn exact_pairs(&self) -> Vec<Pair> {
-        brute::broadphase_pairs(&self.broadphase)
+        let margin = self.broadphase.config().margin;
+        let proxies: Vec<brute::Proxy> = self
+            .broadphase
+            .iter()
+            .map(|(key, shape)| brute::Proxy {
+                key,
+                aabb: shape.grown_aabb(margin),
+                is_static: shape.is_static(),
+            })
+            .collect();
+        brute::sweep_pairs(&proxies)
     }
 
     /// Steps the broadphase and compares its pairs with rapier's current pairs and with brute
