@@ -360,6 +360,9 @@ fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
     }
     let (mut ours_ns, mut rapier_ns) = (Vec::new(), Vec::new());
     let mut last_pairs = Vec::new();
+    // `BROADLEAF_TRACE=1` prints every step's time and StepStats on stderr.
+    let trace = std::env::var_os("BROADLEAF_TRACE").is_some();
+    let live_now = scene.len().max(1) as f64;
     let mut ours_step = |frame: &Frame| {
         let t = Instant::now();
         ours.feed
@@ -367,6 +370,9 @@ fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
             .expect("scene frames are valid");
         let pairs = ours.bp.step().pairs;
         let ns = t.elapsed().as_nanos() as f64;
+        if trace {
+            eprintln!("{:.1} ns/object {:?}", ns / live_now, ours.bp.stats());
+        }
         last_pairs.clear();
         last_pairs.extend_from_slice(pairs);
         ns

@@ -447,7 +447,7 @@ impl Grid {
             }
             self.insertion_sort::<A>(i, end);
             for b in &self.boxes[i..end] {
-                reach = reach.max(f64::from(b.max[A]) - f64::from(b.min[A]));
+                reach = reach.max(extent_up(b, A));
             }
             self.cols.push(key);
             self.col_start.push(i as u32);
@@ -459,7 +459,7 @@ impl Grid {
         self.reach = reach;
         self.large_reach = self.boxes[normal..sorted]
             .iter()
-            .map(|b| f64::from(b.max[A]) - f64::from(b.min[A]))
+            .map(|b| extent_up(b, A))
             .fold(0.0, f64::max);
         self.mins.clear();
         self.mins.extend(self.boxes.iter().map(|b| b.min[A]));
@@ -581,7 +581,7 @@ impl Grid {
         if u0 > u1 || v0 > v1 {
             return;
         }
-        let start = f64::from(q.min[A]) - self.reach;
+        let start = start_down(q.min[A], self.reach);
         for cu in u0..=u1 {
             let (Some(lo), Some(hi)) = (f0.key(cu, v0), f0.key(cu, v1)) else {
                 continue;
@@ -619,21 +619,21 @@ impl Grid {
     /// the caller filters dirty entries, and tests appended ones itself.
     pub(super) fn query(&self, q: &SimdBox, mut f: impl FnMut(u32)) {
         match self.frame.axis {
-            0 => self.visit_columns::<0>(q, |i| f(self.slots[i])),
-            1 => self.visit_columns::<1>(q, |i| f(self.slots[i])),
-            _ => self.visit_columns::<2>(q, |i| f(self.slots[i])),
+            0 => self.visit_columns::<0>(q, |i| live(self.slots[i], &mut f)),
+            1 => self.visit_columns::<1>(q, |i| live(self.slots[i], &mut f)),
+            _ => self.visit_columns::<2>(q, |i| live(self.slots[i], &mut f)),
         }
         // The large list is sorted by `min[A]`: only entries starting after `q.min[A]` minus
         // the longest of them, and before `q.max[A]`, can overlap.
         let large = &self.mins[self.normal..self.sorted];
-        let start = f64::from(q.min[self.frame.axis]) - self.large_reach;
+        let start = start_down(q.min[self.frame.axis], self.large_reach);
         let first = self.normal + large.partition_point(|&m| f64::from(m) < start);
         for i in first..self.sorted {
             if self.mins[i] > q.max[self.frame.axis] {
                 break;
             }
             if self.boxes[i].overlaps(q) {
-                f(self.slots[i]);
+                live(self.slots[i], &mut f);
             }
         }
     }
@@ -687,7 +687,7 @@ impl Grid {
     ) {
         let mut best = max_t;
         for i in self.normal..self.sorted {
-            if ray_box(origin, dir, &self.boxes[i], best).is_some() {
+            if self.slots[i] != DEAD && ray_box(origin, dir, &self.boxes[i], best).is_some() {
                 best = best.min(visit(self.slots[i]));
             }
         }
@@ -709,7 +709,7 @@ impl Grid {
                 max: p0.max(p1) + slack,
             };
             let mut test = |i: usize| {
-                if ray_box(origin, dir, &self.boxes[i], best).is_some() {
+                if self.slots[i] != DEAD && ray_box(origin, dir, &self.boxes[i], best).is_some() {
                     best = best.min(visit(self.slots[i]));
                 }
             };
@@ -807,6 +807,29 @@ impl Grid {
         }
         assert_eq!(*self.col_start.last().unwrap_or(&0) as usize, self.normal);
     }
+}
+
+/// Calls `f(word)` unless the entry was removed: a removed entry's box is empty (`+∞..−∞`),
+/// which a box reaching infinity on an axis would still "overlap" there.
+#[inline]
+fn live(word: u32, f: &mut impl FnMut(u32)) {
+    if word != DEAD {
+        f(word);
+    }
+}
+
+/// `max − min` of `b` on `axis`, rounded up: an upper bound even where `f64` cannot hold the
+/// difference of two far-apart `f32`s exactly.
+#[inline]
+fn extent_up(b: &SimdBox, axis: usize) -> f64 {
+    (f64::from(b.max[axis]) - f64::from(b.min[axis])).next_up()
+}
+
+/// `min − reach` rounded down: no box of extent at most `reach` that starts before it can
+/// reach `min`.
+#[inline]
+fn start_down(min: f32, reach: f64) -> f64 {
+    (f64::from(min) - reach).next_down()
 }
 
 /// The ray's entry parameter into `b` if it hits it within `[0, max_t]` (slab test; `dir`
