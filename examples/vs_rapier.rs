@@ -282,11 +282,15 @@ fn run(name: &str, n: usize, args: &Args) -> Row {
     // rapier detects the last frame's poses (and holds its inserts) in one more step.
     theirs.step();
     let (rapier_pairs, unmapped) = theirs.pairs(&ours.feed);
-    let mut cmp = Comparison::new(
-        &last_pairs,
-        &rapier_pairs,
-        &brute::broadphase_pairs(&ours.bp),
-    );
+    // The reference: the scene's own objects after the last frame (the state both engines were
+    // given), not the broadphase's record of them.
+    spawns.clear();
+    scene.spawns(&mut spawns);
+    let proxies = ours
+        .feed
+        .brute_proxies(&spawns, ours.bp.config().margin)
+        .expect("the feed holds every live scene object");
+    let mut cmp = Comparison::new(&last_pairs, &rapier_pairs, &brute::sweep_pairs(&proxies));
     cmp.unmapped = unmapped;
     Row {
         scene: name.to_string(),
