@@ -27,7 +27,8 @@ usage: falling_spheres [--n N] [--steps S] [--index octree|bvh] [--placement str
   --index KIND   where the spheres live: octree (default) or bvh
   --placement P  the octree's placement: strict (default, RTCD 7.3) or loose
   --skin S       the broadphase's pair cache skin in metres (Config::skin; default 0: off)
-  --verify       check every step's pairs against brute force over the same boxes
+  --verify       check every step's pairs against brute force over the spheres and walls
+                 the world handed the broadphase
   --out PATH     animated GIF to write (default falling_spheres.gif)
   --png PATH     also write the last frame as a PNG
   --frames F     frames in the GIF (default 60)
@@ -167,7 +168,12 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let (mut peak_energy, mut peak_step, mut verified) = (0.0f64, 0, 0);
     let mut worst_overlap = 0.0f32;
     let start = Instant::now();
+    let mut centers = Vec::new();
     for step in 0..args.steps {
+        if args.verify {
+            centers.clear();
+            centers.extend_from_slice(world.positions());
+        }
         let stats = world.step(DT)?;
         bp_ns.push(stats.broadphase_time.as_nanos() as f64 / world.len().max(1) as f64);
         step_ms.push(stats.total_time.as_secs_f64() * 1e3);
@@ -176,7 +182,7 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
             (peak_energy, peak_step) = (stats.kinetic_energy, step);
         }
         if args.verify {
-            let expected = brute_pairs(&world);
+            let expected = brute_pairs(&world, &centers);
             if world.pairs() != expected.as_slice() {
                 bar.abandon();
                 return Err(format!(
@@ -276,24 +282,36 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
-/// The brute-force pair set over exactly the boxes the broadphase holds this step.
-fn brute_pairs(world: &World) -> Vec<Pair> {
-    let bp = world.broadphase();
-    let margin = bp.config().margin;
-    let proxies: Vec<brute::Proxy> = world
-        .sphere_keys()
+/// The brute-force pair set of the step just taken, from the demo's own record of what the
+/// world handed its broadphase: each sphere at its centre from before the step (`centers`) with
+/// radius `radii()[i] + growth()[i]`, as a sphere (octree) or as that sphere's box (BVH); every
+/// wall as the static box it is. Each box is grown by the margin here; nothing is read from
+/// the broadphase.
+fn brute_pairs(world: &World, centers: &[Vec3]) -> Vec<Pair> {
+    let margin = world.config().broadphase.margin;
+    let grown = |b: Aabb| Aabb::new(b.min - Vec3::splat(margin), b.max + Vec3::splat(margin));
+    let spheres = world.sphere_keys().iter().enumerate().map(|(i, &key)| {
+        let radius = world.radii()[i] + world.growth()[i];
+        let aabb = match world.config().index {
+            IndexKind::Octree => Aabb::from_center_radius(centers[i], radius + margin),
+            IndexKind::Bvh => grown(Aabb::from_center_radius(centers[i], radius)),
+        };
+        brute::Proxy {
+            key,
+            aabb,
+            is_static: false,
+        }
+    });
+    let walls = world
+        .box_keys()
         .iter()
-        .map(|&k| (k, false))
-        .chain(world.box_keys().iter().map(|&k| (k, true)))
-        .filter_map(|(key, is_static)| {
-            bp.aabb(key).map(|aabb| brute::Proxy {
-                key,
-                aabb: aabb.grown(margin),
-                is_static,
-            })
-        })
-        .collect();
-    brute::sweep_pairs(&proxies)
+        .zip(world.boxes())
+        .map(|(&key, &b)| brute::Proxy {
+            key,
+            aabb: grown(b),
+            is_static: true,
+        });
+    brute::sweep_pairs(&spheres.chain(walls).collect::<Vec<_>>())
 }
 
 /// A sphere with no octree level (it lives in the BVH).

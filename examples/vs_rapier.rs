@@ -59,30 +59,13 @@
 use broadleaf::fixtures::rapier_world::{SceneWorld, record_pile};
 use broadleaf::fixtures::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Idle, Rng, Scene};
 use broadleaf::rapier::Comparison;
-use broadleaf::{
-    Aabb, BroadPhase, Config, Pair, Passes, Placement, ProxyKey, Shape, Vec3, brute, geom,
-};
+use broadleaf::{Aabb, BroadPhase, Config, Passes, Placement, ProxyKey, Shape, Vec3, brute, geom};
 use plotters::prelude::*;
 use rapier3d::parry::bounding_volume::BoundingVolume;
 use rapier3d::parry::query::Ray;
 use std::hint::black_box;
 use std::process::exit;
 use std::time::Instant;
-
-/// The pairs `bp` must report: brute force over its proxies' margin-grown boxes, static bodies
-/// flagged.
-fn brute_pairs(bp: &BroadPhase) -> Vec<Pair> {
-    let margin = bp.config().margin;
-    let proxies: Vec<brute::Proxy> = bp
-        .iter()
-        .map(|(key, shape)| brute::Proxy {
-            key,
-            aabb: shape.grown_aabb(margin),
-            is_static: shape.is_static(),
-        })
-        .collect();
-    brute::sweep_pairs(&proxies)
-}
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Index {
@@ -370,11 +353,11 @@ fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
             .expect("scene frames are valid");
         let pairs = ours.bp.step().pairs;
         let ns = t.elapsed().as_nanos() as f64;
+        last_pairs.clear();
+        last_pairs.extend_from_slice(pairs);
         if trace {
             eprintln!("{:.1} ns/object {:?}", ns / live_now, ours.bp.stats());
         }
-        last_pairs.clear();
-        last_pairs.extend_from_slice(pairs);
         ns
     };
     let mut theirs_step = |frame: &Frame| {
@@ -410,7 +393,15 @@ fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
     // rapier detects the last frame's poses (and holds its inserts) in one more step.
     theirs.step();
     let (rapier_pairs, unmapped) = theirs.pairs(&ours.feed);
-    let mut cmp = Comparison::new(&last_pairs, &rapier_pairs, &brute_pairs(&ours.bp));
+    // The reference: the scene's own objects after the last frame (the state both engines were
+    // given), not the broadphase's record of them.
+    spawns.clear();
+    scene.spawns(&mut spawns);
+    let proxies = ours
+        .feed
+        .brute_proxies(&spawns, ours.bp.config().margin)
+        .expect("the feed holds every live scene object");
+    let mut cmp = Comparison::new(&last_pairs, &rapier_pairs, &brute::sweep_pairs(&proxies));
     cmp.unmapped = unmapped;
     Row {
         scene: name.to_string(),

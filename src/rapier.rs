@@ -34,7 +34,7 @@
 //! `ActiveCollisionTypes::all()` on every collider.
 
 use crate::pair::{self, Pair, ProxyKey};
-use crate::{Aabb, BodyKind, BroadPhase, Config, Shape, StepPairs, brute};
+use crate::{Aabb, BodyKind, BroadPhase, Config, Shape, StepPairs, Vec3, brute};
 use core::fmt;
 use rapier3d::dynamics::RigidBodySet;
 use rapier3d::geometry::{Collider, ColliderHandle, ColliderSet, NarrowPhase};
@@ -63,6 +63,9 @@ struct Entry {
     handle: ColliderHandle,
     key: ProxyKey,
     class: Class,
+    /// The sphere or box the broadphase was last given for this collider (and accepted): the
+    /// mirror's own record, from which [`Mirror::exact_pairs`] builds the reference.
+    shape: Shape,
     /// The `sync` call that last saw the collider.
     stamp: u64,
 }
@@ -136,7 +139,7 @@ impl Mirror {
             match &mut self.slots[i] {
                 Some(e) => {
                     e.stamp = self.stamp;
-                    if self.broadphase.shape(e.key) != Some(shape) {
+                    if e.shape != shape {
                         let pushed = match shape {
                             Shape::Sphere { center, radius } => {
                                 self.broadphase.update_sphere(e.key, center, radius)
@@ -144,7 +147,10 @@ impl Mirror {
                             Shape::Body { aabb, .. } => self.broadphase.update_body(e.key, aabb),
                         };
                         match pushed {
-                            Ok(()) => report.updated += 1,
+                            Ok(()) => {
+                                e.shape = shape;
+                                report.updated += 1;
+                            }
                             Err(_) => report.skipped += 1,
                         }
                     }
@@ -162,6 +168,7 @@ impl Mirror {
                                 handle,
                                 key,
                                 class: Class::of(&shape),
+                                shape,
                                 stamp: self.stamp,
                             });
                             self.handles.insert(key, handle);
@@ -254,22 +261,30 @@ impl Mirror {
         unmapped
     }
 
+    /// True for a key this mirror holds as a static body.
     fn is_static(&self, key: ProxyKey) -> bool {
-        self.broadphase.shape(key).is_some_and(|s| s.is_static())
+        self.handles
+            .get(key)
+            .and_then(|&h| self.slots.get(h.into_raw_parts().0 as usize))
+            .and_then(|slot| *slot)
+            .is_some_and(|e| e.class == Class::Body(BodyKind::Static))
     }
 
-    /// The brute-force pair set of the mirrored boxes as they are now (grown by the
-    /// broadphase's margin; the exact set with margin 0), by [`brute::sweep_pairs`].
+    /// The brute-force pair set of the mirrored colliders as the last `sync` gave them to the
+    /// broadphase, from the mirror's own record of each sphere and box (not from the
+    /// broadphase), grown by the configured margin (the exact set with margin 0), by
+    /// [`brute::sweep_pairs`].
     #[must_use]
     pub fn exact_pairs(&self) -> Vec<Pair> {
         let margin = self.broadphase.config().margin;
         let proxies: Vec<brute::Proxy> = self
-            .broadphase
+            .slots
             .iter()
-            .map(|(key, shape)| brute::Proxy {
-                key,
-                aabb: shape.grown_aabb(margin),
-                is_static: shape.is_static(),
+            .flatten()
+            .map(|e| brute::Proxy {
+                key: e.key,
+                aabb: pair_box(&e.shape, margin),
+                is_static: e.class == Class::Body(BodyKind::Static),
             })
             .collect();
         brute::sweep_pairs(&proxies)
@@ -286,6 +301,25 @@ impl Mirror {
         cmp.unmapped = unmapped;
         self.rapier = rapier;
         cmp
+    }
+}
+
+/// The box `shape` pairs with, by the contract's pair semantics: a sphere's
+/// `center ± (radius + margin)`, a body's box grown by `margin` on every side with faces that
+/// overflow kept at `±f32::MAX`.
+fn pair_box(shape: &Shape, margin: f32) -> Aabb {
+    match *shape {
+        Shape::Sphere { center, radius } => {
+            let r = Vec3::splat(radius + margin);
+            Aabb::new(center - r, center + r)
+        }
+        Shape::Body { aabb, .. } => {
+            let m = Vec3::splat(margin);
+            Aabb::new(
+                (aabb.min - m).max(Vec3::splat(-f32::MAX)),
+                (aabb.max + m).min(Vec3::splat(f32::MAX)),
+            )
+        }
     }
 }
 

@@ -1,7 +1,7 @@
 //! `BroadPhase` against the brute-force reference: after every `step()` of a random operation
-//! sequence, `pairs` equals `brute::pairs` over the (margin-grown) boxes, and `added` /
-//! `removed` equal the set differences with the previous step's pairs; the octree runs in both
-//! placements.
+//! sequence, `pairs` equals `brute::pairs` over the test's own model of the shapes, grown by
+//! the margin by the test itself, and `added` / `removed` equal the set differences with the
+//! previous step's pairs; the octree runs in both placements.
 
 use broadleaf::{
     Aabb, BodyKind, BroadPhase, Config, Pair, Placement, ProxyKey, Shape, Vec3, brute,
@@ -63,16 +63,49 @@ fn config(depth: u32, margin: f32, placement: Placement, skin: f32) -> Config {
     }
 }
 
-/// Checks one step against the model; returns the step's pairs.
-fn check_step(bp: &mut BroadPhase, model: &[(ProxyKey, Shape)], prev: &[Pair]) -> Vec<Pair> {
-    let margin = bp.config().margin;
+/// The test's own reference proxy of a shape: the box the contract pairs, a sphere's
+/// `center ± (radius + margin)`, a body's box with `margin` added on every side (the lattice
+/// keeps every face finite), and whether it is a static body.
+fn proxy(key: ProxyKey, shape: &Shape, margin: f32) -> brute::Proxy {
+    let (aabb, is_static) = match *shape {
+        Shape::Sphere { center, radius } => {
+            let r = radius + margin;
+            let min = Vec3::new(center.x - r, center.y - r, center.z - r);
+            let max = Vec3::new(center.x + r, center.y + r, center.z + r);
+            (Aabb { min, max }, false)
+        }
+        Shape::Body { aabb, kind } => {
+            let min = Vec3::new(
+                aabb.min.x - margin,
+                aabb.min.y - margin,
+                aabb.min.z - margin,
+            );
+            let max = Vec3::new(
+                aabb.max.x + margin,
+                aabb.max.y + margin,
+                aabb.max.z + margin,
+            );
+            (Aabb { min, max }, kind == BodyKind::Static)
+        }
+    };
+    brute::Proxy {
+        key,
+        aabb,
+        is_static,
+    }
+}
+
+/// Checks one step against the model, whose boxes pair grown by `margin`; returns the step's
+/// pairs.
+fn check_step(
+    bp: &mut BroadPhase,
+    model: &[(ProxyKey, Shape)],
+    prev: &[Pair],
+    margin: f32,
+) -> Vec<Pair> {
     let proxies: Vec<brute::Proxy> = model
         .iter()
-        .map(|(key, shape)| brute::Proxy {
-            key: *key,
-            aabb: shape.grown_aabb(margin),
-            is_static: shape.is_static(),
-        })
+        .map(|(key, shape)| proxy(*key, shape, margin))
         .collect();
     let expected = brute::pairs(&proxies);
     let step = bp.step();
@@ -148,14 +181,14 @@ fn run(depth: u32, margin: f32, placement: Placement, skin: f32, ops: &[Op]) {
                 bp.remove(key).unwrap();
                 assert!(bp.aabb(key).is_none());
             }
-            Op::Step => prev = check_step(&mut bp, &model, &prev),
+            Op::Step => prev = check_step(&mut bp, &model, &prev, margin),
             _ => {}
         }
         // Between steps too: queries and rays see the current boxes.
         bp.validate();
         assert_eq!(bp.len(), model.len());
     }
-    check_step(&mut bp, &model, &prev);
+    check_step(&mut bp, &model, &prev, margin);
     for &(key, shape) in &model {
         assert_eq!(bp.aabb(key), Some(shape.aabb()));
         assert_eq!(bp.shape(key), Some(shape));
@@ -340,14 +373,7 @@ fn queries_and_rays_see_exact_shapes_with_a_pair_cache() {
                 }
             }
             bp.validate();
-            let proxies: Vec<brute::Proxy> = model
-                .iter()
-                .map(|(k, s)| brute::Proxy {
-                    key: *k,
-                    aabb: s.grown_aabb(0.0),
-                    is_static: s.is_static(),
-                })
-                .collect();
+            let proxies: Vec<brute::Proxy> = model.iter().map(|(k, s)| proxy(*k, s, 0.0)).collect();
             for _ in 0..60 {
                 let c = rng.vec3_in(Vec3::splat(-12.0), Vec3::splat(12.0));
                 let q = Aabb::from_center_half_extents(c, Vec3::splat(rng.range(0.0, 3.0)));
@@ -412,7 +438,7 @@ fn pair_cache_patches_equal_brute_force_step_by_step() {
         for _ in 0..400 {
             model.push(add(&mut bp, &mut rng));
         }
-        let mut prev = check_step(&mut bp, &model, &[]);
+        let mut prev = check_step(&mut bp, &model, &[], margin);
         for _ in 0..150 {
             for _ in 0..rng.below(12) {
                 let i = rng.below(model.len() as u32) as usize;
@@ -441,7 +467,7 @@ fn pair_cache_patches_equal_brute_force_step_by_step() {
             if rng.below(3) == 0 {
                 model.push(add(&mut bp, &mut rng));
             }
-            prev = check_step(&mut bp, &model, &prev);
+            prev = check_step(&mut bp, &model, &prev, margin);
         }
     }
 }

@@ -1,10 +1,12 @@
 //! The physics loop end to end: 1000 spheres dropped into a box come to rest inside it, the run
 //! is bit-for-bit repeatable, and the octree (both placements) and BVH paths see the same pairs
-//! at every step.
+//! at every step: the pair set the test builds itself from the spheres and walls the world
+//! handed its broadphase (centres copied before the step, radii, growths), grown by the margin
+//! by the test.
 
 use broadleaf::fixtures::sim::{DropConfig, IndexKind, SphereDrop, World};
 use broadleaf::octree::Placement;
-use broadleaf::{Pair, brute};
+use broadleaf::{Aabb, Pair, Vec3, brute};
 
 const N: usize = 1000;
 const RADIUS: f32 = 0.5;
@@ -51,22 +53,37 @@ fn pairs_by_id(world: &World) -> Vec<(Id, Id)> {
     out
 }
 
-/// The brute-force pair set over exactly the boxes the world's broadphase holds.
-fn brute_pairs(world: &World) -> Vec<Pair> {
-    let bp = world.broadphase();
-    let margin = bp.config().margin;
-    let proxy = |key, is_static| brute::Proxy {
-        key,
-        aabb: bp.aabb(key).unwrap().grown(margin),
-        is_static,
-    };
-    let proxies: Vec<brute::Proxy> = world
-        .sphere_keys()
+/// The pair set the step just taken must report, from the test's own record of what the world
+/// handed its broadphase: each sphere at its centre from before the step (`centers`, copied
+/// by the test) with radius `radii()[i] + growth()[i]`, as a sphere (octree) or as that
+/// sphere's box (BVH); every wall as the static box the test's scene gave. The test grows each
+/// box by the configured margin itself (a sphere's radius, a box's faces) and feeds
+/// `brute::sweep_pairs`; nothing is read from the broadphase.
+fn expected_pairs(world: &World, centers: &[Vec3]) -> Vec<Pair> {
+    let margin = world.config().broadphase.margin;
+    let grown = |b: Aabb| Aabb::new(b.min - Vec3::splat(margin), b.max + Vec3::splat(margin));
+    let spheres = world.sphere_keys().iter().enumerate().map(|(i, &key)| {
+        let radius = world.radii()[i] + world.growth()[i];
+        let aabb = match world.config().index {
+            IndexKind::Octree => Aabb::from_center_radius(centers[i], radius + margin),
+            IndexKind::Bvh => grown(Aabb::from_center_radius(centers[i], radius)),
+        };
+        brute::Proxy {
+            key,
+            aabb,
+            is_static: false,
+        }
+    });
+    let walls = world
+        .box_keys()
         .iter()
-        .map(|&k| proxy(k, false))
-        .chain(world.box_keys().iter().map(|&k| proxy(k, true)))
-        .collect();
-    brute::sweep_pairs(&proxies)
+        .zip(world.boxes())
+        .map(|(&key, &b)| brute::Proxy {
+            key,
+            aabb: grown(b),
+            is_static: true,
+        });
+    brute::sweep_pairs(&spheres.chain(walls).collect::<Vec<_>>())
 }
 
 /// The deepest overlap of the final positions, sphere–sphere and sphere–wall, measured from
@@ -178,6 +195,8 @@ fn octree_and_bvh_paths_give_the_same_pairs_at_every_step() {
     let mut bvh = drop_scene(IndexKind::Bvh);
     let mut total = 0usize;
     for step in 0..STEPS {
+        let before = |scene: &SphereDrop| scene.world.positions().to_vec();
+        let (at_o, at_l, at_b) = (before(&octree), before(&loose), before(&bvh));
         octree.world.step(DT).unwrap();
         loose.world.step(DT).unwrap();
         bvh.world.step(DT).unwrap();
@@ -186,15 +205,19 @@ fn octree_and_bvh_paths_give_the_same_pairs_at_every_step() {
         assert_eq!(pairs_by_id(&loose.world), pb, "step {step}");
         assert_eq!(
             octree.world.pairs(),
-            brute_pairs(&octree.world),
+            expected_pairs(&octree.world, &at_o),
             "step {step}"
         );
         assert_eq!(
             loose.world.pairs(),
-            brute_pairs(&loose.world),
+            expected_pairs(&loose.world, &at_l),
             "step {step}"
         );
-        assert_eq!(bvh.world.pairs(), brute_pairs(&bvh.world), "step {step}");
+        assert_eq!(
+            bvh.world.pairs(),
+            expected_pairs(&bvh.world, &at_b),
+            "step {step}"
+        );
         total += po.len();
     }
     assert!(total > STEPS * N, "the spheres did meet: {total} pairs");

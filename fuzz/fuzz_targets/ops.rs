@@ -1,14 +1,15 @@
-//! Random operation sequences on `BroadPhase` against a brute-force model. Floats come raw from
-//! the fuzzer, so NaN, infinities, huge and subnormal values all appear: every refusal must be
-//! an `Err` that leaves the broadphase unchanged, and after every step the pairs and events
-//! must equal the brute-force set and its difference with the previous step.
+//! Random operation sequences on `BroadPhase` against the target's own model: a map of the
+//! shapes it inserted, its own growth by the margin, its own O(n²) loop and its own set
+//! difference. Floats come raw from the fuzzer, so NaN, infinities, huge and subnormal values
+//! all appear: every refusal must be an `Err` that leaves the broadphase unchanged, and after
+//! every step the pairs and events must equal the model's set and its difference with the
+//! model's previous set.
 #![no_main]
 
 use arbitrary::Arbitrary;
-use broadleaf::{
-    Aabb, BodyKind, BroadPhase, Config, Pair, Placement, ProxyKey, Shape, Vec3, brute,
-};
+use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Pair, Placement, ProxyKey, Shape, Vec3};
 use libfuzzer_sys::fuzz_target;
+use std::collections::{BTreeSet, HashMap};
 
 #[derive(Arbitrary, Debug)]
 enum Op {
@@ -60,119 +61,230 @@ fuzz_target!(|input: Input| {
         },
         ..Config::default()
     });
-    let mut model: Vec<(ProxyKey, Shape)> = Vec::new();
+    // The model: the shape of every live proxy as given, and the live keys in insertion order
+    // (a deterministic order to pick from).
+    let mut shapes: HashMap<ProxyKey, Shape> = HashMap::new();
+    let mut live: Vec<ProxyKey> = Vec::new();
     let mut dead: Vec<ProxyKey> = Vec::new();
-    let mut prev: Vec<Pair> = Vec::new();
-    let pick = |model: &[(ProxyKey, Shape)], dead: &[ProxyKey], i: u8| -> Option<ProxyKey> {
+    let mut prev: Vec<KeyPair> = Vec::new();
+    let pick = |live: &[ProxyKey], dead: &[ProxyKey], i: u8| -> Option<ProxyKey> {
         let i = usize::from(i);
         if i % 8 == 7 && !dead.is_empty() {
             return Some(dead[i % dead.len()]);
         }
-        (!model.is_empty()).then(|| model[i % model.len()].0)
+        (!live.is_empty()).then(|| live[i % live.len()])
     };
     for op in input.ops.iter().take(256) {
         match *op {
             Op::InsertSphere(c, r) => {
                 let (c, r) = (v(c), r);
                 match bp.insert_sphere(c, r) {
-                    Ok(k) => model.push((k, Shape::Sphere { center: c, radius: r })),
+                    Ok(k) => {
+                        assert!(
+                            shapes
+                                .insert(
+                                    k,
+                                    Shape::Sphere {
+                                        center: c,
+                                        radius: r
+                                    }
+                                )
+                                .is_none()
+                        );
+                        live.push(k);
+                    }
                     Err(_) => assert!(!valid_sphere(c, r)),
                 }
             }
             Op::InsertBody(lo, hi, is_static) => {
                 let aabb = Aabb::new(v(lo), v(hi));
-                let kind = if is_static { BodyKind::Static } else { BodyKind::Dynamic };
+                let kind = if is_static {
+                    BodyKind::Static
+                } else {
+                    BodyKind::Dynamic
+                };
                 match bp.insert_body(aabb, kind) {
-                    Ok(k) => model.push((k, Shape::Body { aabb, kind })),
+                    Ok(k) => {
+                        assert!(shapes.insert(k, Shape::Body { aabb, kind }).is_none());
+                        live.push(k);
+                    }
                     Err(_) => assert!(!valid_box(&aabb)),
                 }
             }
             Op::UpdateSphere(i, c, r) => {
-                let Some(key) = pick(&model, &dead, i) else { continue };
-                let slot = model.iter().position(|m| m.0 == key);
+                let Some(key) = pick(&live, &dead, i) else {
+                    continue;
+                };
                 let res = bp.update_sphere(key, v(c), r);
-                match (slot, res) {
-                    (Some(s), Ok(())) => model[s].1 = Shape::Sphere { center: v(c), radius: r },
-                    (Some(s), Err(_)) => assert!(
-                        !valid_sphere(v(c), r) || !matches!(model[s].1, Shape::Sphere { .. })
-                    ),
+                match (shapes.get_mut(&key), res) {
+                    (Some(shape), Ok(())) => {
+                        assert!(
+                            matches!(shape, Shape::Sphere { .. }),
+                            "updated a body as a sphere"
+                        );
+                        *shape = Shape::Sphere {
+                            center: v(c),
+                            radius: r,
+                        };
+                    }
+                    (Some(shape), Err(_)) => {
+                        assert!(!valid_sphere(v(c), r) || !matches!(shape, Shape::Sphere { .. }))
+                    }
                     (None, res) => assert!(res.is_err()),
                 }
             }
             Op::UpdateBody(i, lo, hi) => {
-                let Some(key) = pick(&model, &dead, i) else { continue };
-                let slot = model.iter().position(|m| m.0 == key);
+                let Some(key) = pick(&live, &dead, i) else {
+                    continue;
+                };
                 let aabb = Aabb::new(v(lo), v(hi));
                 let res = bp.update_body(key, aabb);
-                match (slot, res) {
-                    (Some(s), Ok(())) => {
-                        let Shape::Body { kind, .. } = model[s].1 else { panic!("updated a sphere as a body") };
-                        model[s].1 = Shape::Body { aabb, kind };
+                match (shapes.get_mut(&key), res) {
+                    (Some(shape), Ok(())) => {
+                        let Shape::Body { kind, .. } = *shape else {
+                            panic!("updated a sphere as a body")
+                        };
+                        *shape = Shape::Body { aabb, kind };
                     }
-                    (Some(s), Err(_)) => assert!(
-                        !valid_box(&aabb) || matches!(model[s].1, Shape::Sphere { .. })
-                    ),
+                    (Some(shape), Err(_)) => {
+                        assert!(!valid_box(&aabb) || matches!(shape, Shape::Sphere { .. }))
+                    }
                     (None, res) => assert!(res.is_err()),
                 }
             }
             Op::Remove(i) => {
-                let Some(key) = pick(&model, &dead, i) else { continue };
-                match model.iter().position(|m| m.0 == key) {
-                    Some(s) => {
+                let Some(key) = pick(&live, &dead, i) else {
+                    continue;
+                };
+                match shapes.remove(&key) {
+                    Some(_) => {
                         bp.remove(key).expect("live key refused");
-                        model.swap_remove(s);
+                        let s = live.iter().position(|&k| k == key).expect("a live key");
+                        live.swap_remove(s);
                         dead.push(key);
                     }
                     None => assert!(bp.remove(key).is_err()),
                 }
             }
             Op::Nudge(i, x, y, z) => {
-                if model.is_empty() {
+                if live.is_empty() {
                     continue;
                 }
-                let s = usize::from(i) % model.len();
+                let key = live[usize::from(i) % live.len()];
                 let d = Vec3::new(f32::from(x % 4), f32::from(y % 4), f32::from(z % 4)) * 0.25;
-                let (key, shape) = &mut model[s];
+                let shape = shapes.get_mut(&key).expect("a live key");
                 match shape {
                     Shape::Sphere { center, radius } => {
-                        if bp.update_sphere(*key, *center + d, *radius).is_ok() {
+                        if bp.update_sphere(key, *center + d, *radius).is_ok() {
                             *center += d;
                         }
                     }
                     Shape::Body { aabb, .. } => {
                         let moved = Aabb::new(aabb.min + d, aabb.max + d);
-                        if bp.update_body(*key, moved).is_ok() {
+                        if bp.update_body(key, moved).is_ok() {
                             *aabb = moved;
                         }
                     }
                 }
             }
-            Op::Step => prev = check(&mut bp, &model, &prev, margin),
+            Op::Step => prev = check(&mut bp, &shapes, &prev, margin),
         }
-        assert_eq!(bp.len(), model.len());
+        assert_eq!(bp.len(), shapes.len());
     }
-    check(&mut bp, &model, &prev, margin);
-    for (key, shape) in &model {
+    check(&mut bp, &shapes, &prev, margin);
+    for (key, shape) in &shapes {
         assert_eq!(bp.shape(*key), Some(*shape));
     }
 });
 
-fn check(bp: &mut BroadPhase, model: &[(ProxyKey, Shape)], prev: &[Pair], margin: f32) -> Vec<Pair> {
-    let proxies: Vec<brute::Proxy> = model
+/// A pair as the model lists it: `(smaller key, larger key)`.
+type KeyPair = (ProxyKey, ProxyKey);
+
+/// The box a proxy pairs with: a sphere's `center ± (radius + margin)`, a body's box with
+/// `margin` added on every side. A face that overflows becomes `±∞`, which overlaps exactly
+/// what the crate's `±f32::MAX` overlaps.
+fn pair_box(shape: &Shape, margin: f32) -> (Vec3, Vec3) {
+    match *shape {
+        Shape::Sphere { center, radius } => {
+            let r = radius + margin;
+            (
+                Vec3::new(center.x - r, center.y - r, center.z - r),
+                Vec3::new(center.x + r, center.y + r, center.z + r),
+            )
+        }
+        Shape::Body { aabb, .. } => (
+            Vec3::new(
+                aabb.min.x - margin,
+                aabb.min.y - margin,
+                aabb.min.z - margin,
+            ),
+            Vec3::new(
+                aabb.max.x + margin,
+                aabb.max.y + margin,
+                aabb.max.z + margin,
+            ),
+        ),
+    }
+}
+
+fn is_static(shape: &Shape) -> bool {
+    matches!(
+        shape,
+        Shape::Body {
+            kind: BodyKind::Static,
+            ..
+        }
+    )
+}
+
+/// Every pair of overlapping closed pair boxes but static×static, by testing all of them;
+/// sorted.
+fn model_pairs(shapes: &HashMap<ProxyKey, Shape>, margin: f32) -> Vec<KeyPair> {
+    let boxes: Vec<(ProxyKey, (Vec3, Vec3), bool)> = shapes
         .iter()
-        .map(|(key, shape)| brute::Proxy {
-            key: *key,
-            aabb: shape.grown_aabb(margin),
-            is_static: shape.is_static(),
-        })
+        .map(|(&k, s)| (k, pair_box(s, margin), is_static(s)))
         .collect();
-    let expected = brute::pairs(&proxies);
+    let mut out = Vec::new();
+    for (i, (k, (p0, p1), s)) in boxes.iter().enumerate() {
+        for (l, (q0, q1), t) in &boxes[i + 1..] {
+            let overlap = p0.x <= q1.x
+                && q0.x <= p1.x
+                && p0.y <= q1.y
+                && q0.y <= p1.y
+                && p0.z <= q1.z
+                && q0.z <= p1.z;
+            if !(*s && *t) && overlap {
+                out.push(if k < l { (*k, *l) } else { (*l, *k) });
+            }
+        }
+    }
+    out.sort_unstable();
+    out
+}
+
+fn as_key_pairs(pairs: &[Pair]) -> Vec<KeyPair> {
+    pairs.iter().map(|p| (p.a, p.b)).collect()
+}
+
+/// Steps `bp` and checks its pairs against the model's and its events against the model's own
+/// set difference with `prev`; returns the model's pairs (the next step's `prev`).
+fn check(
+    bp: &mut BroadPhase,
+    shapes: &HashMap<ProxyKey, Shape>,
+    prev: &[KeyPair],
+    margin: f32,
+) -> Vec<KeyPair> {
+    let expected = model_pairs(shapes, margin);
+    let (now, before): (BTreeSet<KeyPair>, BTreeSet<KeyPair>) = (
+        expected.iter().copied().collect(),
+        prev.iter().copied().collect(),
+    );
+    let added: Vec<KeyPair> = now.difference(&before).copied().collect();
+    let removed: Vec<KeyPair> = before.difference(&now).copied().collect();
     let out = bp.step();
-    assert_eq!(out.pairs, expected.as_slice());
-    let mut added = Vec::new();
-    let mut removed = Vec::new();
-    broadleaf::pair::diff(prev, &expected, &mut added, &mut removed);
-    assert_eq!(out.added, added.as_slice());
-    assert_eq!(out.removed, removed.as_slice());
+    assert_eq!(as_key_pairs(out.pairs), expected);
+    assert_eq!(as_key_pairs(out.added), added);
+    assert_eq!(as_key_pairs(out.removed), removed);
+    bp.validate();
     expected
 }
