@@ -708,7 +708,7 @@ fn partition(refs: &mut [PrimBox], ids: &mut [u32], left: impl Fn(&PrimBox) -> b
 mod tests {
     use super::*;
     use crate::Vec3;
-    use crate::fixtures::scene::Rng;
+    use crate::rng::Rng;
 
     /// Unit boxes with their min corner at `(x, 0, 0)`, and their ids `0..`.
     fn refs(xs: &[f32]) -> (Vec<PrimBox>, Vec<u32>) {
