@@ -77,18 +77,6 @@ pub fn sweep_pairs(proxies: &[Proxy]) -> Vec<Pair> {
     out
 }
 
-/// The pair set a [`BroadPhase`](crate::BroadPhase) must report for its current proxies:
-/// [`sweep_pairs`] over their margin-grown boxes, static bodies flagged.
-#[must_use]
-pub fn broadphase_pairs(bp: &crate::BroadPhase) -> Vec<Pair> {
-    let margin = bp.config().margin;
-    let proxies: Vec<Proxy> = bp
-        .iter()
-        .map(|(key, shape)| Proxy::of(key, &shape, margin))
-        .collect();
-    sweep_pairs(&proxies)
-}
-
 /// Keys of every proxy whose box overlaps `aabb`, sorted.
 #[must_use]
 pub fn query_aabb(proxies: &[Proxy], aabb: &Aabb) -> Vec<ProxyKey> {

@@ -63,6 +63,9 @@ struct Entry {
     handle: ColliderHandle,
     key: ProxyKey,
     class: Class,
+    /// The sphere or box the broadphase last accepted for it: the mirror's own record, from
+    /// which [`Mirror::exact_pairs`] computes the reference without reading the broadphase.
+    shape: Shape,
     /// The `sync` call that last saw the collider.
     stamp: u64,
 }
@@ -136,7 +139,7 @@ impl Mirror {
             match &mut self.slots[i] {
                 Some(e) => {
                     e.stamp = self.stamp;
-                    if self.broadphase.shape(e.key) != Some(shape) {
+                    if e.shape != shape {
                         let pushed = match shape {
                             Shape::Sphere { center, radius } => {
                                 self.broadphase.update_sphere(e.key, center, radius)
@@ -144,7 +147,10 @@ impl Mirror {
                             Shape::Body { aabb, .. } => self.broadphase.update_body(e.key, aabb),
                         };
                         match pushed {
-                            Ok(()) => report.updated += 1,
+                            Ok(()) => {
+                                e.shape = shape;
+                                report.updated += 1;
+                            }
                             Err(_) => report.skipped += 1,
                         }
                     }
@@ -162,6 +168,7 @@ impl Mirror {
                                 handle,
                                 key,
                                 class: Class::of(&shape),
+                                shape,
                                 stamp: self.stamp,
                             });
                             self.handles.insert(key, handle);
@@ -255,14 +262,28 @@ impl Mirror {
     }
 
     fn is_static(&self, key: ProxyKey) -> bool {
-        self.broadphase.shape(key).is_some_and(|s| s.is_static())
+        self.entry(key).is_some_and(|e| e.shape.is_static())
     }
 
-    /// The brute-force pair set of the mirrored boxes as they are now (grown by the
-    /// broadphase's margin; the exact set with margin 0), by [`brute::sweep_pairs`].
+    fn entry(&self, key: ProxyKey) -> Option<&Entry> {
+        let h = self.handle(key)?;
+        self.slots[h.into_raw_parts().0 as usize].as_ref()
+    }
+
+    /// The brute-force pair set, by [`brute::sweep_pairs`], of the colliders' spheres and boxes
+    /// as the last `sync` read them from rapier (grown by the broadphase's margin; the exact
+    /// set with margin 0). It comes from the mirror's own record of what it pushed, never from
+    /// the broadphase it checks.
     #[must_use]
     pub fn exact_pairs(&self) -> Vec<Pair> {
-        brute::broadphase_pairs(&self.broadphase)
+        let margin = self.broadphase.config().margin;
+        let proxies: Vec<brute::Proxy> = self
+            .slots
+            .iter()
+            .flatten()
+            .map(|e| brute::Proxy::of(e.key, &e.shape, margin))
+            .collect();
+        brute::sweep_pairs(&proxies)
     }
 
     /// Steps the broadphase and compares its pairs with rapier's current pairs and with brute

@@ -1,57 +1,49 @@
 //! Churn and teleports at scale: 10k proxies (spheres, dynamic and static bodies), 200 steps,
 //! each step 1 % removed, 1 % inserted, 1 % teleported anywhere, 1 % resized and the rest
-//! moved. After every step the pairs equal the sweep reference over the current boxes, the
-//! events equal the set difference with the previous step, and `validate()` holds. Both octree
-//! placements.
+//! moved. After every step the pairs equal the test's own model (its sort-and-sweep over the
+//! shapes it gave, grown by its own code), the events equal the model's own set difference
+//! with the previous step, and `validate()` holds. Both octree placements.
+
+mod common;
 
 use broadleaf::fixtures::scene::{DT, Gas, Rng};
 use broadleaf::octree::depth_for_loose;
-use broadleaf::{
-    Aabb, BodyKind, BroadPhase, Config, Pair, Placement, ProxyKey, Shape, Vec3, brute, pair,
-};
+use broadleaf::{Aabb, BroadPhase, Config, Placement, ProxyKey, Vec3};
+use common::{Model, ModelShape};
 
 const N: usize = 10_000;
 const STEPS: usize = 200;
 
-/// A random live proxy of a random kind somewhere in (or a little outside) `bounds`.
-fn random_proxy(bp: &mut BroadPhase, rng: &mut Rng, bounds: &Aabb) -> ProxyKey {
+/// A random shape of a random kind somewhere in (or a little outside) `bounds`.
+fn random_shape(rng: &mut Rng, bounds: &Aabb) -> ModelShape {
     let c = rng.vec3_in(bounds.min - 2.0, bounds.max + 2.0);
     match rng.below(20) {
         0 => {
             let h = Vec3::new(rng.log_range(0.1, 2.0), rng.log_range(0.1, 2.0), 0.3);
-            bp.insert_body(Aabb::from_center_half_extents(c, h), BodyKind::Static)
+            ModelShape::body(c, h, true)
         }
         1..=3 => {
             let h = Vec3::splat(rng.log_range(0.1, 2.0));
-            bp.insert_body(Aabb::from_center_half_extents(c, h), BodyKind::Dynamic)
+            ModelShape::body(c, h, false)
         }
-        _ => bp.insert_sphere(c, rng.range(0.0, 1.0)),
+        _ => ModelShape::Sphere {
+            center: c,
+            radius: rng.range(0.0, 1.0),
+        },
     }
-    .expect("finite proxy")
 }
 
-fn moved(shape: Shape, to: Vec3, size: Option<f32>) -> Shape {
+fn moved(shape: ModelShape, to: Vec3, size: Option<f32>) -> ModelShape {
     match shape {
-        Shape::Sphere { radius, .. } => Shape::Sphere {
+        ModelShape::Sphere { radius, .. } => ModelShape::Sphere {
             center: to,
             radius: size.unwrap_or(radius),
         },
-        Shape::Body { aabb, kind } => {
+        ModelShape::Body { aabb, is_static } => {
             let h = size.map_or(aabb.extent() * 0.5, Vec3::splat);
-            Shape::Body {
-                aabb: Aabb::from_center_half_extents(to, h),
-                kind,
-            }
+            ModelShape::body(to, h, is_static)
         }
     }
-}
-
-fn apply(bp: &mut BroadPhase, key: ProxyKey, shape: Shape) {
-    match shape {
-        Shape::Sphere { center, radius } => bp.update_sphere(key, center, radius),
-        Shape::Body { aabb, .. } => bp.update_body(key, aabb),
-    }
-    .expect("live key, finite shape");
 }
 
 fn run(margin: f32, depth: u32, placement: Placement, steps: usize) {
@@ -63,64 +55,54 @@ fn run(margin: f32, depth: u32, placement: Placement, steps: usize) {
         margin,
         ..Config::default()
     });
+    let mut model = Model::new(margin);
+    model.quadratic = false;
     let mut rng = Rng::new(2024);
     let mut live: Vec<ProxyKey> = (0..N)
-        .map(|_| random_proxy(&mut bp, &mut rng, &bounds))
+        .map(|_| {
+            let shape = random_shape(&mut rng, &bounds);
+            model.insert(&mut bp, shape)
+        })
         .collect();
     let mut velocity: Vec<Vec3> = (0..N)
         .map(|_| rng.vec3_in(Vec3::splat(-5.0), Vec3::splat(5.0)))
         .collect();
-    let mut prev: Vec<Pair> = Vec::new();
-    let (mut added, mut removed) = (Vec::new(), Vec::new());
     let per_step = N / 100;
     for step in 0..steps {
         for _ in 0..per_step {
             let i = rng.below(live.len() as u32) as usize;
-            bp.remove(live.swap_remove(i)).expect("live key");
+            model.remove(&mut bp, live.swap_remove(i));
             velocity.swap_remove(i);
         }
         for _ in 0..per_step {
-            live.push(random_proxy(&mut bp, &mut rng, &bounds));
+            let shape = random_shape(&mut rng, &bounds);
+            live.push(model.insert(&mut bp, shape));
             velocity.push(rng.vec3_in(Vec3::splat(-5.0), Vec3::splat(5.0)));
         }
         for (i, &key) in live.iter().enumerate() {
-            let shape = bp.shape(key).expect("live key");
-            if matches!(
-                shape,
-                Shape::Body {
-                    kind: BodyKind::Static,
-                    ..
-                }
-            ) && rng.below(50) != 0
-            {
+            let shape = model.shapes[&key];
+            if shape.is_static() && rng.below(50) != 0 {
                 continue;
             }
             let roll = rng.below(100);
-            let center = shape.aabb().center();
+            let center = shape.user_box().center();
             let next = match roll {
                 0 => moved(shape, rng.vec3_in(bounds.min, bounds.max), None),
                 1 => moved(shape, center, Some(rng.range(0.0, 1.5))),
                 _ => moved(shape, center + velocity[i] * DT, None),
             };
-            apply(&mut bp, key, next);
+            model.update(&mut bp, key, next);
         }
+        let want = model.expect_step();
         let out = bp.step();
-        let (pairs, got_added, got_removed) =
-            (out.pairs.to_vec(), out.added.to_vec(), out.removed.to_vec());
-        let expected = brute::broadphase_pairs(&bp);
-        assert_eq!(pairs.len(), expected.len(), "step {step}: pair count");
-        assert_eq!(
-            pairs, expected,
-            "step {step}: pairs differ from the reference"
-        );
-        pair::diff(&prev, &expected, &mut added, &mut removed);
-        assert_eq!(got_added, added, "step {step}: added");
-        assert_eq!(got_removed, removed, "step {step}: removed");
+        let context = format!("step {step}");
+        model.assert_list(&context, "pairs", out.pairs, &want.pairs);
+        model.assert_list(&context, "added", out.added, &want.added);
+        model.assert_list(&context, "removed", out.removed, &want.removed);
         assert_eq!(bp.len(), N);
         if step % 10 == 0 || step + 1 == steps {
             bp.validate();
         }
-        prev = expected;
     }
     bp.validate();
 }
