@@ -73,6 +73,9 @@
 //! # Features
 //! - `rapier`: interop with rapier3d 0.36 (`broadleaf::rapier`): mirror a collider set into a
 //!   `BroadPhase` and compare pair sets with rapier's broadphase.
+//! - `fixtures`: benchmark and test support (`broadleaf::fixtures`): the seeded scenes, the
+//!   demo's physics loop and, with `rapier`, rapier worlds playing the same scenes. Not part of
+//!   the broadphase; the crate's own examples, benches and tests turn it on.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
