@@ -192,7 +192,9 @@ mod bvh_benches {
 // Scenes: broadleaf's whole `BroadPhase` step next to rapier's broad phase, same motion.
 // ---------------------------------------------------------------------------------------------
 mod scene_benches {
-    use broadleaf::fixtures::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Scene, Spawn};
+    use broadleaf::fixtures::scene::{
+        Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Idle, Scene, Spawn,
+    };
     use broadleaf::octree::Placement;
     use broadleaf::{BroadPhase, Config};
     use criterion::{BenchmarkId, Criterion, Throughput};
@@ -367,7 +369,36 @@ mod scene_benches {
         group.finish();
     }
 
+    /// Spheres of the `idle` bench: 100 000, since one step of broadleaf or rapier stays far
+    /// under the ~1 s an iteration may take (building the world is outside the timing).
+    const IDLE_N: usize = 100_000;
+    /// Percentages of movers the `idle` bench runs.
+    const IDLE_MOVING: [f64; 3] = [0.0, 1.0, 10.0];
+
+    /// `idle`: the `gas` spheres at rest but for a fixed P % that move (the rest are never
+    /// updated, in either engine); one benchmark per engine and P.
+    fn register_idle(c: &mut Criterion) {
+        let mut group = c.benchmark_group("idle");
+        group.sample_size(10);
+        group.warm_up_time(Duration::from_secs(1));
+        group.measurement_time(Duration::from_secs(3));
+        group.throughput(Throughput::Elements(IDLE_N as u64));
+        for p in IDLE_MOVING {
+            group.bench_function(BenchmarkId::new("broadleaf", p), |b| {
+                b.iter_custom(|iters| {
+                    broadleaf(&mut Idle::new(IDLE_N, 1, p), iters, Placement::Strict, 0.0)
+                });
+            });
+            #[cfg(feature = "rapier")]
+            group.bench_function(BenchmarkId::new("rapier", p), |b| {
+                b.iter_custom(|iters| rapier(&mut Idle::new(IDLE_N, 1, p), iters));
+            });
+        }
+        group.finish();
+    }
+
     pub fn register(c: &mut Criterion) {
+        register_idle(c);
         #[cfg(feature = "rapier")]
         register_pile(c);
         for (name, mut make) in scenes() {

@@ -7,13 +7,17 @@
 //! pairs are `Octree::pairs_into` (unsorted), with `broadphase` the whole `BroadPhase::step`
 //! (sorted list plus added / removed). `feed` runs the scene's frames (with `churn`'s removes
 //! and inserts) through `scene::Feed` into a `BroadPhase`, as `vs_rapier` does, and times
-//! only `Feed::apply` and `BroadPhase::step`, not the scene's motion. The depth defaults to
+//! only `Feed::apply` and `BroadPhase::step`, not the scene's motion. `batch` times the same
+//! motion fed four ways, each into a fresh `BroadPhase`: one `update_spheres` batch per step,
+//! one `update_sphere` call per sphere, and `Feed::apply` batched and per object; for each
+//! it prints the median ns/object of the moves alone and of the moves plus `step()` (the
+//! batch is built from the scene untimed; `Feed::apply` builds its own, timed). The depth defaults to
 //! `depth_for` (strict) or `depth_for_loose` (loose). Under callgrind,
 //! `--toggle-collect=*measured*` counts only the measured steps.
 
 use broadleaf::fixtures::scene::{Churn, DT, Feed, Frame, Gas, Scene};
 use broadleaf::octree::{Octree, Placement};
-use broadleaf::{BroadPhase, Config, Pair, ProxyKey};
+use broadleaf::{BroadPhase, Config, Pair, ProxyKey, Vec3};
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -157,6 +161,22 @@ fn main() {
                     times.push(t.elapsed().as_nanos() as f64 / n as f64);
                 }
             }
+            println!(
+                "memory: {:.1} heap bytes per proxy ({} proxies), last step {:?}",
+                bp.heap_bytes() as f64 / bp.len().max(1) as f64,
+                bp.len(),
+                bp.stats()
+            );
+        }
+        "batch" => {
+            for way in [Way::Batch, Way::PerCall, Way::FeedBatch, Way::FeedPerCall] {
+                let (apply, total) = time_feeding(&gas, way, args.steps);
+                println!(
+                    "scene={} n={n} what=batch way={way:?} steps={} median_apply_ns_per_object={apply:.1} median_apply_step_ns_per_object={total:.1}",
+                    args.scene, args.steps
+                );
+            }
+            return;
         }
         other => panic!("unknown --what {other}"),
     }
@@ -175,4 +195,69 @@ fn main() {
             s.overflow
         );
     }
+}
+
+/// How `--what batch` feeds a step's moves to the broadphase.
+#[derive(Clone, Copy, Debug)]
+enum Way {
+    /// One `update_spheres` call with every sphere.
+    Batch,
+    /// One `update_sphere` call per sphere.
+    PerCall,
+    /// `Feed::apply` (one `update_spheres` batch).
+    FeedBatch,
+    /// `Feed::apply` with `Feed::per_object`.
+    FeedPerCall,
+}
+
+/// Runs `gas`'s motion (a copy) into a fresh default `BroadPhase`, fed `way`; the medians of
+/// ns/object for the moves alone and for the moves plus `step()`.
+fn time_feeding(gas: &Gas, way: Way, steps: usize) -> (f64, f64) {
+    let mut gas = gas.clone();
+    let n = gas.len().max(1) as f64;
+    let mut bp = BroadPhase::new(Config {
+        bounds: gas.bounds,
+        ..Config::default()
+    });
+    let per_object = matches!(way, Way::FeedPerCall);
+    let (mut feed, mut spawns, mut frame) = (
+        Feed::new(false).per_object(per_object),
+        Vec::new(),
+        Frame::default(),
+    );
+    gas.spawns(&mut spawns);
+    feed.spawn(&mut bp, &spawns).expect("valid scene");
+    bp.step();
+    let mut batch: Vec<(ProxyKey, Vec3, f32)> = Vec::with_capacity(gas.len());
+    let (mut apply, mut total) = (Vec::new(), Vec::new());
+    for i in 0..WARMUP + steps {
+        gas.advance(&mut frame);
+        batch.clear();
+        batch.extend(frame.moved.iter().map(|&(id, o)| {
+            let key = feed.key(id).expect("live id");
+            (key, o.center(), gas.radius)
+        }));
+        let t = Instant::now();
+        match way {
+            Way::Batch => bp.update_spheres(&batch).expect("valid batch"),
+            Way::PerCall => {
+                for &(k, c, r) in &batch {
+                    bp.update_sphere(k, c, r).expect("valid sphere");
+                }
+            }
+            Way::FeedBatch | Way::FeedPerCall => feed.apply(&mut bp, &frame).expect("valid frame"),
+        }
+        let moved = t.elapsed();
+        black_box(bp.step().pairs.len());
+        let stepped = t.elapsed();
+        if i >= WARMUP {
+            apply.push(moved.as_nanos() as f64 / n);
+            total.push(stepped.as_nanos() as f64 / n);
+        }
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+    };
+    (median(&mut apply), median(&mut total))
 }

@@ -6,15 +6,23 @@
 //!     [--skin 0]
 //! ```
 //!
-//! `--scene` is `gas`, `clustered`, `bodies`, `churn`, `pile` or `all` (every scene at its
-//! default N: gas, clustered and churn 100 000, bodies and pile 10 000; `--n` overrides it for
-//! all). `pile` is recorded first from a dynamic rapier run (`broadleaf::fixtures::rapier_world::record_pile`,
+//! `--scene` is `gas`, `clustered`, `bodies`, `churn`, `pile`, `idle` or `all` (every scene at
+//! its default N: gas, clustered, churn and idle 100 000, bodies and pile 10 000; `--n`
+//! overrides it for all; `all` runs `idle` at 1 % and at 10 % moving). `idle` is the `gas`
+//! spheres at rest but for a fixed random `--moving P` % of them (default 1) that move like
+//! `gas`; the others are never updated, in broadleaf or in rapier. `bodies --moving P` moves
+//! only a fixed P % of its dynamic boxes (default 100). `--moving` takes a list
+//! (`--moving 0,1,2,5,10,20,50,100`): one row per P, and with more than one P and no
+//! `--scene` the scene is `idle`; `--plot PATH.svg` then draws ns/object/step against P (a
+//! linear P axis), otherwise against N (`--sizes`, log–log). `pile` is recorded first from a dynamic rapier run (`broadleaf::fixtures::rapier_world::record_pile`,
 //! 240 settling steps, untimed) and then replayed like the others. The scene's frames are
 //! generated first; then broadleaf runs all of them, then rapier does (`--interleave`
 //! alternates the two per step instead, so each also pays for the other evicting its caches).
 //! Each step the scene's motion is fed to both:
 //!
-//! - broadleaf: the frame's removes, inserts and new positions/boxes, then `step()`; spheres go
+//! - broadleaf: the frame's removes, inserts and new positions/boxes (one `update_spheres` and
+//!   one `update_bodies` batch; `--per-object` calls `update_sphere` / `update_body` for each
+//!   object instead), then `step()`; spheres go
 //!   in with `insert_sphere` (`--index octree` or `auto`) or as dynamic bodies by their box
 //!   (`--index bvh`); boxes always go in as bodies. The octree's placement is `--placement`
 //!   (default strict, depth `depth_for`; loose uses `depth_for_loose`), its pair cache's skin
@@ -36,11 +44,26 @@
 //! object, static ones included) per step. The last line is exactly
 //! `ratio=<speed-up> missed=<n> extra=<n>`; for `--scene all` the ratio is the worst (smallest)
 //! speed-up of the scenes and `missed`/`extra` are summed over them.
+//!
+//! `--queries` runs scene queries instead of the step table: on `gas` (N = `--n`, default
+//! 100 000) after one step, 100 000 box queries (cubes of 1–4 m edge, centres uniform in the
+//! scene's cube) and 100 000 closest-hit rays (origins uniform in the cube, directions uniform
+//! on the sphere, `max_t` the cube's edge), timed in broadleaf (`query_aabb`, `cast_ray`) and in
+//! rapier's query pipeline over the same colliders (`BroadPhaseBvh::as_query_pipeline`:
+//! `intersect_aabb_conservative` re-tested against each collider's exact AABB, so both return
+//! the same set, and `cast_ray` with `solid`). Every 100th query is checked: the same key set
+//! for a box; for a ray the same `t` within 1e-4 and the same collider, or (a tie, as for an
+//! origin inside two overlapping spheres) one broadleaf also hits at that `t`. Its own table; the last line is
+//! `queries mismatches=<n>`.
 
 use broadleaf::fixtures::rapier_world::{SceneWorld, record_pile};
-use broadleaf::fixtures::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Scene};
+use broadleaf::fixtures::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Idle, Rng, Scene};
 use broadleaf::rapier::Comparison;
-use broadleaf::{BroadPhase, Config, Passes, Placement, brute};
+use broadleaf::{Aabb, BroadPhase, Config, Passes, Placement, ProxyKey, Shape, Vec3, brute, geom};
+use plotters::prelude::*;
+use rapier3d::parry::bounding_volume::BoundingVolume;
+use rapier3d::parry::query::Ray;
+use std::hint::black_box;
 use std::process::exit;
 use std::time::Instant;
 
@@ -69,12 +92,22 @@ struct Args {
     plot: Option<String>,
     /// Alternate the two engines step by step instead of running each back to back.
     interleave: bool,
+    /// Percentages of movers for `idle` and `bodies` (`--moving 1` or `--moving 0,1,10`);
+    /// empty: each scene's default.
+    moving: Vec<f64>,
+    /// True if `--scene` was given (with several `--moving` values the default is `idle`).
+    scene_given: bool,
+    /// Feed the moves one `update_*` call per object instead of in batches.
+    per_object: bool,
+    /// Time scene queries instead of steps.
+    queries: bool,
 }
 
-const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|all] [--n N] \
+const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|idle|all] [--n N] \
                      [--steps 30] [--warmup 5] [--index octree|bvh|auto] \
                      [--placement strict|loose] [--skin 0] [--passes adaptive|full|incremental] [--seed 1] \
-                     [--sizes N1,N2,...] [--plot PATH.svg] [--interleave]";
+                     [--sizes N1,N2,...] [--moving P1,P2,...] [--plot PATH.svg] [--interleave] \
+                     [--per-object] [--queries]";
 
 fn parse_args() -> Result<Args, String> {
     let mut args = Args {
@@ -90,6 +123,10 @@ fn parse_args() -> Result<Args, String> {
         sizes: Vec::new(),
         plot: None,
         interleave: false,
+        moving: Vec::new(),
+        scene_given: false,
+        per_object: false,
+        queries: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -97,14 +134,37 @@ fn parse_args() -> Result<Args, String> {
             println!("{USAGE}");
             exit(0);
         }
-        if flag == "--interleave" {
-            args.interleave = true;
-            continue;
+        match flag.as_str() {
+            "--interleave" => {
+                args.interleave = true;
+                continue;
+            }
+            "--per-object" => {
+                args.per_object = true;
+                continue;
+            }
+            "--queries" => {
+                args.queries = true;
+                continue;
+            }
+            _ => {}
         }
         let value = it.next().ok_or(format!("{flag} needs a value"))?;
         let number = |v: &str| v.parse::<usize>().map_err(|e| format!("{flag} {v}: {e}"));
         match flag.as_str() {
-            "--scene" => args.scene = value,
+            "--scene" => {
+                args.scene = value;
+                args.scene_given = true;
+            }
+            "--moving" => {
+                args.moving = value
+                    .split(',')
+                    .map(|v| match v.parse::<f64>() {
+                        Ok(p) if (0.0..=100.0).contains(&p) => Ok(p),
+                        _ => Err(format!("--moving {v}: a percentage in [0, 100]")),
+                    })
+                    .collect::<Result<_, _>>()?;
+            }
             "--n" => args.n = Some(number(&value)?),
             "--steps" => args.steps = number(&value)?.max(1),
             "--warmup" => args.warmup = number(&value)?,
@@ -144,21 +204,60 @@ fn parse_args() -> Result<Args, String> {
             other => return Err(format!("unknown flag {other}")),
         }
     }
+    if args.moving.len() > 1 && !args.scene_given {
+        args.scene = "idle".into();
+    }
     Ok(args)
 }
 
 /// Unrecorded rapier steps that let the `pile` scene settle before its frames are recorded.
 const PILE_SETTLE_STEPS: usize = 240;
 
-fn make_scene(name: &str, n: usize, seed: u64, steps: usize) -> Option<Box<dyn Scene>> {
+/// `--scene all` runs `idle` at each of these percentages of movers.
+const ALL_IDLE_MOVING: [f64; 2] = [1.0, 10.0];
+
+/// `moving` is the percentage of movers for `idle` and `bodies`, ignored by the others.
+fn make_scene(
+    name: &str,
+    n: usize,
+    seed: u64,
+    steps: usize,
+    moving: f64,
+) -> Option<Box<dyn Scene>> {
     Some(match name {
         "pile" => Box::new(record_pile(n, seed, PILE_SETTLE_STEPS, steps + 1)),
         "gas" => Box::new(Gas::new(n, seed)),
         "clustered" => Box::new(Gas::clustered(n, seed)),
-        "bodies" => Box::new(Bodies::new(n, seed)),
+        "bodies" => Box::new(Bodies::with_moving(n, seed, moving)),
         "churn" => Box::new(Churn::new(n, seed)),
+        "idle" => Box::new(Idle::new(n, seed, moving)),
         _ => return None,
     })
+}
+
+/// The percentages of movers a scene runs at: `--moving`, else its default (`idle` 1 %,
+/// `bodies` 100 %); `None` for a scene without movers.
+fn moving_for(scene: &str, args: &Args) -> Result<Vec<Option<f64>>, String> {
+    let default = match scene {
+        "idle" => 1.0,
+        "bodies" => 100.0,
+        _ if args.moving.is_empty() => return Ok(vec![None]),
+        _ => return Err(format!("--moving applies to idle and bodies, not {scene}")),
+    };
+    if args.moving.is_empty() {
+        Ok(vec![Some(default)])
+    } else {
+        Ok(args.moving.iter().map(|&p| Some(p)).collect())
+    }
+}
+
+/// The table's scene cell: the name, with the percentage of movers for `idle` and for
+/// `bodies` when not every box moves.
+fn label(scene: &str, moving: Option<f64>) -> String {
+    match moving {
+        Some(p) if scene == "idle" || p < 100.0 => format!("{scene} {p}%"),
+        _ => scene.to_string(),
+    }
 }
 
 fn default_n(scene: &str) -> usize {
@@ -187,7 +286,7 @@ impl Ours {
                 passes: args.passes,
                 ..Config::default()
             }),
-            feed: Feed::new(index == Index::Bvh),
+            feed: Feed::new(index == Index::Bvh).per_object(args.per_object),
         }
     }
 }
@@ -204,14 +303,21 @@ fn median(v: &mut [f64]) -> f64 {
 
 struct Row {
     scene: String,
+    /// The scene's name without the percentage of movers.
+    name: String,
+    /// Percentage of movers (`idle`, `bodies`).
+    moving: Option<f64>,
     n: usize,
     ours_ns: f64,
     rapier_ns: f64,
     cmp: Comparison,
 }
 
-fn run(name: &str, n: usize, args: &Args) -> Row {
-    let mut scene = make_scene(name, n, args.seed, args.warmup + args.steps).expect("known scene");
+fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
+    let steps = args.warmup + args.steps;
+    let mut scene =
+        make_scene(name, n, args.seed, steps, moving.unwrap_or(100.0)).expect("known scene");
+    let name = &label(name, moving);
     let mut ours = Ours::new(scene.bounds(), args.index, args);
     let mut theirs = SceneWorld::new();
     let mut spawns = Vec::new();
@@ -227,7 +333,6 @@ fn run(name: &str, n: usize, args: &Args) -> Row {
     // The motion is generated up front, so each engine can run its steps back to back (a
     // real program runs one broadphase, and alternating the two per step makes each pay for
     // the other evicting its caches); `--interleave` alternates them as before.
-    let steps = args.warmup + args.steps;
     let mut frames = Vec::with_capacity(steps);
     let mut live = Vec::with_capacity(steps);
     for _ in 0..steps {
@@ -290,6 +395,8 @@ fn run(name: &str, n: usize, args: &Args) -> Row {
     cmp.unmapped = unmapped;
     Row {
         scene: name.to_string(),
+        name: name.split(' ').next().unwrap_or(name).to_string(),
+        moving,
         n: scene.len(),
         ours_ns: median(&mut ours_ns),
         rapier_ns: median(&mut rapier_ns),
@@ -318,9 +425,24 @@ fn main() {
         eprintln!("{e}\n{USAGE}");
         exit(2);
     });
-    let names: Vec<&str> = match args.scene.as_str() {
-        "all" => vec!["gas", "clustered", "bodies", "churn", "pile"],
-        s if make_scene(s, 0, 0, 0).is_some() => vec![s],
+    if args.queries {
+        let mismatches = run_queries(&args);
+        println!("queries mismatches={mismatches}");
+        return;
+    }
+    let names: Vec<(&str, Option<f64>)> = match args.scene.as_str() {
+        "all" => ["gas", "clustered", "bodies", "churn", "pile"]
+            .map(|name| (name, None))
+            .into_iter()
+            .chain(ALL_IDLE_MOVING.map(|p| ("idle", Some(p))))
+            .collect(),
+        s if make_scene(s, 0, 0, 0, 0.0).is_some() => {
+            let moving = moving_for(s, &args).unwrap_or_else(|e| {
+                eprintln!("{e}\n{USAGE}");
+                exit(2);
+            });
+            moving.into_iter().map(|p| (s, p)).collect()
+        }
         s => {
             eprintln!("unknown scene {s}\n{USAGE}");
             exit(2);
@@ -347,19 +469,19 @@ fn main() {
     );
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     let mut rows = Vec::new();
-    let runs: Vec<(&str, usize)> = if args.sizes.is_empty() {
+    let runs: Vec<(&str, usize, Option<f64>)> = if args.sizes.is_empty() {
         names
             .iter()
-            .map(|&name| (name, args.n.unwrap_or_else(|| default_n(name))))
+            .map(|&(name, p)| (name, args.n.unwrap_or_else(|| default_n(name)), p))
             .collect()
     } else {
         names
             .iter()
-            .flat_map(|&name| args.sizes.iter().map(move |&n| (name, n)))
+            .flat_map(|&(name, p)| args.sizes.iter().map(move |&n| (name, n, p)))
             .collect()
     };
-    for (name, n) in runs {
-        let r = run(name, n, &args);
+    for (name, n, moving) in runs {
+        let r = run(name, n, moving, &args);
         println!(
             "| {} | {} | {:.1} | {:.1} | {:.2} | {} | {} | {} | {} | {} |",
             r.scene,
@@ -385,7 +507,13 @@ fn main() {
         }
     }
     if let Some(path) = &args.plot {
-        match std::fs::write(path, plot_svg(&rows)) {
+        let by_moving = args.moving.len() > 1;
+        let drawn = if by_moving {
+            plot_moving(&rows, path)
+        } else {
+            plot_sizes(&rows, path)
+        };
+        match drawn {
             Ok(()) => println!("wrote {path}"),
             Err(e) => eprintln!("cannot write {path}: {e}"),
         }
@@ -399,102 +527,384 @@ fn main() {
     println!("ratio={ratio:.2} missed={missed} extra={extra}");
 }
 
-/// One line of the plot: engine name, colour, and which time of a row it draws.
-type Engine = (&'static str, &'static str, fn(&Row) -> f64);
+/// Size of the plots in pixels.
+const PLOT_SIZE: (u32, u32) = (820, 500);
 
-/// A log–log SVG plot of ns/object/step against N, one line per engine and scene; drawn by
-/// hand (a few dozen SVG elements), so the example needs no plotting dependency.
-fn plot_svg(rows: &[Row]) -> String {
-    let (w, h, left, right, top, bottom) = (640.0, 400.0, 70.0, 150.0, 30.0, 50.0);
-    let xs: Vec<f64> = rows.iter().map(|r| (r.n as f64).log10()).collect();
-    let ys: Vec<f64> = rows
-        .iter()
-        .flat_map(|r| [r.ours_ns.log10(), r.rapier_ns.log10()])
-        .collect();
-    let (x0, x1) = (
-        xs.iter().copied().fold(f64::INFINITY, f64::min).floor(),
-        xs.iter()
-            .copied()
-            .fold(f64::NEG_INFINITY, f64::max)
-            .ceil()
-            .max(1.0),
-    );
-    let (y0, y1) = (
-        ys.iter().copied().fold(f64::INFINITY, f64::min).floor(),
-        ys.iter().copied().fold(f64::NEG_INFINITY, f64::max).ceil(),
-    );
-    let px = |x: f64| left + (x - x0) / (x1 - x0).max(1e-9) * (w - left - right);
-    let py = |y: f64| h - bottom - (y - y0) / (y1 - y0).max(1e-9) * (h - top - bottom);
-    let mut svg = format!(
-        "<svg xmlns='http://www.w3.org/2000/svg' width='{w}' height='{h}' font-family='sans-serif' font-size='12'>\n<rect width='100%' height='100%' fill='white'/>\n"
-    );
-    for e in x0 as i32..=x1 as i32 {
-        let x = px(f64::from(e));
-        svg += &format!(
-            "<line x1='{x}' y1='{top}' x2='{x}' y2='{}' stroke='#ddd'/><text x='{x}' y='{}' text-anchor='middle'>1e{e}</text>\n",
-            h - bottom,
-            h - bottom + 16.0
-        );
+/// A plot's engine: name, colour, and which time of a row it draws.
+type Engine = (&'static str, RGBColor, fn(&Row) -> f64);
+
+fn ours_ns(r: &Row) -> f64 {
+    r.ours_ns
+}
+
+fn rapier_ns(r: &Row) -> f64 {
+    r.rapier_ns
+}
+
+const ENGINES: [Engine; 2] = [
+    ("broadleaf", RGBColor(0x2a, 0x9d, 0x8f), ours_ns),
+    ("rapier", RGBColor(0xe7, 0x6f, 0x51), rapier_ns),
+];
+
+type Plotted = Result<(), Box<dyn std::error::Error>>;
+
+/// The whole decades around every value of `v` (positive values), for a log axis.
+fn decades(v: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = v
+        .filter(|x| *x > 0.0)
+        .fold((f64::INFINITY, 0.0f64), |(lo, hi), x| {
+            (lo.min(x), hi.max(x))
+        });
+    if lo > hi {
+        return (1.0, 10.0);
     }
-    for e in y0 as i32..=y1 as i32 {
-        let y = py(f64::from(e));
-        svg += &format!(
-            "<line x1='{left}' y1='{y}' x2='{}' y2='{y}' stroke='#ddd'/><text x='{}' y='{}' text-anchor='end'>1e{e}</text>\n",
-            w - right,
-            left - 6.0,
-            y + 4.0
-        );
-    }
-    svg += &format!(
-        "<text x='{}' y='{}' text-anchor='middle'>objects N</text><text x='16' y='{}' transform='rotate(-90 16 {})' text-anchor='middle'>ns / object / step</text>\n",
-        (left + w - right) / 2.0,
-        h - 10.0,
-        (top + h - bottom) / 2.0,
-        (top + h - bottom) / 2.0
+    let (lo, hi) = (
+        10f64.powf(lo.log10().floor()),
+        10f64.powf(hi.log10().ceil()),
     );
+    (lo, if hi > lo { hi } else { lo * 10.0 })
+}
+
+/// One series: a line (solid for the first group, dashed after) with a dot at each point,
+/// and its legend entry.
+fn series<X, Y>(
+    chart: &mut ChartContext<'_, SVGBackend<'_>, Cartesian2d<X, Y>>,
+    points: Vec<(f64, f64)>,
+    colour: RGBColor,
+    dashed: bool,
+    name: String,
+) -> Plotted
+where
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+{
+    let style = colour.stroke_width(2);
+    let legend = move |(x, y): (i32, i32)| PathElement::new(vec![(x, y), (x + 20, y)], style);
+    if dashed {
+        chart
+            .draw_series(DashedLineSeries::new(points.clone(), 6, 4, style))?
+            .label(name)
+            .legend(legend);
+    } else {
+        chart
+            .draw_series(LineSeries::new(points.clone(), style))?
+            .label(name)
+            .legend(legend);
+    }
+    chart.draw_series(
+        points
+            .into_iter()
+            .map(|p| Circle::new(p, 3, colour.filled())),
+    )?;
+    Ok(())
+}
+
+/// ns/object/step against N (`--sizes`), both axes logarithmic since the sizes span
+/// decades; one line per engine and scene.
+fn plot_sizes(rows: &[Row], path: &str) -> Plotted {
+    let (x0, x1) = decades(rows.iter().map(|r| r.n as f64));
+    let (y0, y1) = decades(rows.iter().flat_map(|r| [r.ours_ns, r.rapier_ns]));
+    let root = SVGBackend::new(path, PLOT_SIZE).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption("one broadphase step against N", ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc("objects N")
+        .y_desc("ns / object / step")
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y}"))
+        .draw()?;
     let mut scenes: Vec<&str> = rows.iter().map(|r| r.scene.as_str()).collect();
     scenes.dedup();
-    let mut legend = 0.0;
     for (k, scene) in scenes.iter().enumerate() {
-        let of_scene: Vec<&Row> = rows.iter().filter(|r| r.scene == *scene).collect();
-        let engines: [Engine; 2] = [
-            ("broadleaf", "#2a9d8f", |r| r.ours_ns),
-            ("rapier", "#e76f51", |r| r.rapier_ns),
-        ];
-        for (engine, colour, value) in engines {
-            let dash = if k == 0 {
-                ""
-            } else {
-                " stroke-dasharray='6 3'"
-            };
-            let points: Vec<String> = of_scene
+        for (engine, colour, value) in ENGINES {
+            let points = rows
                 .iter()
-                .map(|r| {
-                    format!(
-                        "{:.1},{:.1}",
-                        px((r.n as f64).log10()),
-                        py(value(r).log10())
-                    )
-                })
+                .filter(|r| r.scene == *scene)
+                .map(|r| (r.n as f64, value(r)))
                 .collect();
-            svg += &format!(
-                "<polyline points='{}' fill='none' stroke='{colour}' stroke-width='2'{dash}/>\n",
-                points.join(" ")
-            );
-            for p in &points {
-                let (x, y) = p.split_once(',').unwrap_or(("0", "0"));
-                svg += &format!("<circle cx='{x}' cy='{y}' r='3' fill='{colour}'/>\n");
-            }
-            let ly = top + 10.0 + legend * 18.0;
-            svg += &format!(
-                "<line x1='{}' y1='{ly}' x2='{}' y2='{ly}' stroke='{colour}' stroke-width='2'{dash}/><text x='{}' y='{}'>{engine} {scene}</text>\n",
-                w - right + 10.0,
-                w - right + 34.0,
-                w - right + 40.0,
-                ly + 4.0
-            );
-            legend += 1.0;
+            series(
+                &mut chart,
+                points,
+                colour,
+                k > 0,
+                format!("{engine} {scene}"),
+            )?;
         }
     }
-    svg + "</svg>\n"
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+/// ns/object/step against the percentage of movers (`--moving`), on a linear P axis (P = 0 is
+/// a point like any other) and a logarithmic time axis (the engines differ by up to a
+/// decade); one line per engine and scene size, and for broadleaf the no-cliff bound of
+/// `benchmarks.md` (1.1 × its time at the largest P) as a dotted line.
+fn plot_moving(rows: &[Row], path: &str) -> Plotted {
+    let p_of = |r: &Row| r.moving.unwrap_or(100.0);
+    let x1 = rows.iter().map(p_of).fold(1.0, f64::max);
+    let (y0, y1) = decades(rows.iter().flat_map(|r| [r.ours_ns, r.rapier_ns]));
+    let root = SVGBackend::new(path, PLOT_SIZE).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "one broadphase step against the share of objects moving",
+            ("sans-serif", 20),
+        )
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..x1, (y0..y1).log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc("objects moving per step, %")
+        .y_desc("ns / object / step (all objects)")
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y}"))
+        .draw()?;
+    let mut groups: Vec<(String, usize)> = rows.iter().map(|r| (r.name.clone(), r.n)).collect();
+    groups.dedup();
+    for (k, (name, n)) in groups.iter().enumerate() {
+        let of_group: Vec<&Row> = rows
+            .iter()
+            .filter(|r| r.name == *name && r.n == *n)
+            .collect();
+        for (engine, colour, value) in ENGINES {
+            let mut points: Vec<(f64, f64)> =
+                of_group.iter().map(|r| (p_of(r), value(r))).collect();
+            points.sort_by(|a, b| a.0.total_cmp(&b.0));
+            series(
+                &mut chart,
+                points,
+                colour,
+                k > 0,
+                format!("{engine} {name} N={n}"),
+            )?;
+        }
+        if let Some(full) = of_group.iter().max_by(|a, b| p_of(a).total_cmp(&p_of(b))) {
+            let bound = NO_CLIFF * full.ours_ns;
+            chart
+                .draw_series(DashedLineSeries::new(
+                    [(0.0, bound), (x1, bound)],
+                    2,
+                    4,
+                    ENGINES[0].1.stroke_width(1),
+                ))?
+                .label(format!(
+                    "{NO_CLIFF} × broadleaf at {}% ({name} N={n})",
+                    p_of(full)
+                ))
+                .legend(|(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], ENGINES[0].1.stroke_width(1))
+                });
+        }
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+/// `benchmarks.md`'s no-cliff target: ns/object at any P at most this times the figure at
+/// 100 % moving.
+const NO_CLIFF: f64 = 1.1;
+
+/// Box queries and rays `--queries` times per engine.
+const QUERY_COUNT: usize = 100_000;
+/// Edge range of the query cubes, in metres.
+const QUERY_EDGE: (f32, f32) = (1.0, 4.0);
+/// Every this many-th query is checked against the other engine.
+const QUERY_CHECK_EVERY: usize = 100;
+/// Largest difference of the two engines' ray `t` that still counts as the same hit.
+const RAY_T_TOLERANCE: f32 = 1e-4;
+
+/// A direction uniform on the unit sphere (rejection from the cube, then normalised).
+fn unit_dir(rng: &mut Rng) -> Vec3 {
+    loop {
+        let v = rng.vec3_in(Vec3::splat(-1.0), Vec3::splat(1.0));
+        let l2 = v.length_squared();
+        if l2 > 1e-6 && l2 <= 1.0 {
+            return v / l2.sqrt();
+        }
+    }
+}
+
+fn to_parry(b: &Aabb) -> rapier3d::parry::bounding_volume::Aabb {
+    rapier3d::parry::bounding_volume::Aabb::new(b.min, b.max)
+}
+
+/// `--queries`: prints the query table and returns the number of sampled queries on which
+/// the engines disagree.
+fn run_queries(args: &Args) -> usize {
+    let n = args.n.unwrap_or(100_000);
+    let mut scene = Gas::new(n, args.seed);
+    let bounds = scene.bounds;
+    let mut ours = Ours::new(bounds, args.index, args);
+    let mut theirs = SceneWorld::new();
+    let mut spawns = Vec::new();
+    scene.spawns(&mut spawns);
+    ours.feed
+        .spawn(&mut ours.bp, &spawns)
+        .expect("scene objects are finite");
+    for s in &spawns {
+        theirs.insert(s);
+    }
+    ours.bp.step();
+    theirs.step();
+    // One step of motion, so the queries see moved objects; rapier's second step moves
+    // nothing and leaves its tree at the targets' poses.
+    let mut frame = Frame::default();
+    scene.advance(&mut frame);
+    ours.feed
+        .apply(&mut ours.bp, &frame)
+        .expect("scene frames are valid");
+    ours.bp.step();
+    theirs.set_targets(&frame);
+    theirs.step();
+    theirs.step();
+
+    let mut rng = Rng::new(args.seed ^ 0x7175_6572_7973);
+    let boxes: Vec<Aabb> = (0..QUERY_COUNT)
+        .map(|_| {
+            let c = rng.vec3_in(bounds.min, bounds.max);
+            let half = 0.5 * rng.range(QUERY_EDGE.0, QUERY_EDGE.1);
+            Aabb::from_center_half_extents(c, Vec3::splat(half))
+        })
+        .collect();
+    let max_t = bounds.extent().x;
+    let rays: Vec<(Vec3, Vec3)> = (0..QUERY_COUNT)
+        .map(|_| (rng.vec3_in(bounds.min, bounds.max), unit_dir(&mut rng)))
+        .collect();
+    let qp = theirs.query_pipeline();
+    let rapier_box = |b: &Aabb, mut f: Box<dyn FnMut(rapier3d::geometry::ColliderHandle) + '_>| {
+        let q = to_parry(b);
+        for (h, co) in qp.intersect_aabb_conservative(q) {
+            if co.compute_aabb().intersects(&q) {
+                f(h);
+            }
+        }
+    };
+
+    let per_query = |t: Instant| t.elapsed().as_nanos() as f64 / QUERY_COUNT as f64;
+    let (mut ours_hits, mut rapier_hits) = (0usize, 0usize);
+    let t = Instant::now();
+    for b in &boxes {
+        ours.bp.query_aabb(b, |_| ours_hits += 1);
+    }
+    let ours_box = per_query(t);
+    let t = Instant::now();
+    for b in &boxes {
+        let q = to_parry(b);
+        rapier_hits += qp
+            .intersect_aabb_conservative(q)
+            .filter(|(_, co)| co.compute_aabb().intersects(&q))
+            .count();
+    }
+    let rapier_box_ns = per_query(t);
+    let (mut ours_rays, mut rapier_rays) = (0usize, 0usize);
+    let t = Instant::now();
+    for &(o, d) in &rays {
+        ours_rays += usize::from(black_box(ours.bp.cast_ray(o, d, max_t)).is_some());
+    }
+    let ours_ray = per_query(t);
+    let t = Instant::now();
+    for &(o, d) in &rays {
+        let hit = qp.cast_ray(&Ray::new(o, d), max_t, true);
+        rapier_rays += usize::from(black_box(hit).is_some());
+    }
+    let rapier_ray = per_query(t);
+
+    // The sample: every QUERY_CHECK_EVERY-th query, both engines' answers in broadleaf keys.
+    let key_of = |h| theirs.scene_id(h).and_then(|id| ours.feed.key(id));
+    let (mut box_bad, mut ray_bad, mut checked) = (0, 0, 0);
+    for b in boxes.iter().step_by(QUERY_CHECK_EVERY) {
+        let mut a: Vec<ProxyKey> = Vec::new();
+        ours.bp.query_aabb(b, |k| a.push(k));
+        let mut r: Vec<Option<ProxyKey>> = Vec::new();
+        rapier_box(b, Box::new(|h| r.push(key_of(h))));
+        let mut a: Vec<Option<ProxyKey>> = a.into_iter().map(Some).collect();
+        a.sort_unstable();
+        r.sort_unstable();
+        box_bad += usize::from(a != r);
+        checked += 1;
+    }
+    for &(o, d) in rays.iter().step_by(QUERY_CHECK_EVERY) {
+        let a = ours.bp.cast_ray(o, d, max_t);
+        let r = qp
+            .cast_ray(&Ray::new(o, d), max_t, true)
+            .map(|(h, t)| (key_of(h), t));
+        // A tie (two shapes hit at the same t, e.g. an origin inside two overlapping spheres,
+        // both t = 0) may go to either: rapier's pick agrees if broadleaf's own shape for
+        // that key is hit at the same t.
+        let t_of = |k: ProxyKey| match ours.bp.shape(k)? {
+            Shape::Sphere { center, radius } => geom::ray_sphere(o, d, center, radius, max_t),
+            Shape::Body { aabb, .. } => aabb.ray_entry(o, geom::inverse_dir(d), max_t),
+        };
+        let same = match (a, r) {
+            (None, None) => true,
+            (Some((ka, ta)), Some((Some(kr), tr))) => {
+                (ta - tr).abs() <= RAY_T_TOLERANCE
+                    && (ka == kr || t_of(kr).is_some_and(|t| (t - ta).abs() <= RAY_T_TOLERANCE))
+            }
+            _ => false,
+        };
+        if !same {
+            eprintln!("ray mismatch: origin {o} dir {d}: broadleaf {a:?}, rapier {r:?}");
+        }
+        ray_bad += usize::from(!same);
+    }
+
+    println!(
+        "queries on gas N={n} after one step, seed {}, {QUERY_COUNT} of each; rapier: \
+         query pipeline of its BroadPhaseBvh (boxes: intersect_aabb_conservative re-tested \
+         against each collider's exact AABB; rays: cast_ray, solid); checked: every \
+         {QUERY_CHECK_EVERY}th query",
+        args.seed
+    );
+    println!();
+    println!(
+        "| query | count | broadleaf ns/query | rapier ns/query | speed-up | hits (broadleaf) | hits (rapier) | checked | mismatches |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let edge = format!("box {}–{} m", QUERY_EDGE.0, QUERY_EDGE.1);
+    for (what, ours_ns, rapier_ns, oh, rh, bad) in [
+        (
+            edge.as_str(),
+            ours_box,
+            rapier_box_ns,
+            ours_hits,
+            rapier_hits,
+            box_bad,
+        ),
+        (
+            "ray, closest hit",
+            ours_ray,
+            rapier_ray,
+            ours_rays,
+            rapier_rays,
+            ray_bad,
+        ),
+    ] {
+        println!(
+            "| {what} | {QUERY_COUNT} | {ours_ns:.1} | {rapier_ns:.1} | {:.2} | {oh} | {rh} | {checked} | {bad} |",
+            rapier_ns / ours_ns
+        );
+    }
+    println!();
+    box_bad + ray_bad
 }

@@ -8,23 +8,20 @@
 //! # Which structure when
 //! - **[`BroadPhase`]** — start here. One key space for spheres and rigid bodies, one sorted
 //!   pair list per [`BroadPhase::step`], plus `added` / `removed` events, ray casts and box
-//!   queries. Spheres go to the octree, dynamic bodies to one BVH, static bodies to another.
-//!   For worlds that are mostly at rest (settled piles, stacks, parked bodies) set
-//!   [`Config::skin`]: the structures then hold boxes grown by the skin, the broadphase keeps
-//!   the pairs of those as candidates, and a step only re-tests the candidates' exact boxes —
-//!   the same exact lists, several times cheaper while objects stay inside their skin, slower
-//!   when most objects leave it every few steps (fast gas).
-//! - **[`Octree`]** — many moving spheres of similar size in a known region (particles, gas,
-//!   piles, crowds). A top-down preallocated octree (Ericson, *Real-Time Collision Detection*
-//!   7.3), and a move that keeps the node costs one store. Two [`Placement`]s: `Strict` (the
-//!   default) keeps a sphere in the deepest node whose split planes it does not straddle, so
-//!   spheres on big planes stay near the root; `Loose` (RTCD 7.3.6, looseness 2) puts every
-//!   sphere at the level its radius fits, found with its same-level neighbours — usually the
-//!   faster choice for many similar moving spheres (pick the depth with
+//!   queries. It adapts by itself to how much of the world moves: a step is either a full
+//!   sorted sweep of every box or an incremental pass over the candidates of what moved
+//!   (fat boxes whose margin follows each proxy's own motion), whichever its work estimate
+//!   says is cheaper; [`BroadPhase::stats`] says which ran. Nothing in [`Config`] needs tuning
+//!   for speed.
+//! - **[`Octree`]** — many moving spheres of similar size in a known region, on their own. A
+//!   top-down preallocated octree (Ericson, *Real-Time Collision Detection* 7.3), and a move
+//!   that keeps the node costs one store. Two [`Placement`]s: `Strict` (the default) keeps a
+//!   sphere in the deepest node whose split planes it does not straddle; `Loose` (RTCD 7.3.6,
+//!   looseness 2) puts every sphere at the level its radius fits (pick the depth with
 //!   [`octree::depth_for_loose`]).
-//! - **[`Bvh`]** — rigid bodies of any shape and size, given by their world AABBs. A binned-SAH
-//!   bounding-volume hierarchy in a flat depth-first array, refitted bottom-up every step and
-//!   rebuilt when its quality degrades. Use it alone for static geometry queries too.
+//! - **[`Bvh`]** — rigid bodies of any shape and size, given by their world AABBs, on their own.
+//!   A binned-SAH bounding-volume hierarchy in a flat depth-first array, refitted bottom-up and
+//!   rebuilt when its quality degrades. Use it for static geometry queries too.
 //! - **[`brute`]** — the O(n²) reference every test compares against; use it to check your own
 //!   scenes.
 //!
@@ -32,11 +29,7 @@
 //! ```
 //! use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Vec3};
 //!
-//! let mut bp = BroadPhase::new(Config {
-//!     bounds: Aabb::new(Vec3::splat(-50.0), Vec3::splat(50.0)),
-//!     octree_depth: 5,
-//!     ..Config::default()
-//! });
+//! let mut bp = BroadPhase::new(Config::default());
 //! let floor = Aabb::new(Vec3::new(-50.0, -1.0, -50.0), Vec3::new(50.0, 0.0, 50.0));
 //! let floor = bp.insert_body(floor, BodyKind::Static)?;
 //! let ball = bp.insert_sphere(Vec3::new(0.0, 2.0, 0.0), 0.5)?;
@@ -62,8 +55,8 @@
 //! - **Bad input is refused, never half-applied.** NaN or infinite coordinates, a negative
 //!   radius, an inverted box or a stale key give an [`Error`] and leave the structure exactly
 //!   as it was. Objects outside the octree's bounds are not errors: they are kept and paired.
-//! - **No allocation per step** in steady state: every buffer is kept and reused (with a pair
-//!   cache, once its lists have seen their peak sizes).
+//! - **No allocation per step** in steady state: every buffer is kept and reused, and lists
+//!   that swing from step to step grow ahead of their peaks.
 //!
 //! # Keys
 //! [`ProxyKey`] is a slotmap key: a removed proxy's key is refused forever after
@@ -73,9 +66,9 @@
 //! # Features
 //! - `rapier`: interop with rapier3d 0.36 (`broadleaf::rapier`): mirror a collider set into a
 //!   `BroadPhase` and compare pair sets with rapier's broadphase.
-//! - `fixtures`: benchmark and test support (`broadleaf::fixtures`): the seeded scenes, the
-//!   demo's physics loop and, with `rapier`, rapier worlds playing the same scenes. Not part of
-//!   the broadphase; the crate's own examples, benches and tests turn it on.
+//! - `profiler`: `rapier` with rapier's timing counters, for the comparisons that time it.
+//! - `fixtures`: benchmark and test support (`broadleaf::fixtures`: scenes, a small physics
+//!   loop, rapier worlds); not part of the broadphase.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
