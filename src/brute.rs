@@ -1,8 +1,11 @@
 //! The reference every test compares against: the O(n²) all-pairs test, plus a sort-and-sweep
 //! that gives the same set in O(n log n + pairs) for tests at scale. Public, so users can diff
-//! their own scenes with it.
+//! their own scenes with it. It knows boxes and keys only, none of the structures it checks.
 
-use crate::{Aabb, Pair, ProxyKey, Vec3, geom};
+use crate::geom::{self, Aabb, SimdBox};
+use crate::pair::{self, Pair, ProxyKey};
+use crate::sweep::{self, Ordered};
+use glam::Vec3;
 
 /// One proxy as the reference sees it: its key, its (already grown) box, and whether it is
 /// static (static×static pairs are never reported).
@@ -17,17 +20,6 @@ pub struct Proxy {
 }
 
 impl Proxy {
-    /// A proxy of a `BroadPhase` shape: the box the broadphase pairs
-    /// ([`Shape::grown_aabb`](crate::Shape::grown_aabb)) and whether it is a static body.
-    #[must_use]
-    pub fn of(key: ProxyKey, shape: &crate::Shape, margin: f32) -> Self {
-        Self {
-            key,
-            aabb: shape.grown_aabb(margin),
-            is_static: shape.is_static(),
-        }
-    }
-
     /// A non-static proxy.
     #[must_use]
     pub fn new(key: ProxyKey, aabb: Aabb) -> Self {
@@ -51,7 +43,7 @@ pub fn pairs(proxies: &[Proxy]) -> Vec<Pair> {
             }
         }
     }
-    crate::pair::sort_dedup(&mut out);
+    pair::sort_dedup(&mut out);
     out
 }
 
@@ -60,20 +52,22 @@ pub fn pairs(proxies: &[Proxy]) -> Vec<Pair> {
 /// O(n log n + k) where k counts the x-overlapping candidates.
 #[must_use]
 pub fn sweep_pairs(proxies: &[Proxy]) -> Vec<Pair> {
-    let mut order: Vec<&Proxy> = proxies.iter().collect();
-    order.sort_by(|p, q| p.aabb.min.x.total_cmp(&q.aabb.min.x));
+    let boxes: Vec<SimdBox> = proxies.iter().map(|p| SimdBox::new(&p.aabb)).collect();
+    let mut order = Vec::new();
+    sweep::sort_entries(&mut order, &boxes, 0, |_| true);
+    let list = Ordered {
+        order: &order,
+        items: &boxes,
+        axis: 0,
+    };
     let mut out = Vec::new();
-    for (i, p) in order.iter().enumerate() {
-        for q in &order[i + 1..] {
-            if q.aabb.min.x > p.aabb.max.x {
-                break;
-            }
-            if !(p.is_static && q.is_static) && p.aabb.overlaps(&q.aabb) {
-                out.push(Pair::new(p.key, q.key));
-            }
+    sweep::self_pairs_of(&list, |i, j| {
+        let (p, q) = (&proxies[i], &proxies[j]);
+        if !(p.is_static && q.is_static) {
+            out.push(Pair::new(p.key, q.key));
         }
-    }
-    crate::pair::sort_dedup(&mut out);
+    });
+    pair::sort_dedup(&mut out);
     out
 }
 

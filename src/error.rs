@@ -29,8 +29,13 @@ pub enum Error {
     UnknownProxy,
     /// The key names a live proxy of another kind, e.g. `update_sphere` on a body.
     WrongKind,
-    /// An octree depth outside `0..=MAX_DEPTH`.
-    DepthOutOfRange(u32),
+    /// An octree depth deeper than the deepest the octree supports.
+    DepthOutOfRange {
+        /// The depth given.
+        depth: u32,
+        /// The deepest depth accepted ([`octree::MAX_DEPTH`](crate::octree::MAX_DEPTH)).
+        max: u32,
+    },
     /// World bounds that are not finite or have no volume.
     InvalidBounds {
         /// The bounds' `min` corner as given.
@@ -61,11 +66,9 @@ impl fmt::Display for Error {
             }
             Error::UnknownProxy => write!(f, "key names no live proxy of this structure"),
             Error::WrongKind => write!(f, "key names a proxy of another kind"),
-            Error::DepthOutOfRange(d) => write!(
-                f,
-                "octree depth {d} is out of range 0..={}",
-                crate::octree::MAX_DEPTH
-            ),
+            Error::DepthOutOfRange { depth, max } => {
+                write!(f, "octree depth {depth} is out of range 0..={max}")
+            }
             Error::InvalidBounds { min, max } => {
                 write!(
                     f,

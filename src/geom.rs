@@ -1,7 +1,7 @@
 //! Axis-aligned boxes, the ray–box slab test, ray–sphere, and the input checks every entry
 //! point runs before it touches a structure.
 
-use crate::Error;
+use crate::error::Error;
 use glam::{Vec3, Vec3A};
 
 /// A closed axis-aligned box: a point on a face is inside, and boxes that touch overlap.
@@ -111,8 +111,7 @@ impl Aabb {
     #[must_use]
     #[inline]
     pub fn surface_area(&self) -> f32 {
-        let d = self.extent().max(Vec3::ZERO);
-        2.0 * (d.x * d.y + d.y * d.z + d.z * d.x)
+        SimdBox::new(self).surface_area()
     }
 
     /// True if every coordinate is finite.
@@ -215,9 +214,51 @@ impl SimdBox {
     pub(crate) fn overlaps(&self, other: &SimdBox) -> bool {
         (self.min.cmple(other.max) & other.min.cmple(self.max)).all()
     }
+
+    /// The smallest box containing both, as [`Aabb::union`]; [`SimdBox::EMPTY`] is its identity.
+    #[inline]
+    pub(crate) fn union(&self, other: &SimdBox) -> SimdBox {
+        SimdBox {
+            min: self.min.min(other.min),
+            max: self.max.max(other.max),
+        }
+    }
+
+    /// The smallest box containing `self` and the point `p`.
+    #[inline]
+    pub(crate) fn union_point(&self, p: Vec3A) -> SimdBox {
+        SimdBox {
+            min: self.min.min(p),
+            max: self.max.max(p),
+        }
+    }
+
+    /// `min + max`: twice the centre, exact where the centre would round.
+    #[inline]
+    pub(crate) fn center2(&self) -> Vec3A {
+        self.min + self.max
+    }
+
+    /// The surface area, as [`Aabb::surface_area`]: 0 for a point and for an inverted box.
+    #[inline]
+    pub(crate) fn surface_area(&self) -> f32 {
+        let d = self.extent().max(Vec3A::ZERO);
+        2.0 * (d.x * d.y + d.y * d.z + d.z * d.x)
+    }
 }
 
 const _: () = assert!(core::mem::size_of::<SimdBox>() == 32);
+
+/// The bits of `f` as an integer whose unsigned order is [`f32::total_cmp`]'s order: positive
+/// floats (sign bit 0) order like their bits, so setting the sign bit puts them above every
+/// negative one; negative floats order reversed, which inverting all their bits undoes. `-0.0`
+/// maps just below `0.0`; map `f + 0.0` (which is `0.0` for both zeros) where they must tie.
+#[must_use]
+#[inline]
+pub(crate) fn ordered_bits(f: f32) -> u32 {
+    let bits = f.to_bits();
+    bits ^ (((bits as i32 >> 31) as u32) | 0x8000_0000)
+}
 
 /// The smallest `t ∈ [0, max_t]` with `|origin + t·dir − center| ≤ radius`, or `None`.
 /// `dir` need not be unit length (`t` is in units of `dir`); a zero `dir` hits only when the
@@ -364,12 +405,42 @@ mod tests {
         assert_eq!(b.ray_entry(low_face, inverse_dir(-d), 10.0), None);
         assert_eq!(b.ray_entry(low_face, inverse_dir(d), 10.0), Some(1.0));
         // On the plane of one face but outside the box on another axis: a miss (a NaN from
-        // 0 · ∞ once leaked through glam's comparison-based min/max and made this a hit).
+        // 0 · ∞ must not leak through glam's comparison-based min/max and make this a hit).
         let outside = Aabb::new(Vec3::new(-2.0, -4.0, 1.0), Vec3::new(-1.0, 0.0, 5.0));
         assert_eq!(
             outside.ray_entry(Vec3::new(13.0, 3.0, 5.0), inverse_dir(d), 23.0),
             None
         );
+    }
+
+    #[test]
+    fn ordered_bits_order_like_total_cmp() {
+        let xs = [
+            f32::NEG_INFINITY,
+            -f32::MAX,
+            -2.5,
+            -1.0,
+            -f32::MIN_POSITIVE,
+            -1e-45,
+            -0.0,
+            0.0,
+            1e-45,
+            f32::MIN_POSITIVE,
+            1.0,
+            2.5,
+            f32::MAX,
+            f32::INFINITY,
+        ];
+        for x in xs {
+            for y in xs {
+                assert_eq!(
+                    ordered_bits(x).cmp(&ordered_bits(y)),
+                    x.total_cmp(&y),
+                    "{x} {y}"
+                );
+            }
+        }
+        assert_eq!(ordered_bits(-0.0 + 0.0), ordered_bits(0.0));
     }
 
     #[test]

@@ -281,7 +281,11 @@ impl Mirror {
             .slots
             .iter()
             .flatten()
-            .map(|e| brute::Proxy::of(e.key, &e.shape, margin))
+            .map(|e| brute::Proxy {
+                key: e.key,
+                aabb: e.shape.grown_aabb(margin),
+                is_static: e.shape.is_static(),
+            })
             .collect();
         brute::sweep_pairs(&proxies)
     }

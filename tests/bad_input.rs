@@ -290,7 +290,7 @@ mod structures {
         let bounds = Aabb::new(Vec3::splat(-4.0), Vec3::splat(4.0));
         assert_eq!(
             Octree::new(bounds, 11).unwrap_err(),
-            Error::DepthOutOfRange(11)
+            Error::DepthOutOfRange { depth: 11, max: 10 }
         );
         let flat = Aabb::new(Vec3::ZERO, Vec3::new(1.0, 0.0, 1.0));
         assert!(matches!(

@@ -68,7 +68,11 @@ fn check_step(bp: &mut BroadPhase, model: &[(ProxyKey, Shape)], prev: &[Pair]) -
     let margin = bp.config().margin;
     let proxies: Vec<brute::Proxy> = model
         .iter()
-        .map(|(key, shape)| brute::Proxy::of(*key, shape, margin))
+        .map(|(key, shape)| brute::Proxy {
+            key: *key,
+            aabb: shape.grown_aabb(margin),
+            is_static: shape.is_static(),
+        })
         .collect();
     let expected = brute::pairs(&proxies);
     let step = bp.step();
@@ -338,7 +342,11 @@ fn queries_and_rays_see_exact_shapes_with_a_pair_cache() {
             bp.validate();
             let proxies: Vec<brute::Proxy> = model
                 .iter()
-                .map(|(k, s)| brute::Proxy::of(*k, s, 0.0))
+                .map(|(k, s)| brute::Proxy {
+                    key: *k,
+                    aabb: s.grown_aabb(0.0),
+                    is_static: s.is_static(),
+                })
                 .collect();
             for _ in 0..60 {
                 let c = rng.vec3_in(Vec3::splat(-12.0), Vec3::splat(12.0));

@@ -160,7 +160,11 @@ fuzz_target!(|input: Input| {
 fn check(bp: &mut BroadPhase, model: &[(ProxyKey, Shape)], prev: &[Pair], margin: f32) -> Vec<Pair> {
     let proxies: Vec<brute::Proxy> = model
         .iter()
-        .map(|(key, shape)| brute::Proxy::of(*key, shape, margin))
+        .map(|(key, shape)| brute::Proxy {
+            key: *key,
+            aabb: shape.grown_aabb(margin),
+            is_static: shape.is_static(),
+        })
         .collect();
     let expected = brute::pairs(&proxies);
     let out = bp.step();

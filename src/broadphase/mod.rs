@@ -146,7 +146,10 @@ impl Config {
     pub fn validate(&self) -> Result<(), Error> {
         geom::check_bounds(&self.bounds)?;
         if self.octree_depth > crate::octree::MAX_DEPTH {
-            return Err(Error::DepthOutOfRange(self.octree_depth));
+            return Err(Error::DepthOutOfRange {
+                depth: self.octree_depth,
+                max: crate::octree::MAX_DEPTH,
+            });
         }
         if !(self.margin.is_finite() && self.margin >= 0.0) {
             return Err(Error::InvalidConfig {

@@ -25,21 +25,35 @@
 //! # Keys
 //! [`Bvh::insert`] mints keys from a slotmap owned by the tree; `BroadPhase` mints its own keys
 //! and hands them in. Use one way or the other on one tree, never both.
+//!
+//! # Conventions
+//! The same for [`Bvh`] and [`Octree`](crate::Octree):
+//! - **Constructors refuse, never correct.** [`Bvh::new`] and [`Bvh::from_aabbs`] return `Err`
+//!   naming the first bad field or box ([`Error::InvalidConfig`], [`Error::NonFinite`],
+//!   [`Error::InvertedAabb`]) and build nothing; no value is clamped or replaced.
+//! - **`validate` panics, `check` returns.** [`Bvh::validate`] checks every internal invariant
+//!   and panics on the first broken one (tests, debugging); [`BvhConfig::check`] tells a caller
+//!   whether a configuration is valid, as a `Result`.
+//! - **Pairs two ways.** [`Bvh::for_each_pair`] calls a closure per overlapping pair;
+//!   [`Bvh::pairs_into`] appends them to a `Vec<Pair>`, canonical and unsorted.
+//! - **Stats are cheap.** [`Bvh::stats`] walks the node array once (for the SAH cost and the
+//!   depth) and allocates nothing.
 
 mod build;
 mod node;
 mod pairs;
 mod query;
 mod refit;
+mod split;
 mod validate;
 
-use crate::geom::check_aabb;
-use crate::{Aabb, Error, ProxyKey};
+use crate::error::Error;
+use crate::geom::{Aabb, SimdBox, check_aabb};
+use crate::pair::ProxyKey;
 use node::Node;
 use slotmap::{Key, SecondaryMap, SlotMap};
 
 pub(crate) use build::BuildScratch;
-pub(crate) use node::PrimBox;
 
 /// "No index" in the `u32` side arrays.
 const NONE: u32 = u32::MAX;
@@ -69,9 +83,9 @@ pub struct BvhConfig {
     pub sah_buckets: u32,
     /// The SAH cost of visiting a node, in units of one box-vs-box primitive test; `0..=64`,
     /// default 4. Larger values make fewer, fuller leaves (up to `max_leaf_size`); a node of at
-    /// most this many primitives is always a leaf. With cheap box tests a node visit (stack,
-    /// two child tests) costs several of them: on the `bodies` boxes, 4 with leaves of up to 8
-    /// runs update + refit + self pairs in 1.5× fewer instructions than 1 with leaves of 4.
+    /// most this many primitives is always a leaf. The default is above 1 because a box test
+    /// is a few vector instructions while a node visit (the stack, two child tests, the
+    /// branches) costs several of them.
     pub traversal_cost: f32,
     /// [`Bvh::refit`] rebuilds when `sah_cost() / cost at build` exceeds this ratio; finite
     /// and `>= 1`, default 1.5.
@@ -102,7 +116,7 @@ impl BvhConfig {
         if !(1..=255).contains(&self.max_leaf_size) {
             return bad("max_leaf_size", self.max_leaf_size as f32);
         }
-        if !(2..=build::MAX_BUCKETS as u32).contains(&self.sah_buckets) {
+        if !(2..=split::MAX_BUCKETS as u32).contains(&self.sah_buckets) {
             return bad("sah_buckets", self.sah_buckets as f32);
         }
         if !(0.0..=64.0).contains(&self.traversal_cost) {
@@ -157,7 +171,7 @@ pub struct Bvh {
     /// (a leaf's range indexes them directly), the rest are pending.
     keys: Vec<ProxyKey>,
     /// Primitive index → current box; [`Aabb::EMPTY`] for a tombstone.
-    boxes: Vec<PrimBox>,
+    boxes: Vec<SimdBox>,
     /// Primitives covered by the node array (live or tombstones).
     tree_len: usize,
     /// Tombstones among the first `tree_len` primitives.
@@ -174,8 +188,9 @@ pub struct Bvh {
     /// Scratch reused by every build and traversal.
     scratch: BuildScratch,
     pair_stack: Vec<(u32, u32)>,
-    sweep_a: Vec<u32>,
-    sweep_b: Vec<u32>,
+    /// Sweep orders of the pending boxes (`sweep::sort_entries`).
+    sweep_a: Vec<u64>,
+    sweep_b: Vec<u64>,
 }
 
 impl Bvh {
@@ -262,7 +277,7 @@ impl Bvh {
     fn push_pending(&mut self, key: ProxyKey, aabb: Aabb) {
         self.ids.insert(key, self.boxes.len() as u32);
         self.keys.push(key);
-        self.boxes.push(PrimBox::new(&aabb));
+        self.boxes.push(SimdBox::new(&aabb));
     }
 
     /// Replaces the box of `key`. Queries and pairs see the new box at once; node boxes are
@@ -277,7 +292,7 @@ impl Bvh {
     #[inline]
     pub(crate) fn update_checked(&mut self, key: ProxyKey, aabb: &Aabb) -> Result<(), Error> {
         debug_assert!(check_aabb(aabb).is_ok());
-        let b = PrimBox::new(aabb);
+        let b = SimdBox::new(aabb);
         let id = *self.ids.get(key).ok_or(Error::UnknownProxy)? as usize;
         self.boxes[id] = b;
         if id < self.tree_len {
@@ -293,7 +308,7 @@ impl Bvh {
         self.slots.remove(key);
         if id < self.tree_len {
             self.keys[id] = ProxyKey::null();
-            self.boxes[id] = PrimBox::EMPTY;
+            self.boxes[id] = SimdBox::EMPTY;
             self.tombstones += 1;
         } else {
             // Pending: keep the pending region dense by moving the last one into the hole.
@@ -344,17 +359,10 @@ impl Bvh {
         }
     }
 
-    /// Shape and history of the tree. O(nodes).
+    /// Shape and history of the tree. O(nodes), no allocation.
     #[must_use]
     pub fn stats(&self) -> BvhStats {
-        let mut depth = vec![0usize; self.nodes.len()];
-        let (mut leaves, mut max_depth) = (0, 0);
-        for (n, node) in self.nodes.iter().enumerate() {
-            let p = self.parent[n];
-            depth[n] = if p == NONE { 1 } else { depth[p as usize] + 1 };
-            max_depth = max_depth.max(depth[n]);
-            leaves += usize::from(node.is_leaf());
-        }
+        let (leaves, max_depth) = self.shape();
         let cost = self.sah_cost();
         BvhStats {
             nodes: self.nodes.len(),
@@ -373,6 +381,32 @@ impl Bvh {
             rebuilds: self.rebuilds,
             refits: self.refits,
         }
+    }
+}
+
+impl Bvh {
+    /// Leaves and levels of the node array, in one pass without a stack: in depth-first
+    /// order node `n` is its parent's first child when the parent is `n − 1` (one level
+    /// deeper), else the second child of an ancestor of `n − 1`, whose level is found by
+    /// climbing the parent links from `n − 1`; each link is climbed once over the pass.
+    fn shape(&self) -> (usize, usize) {
+        let (mut leaves, mut depth, mut max_depth) = (0, 0, 0);
+        for (n, node) in self.nodes.iter().enumerate() {
+            let p = self.parent[n];
+            if p == NONE {
+                depth = 1;
+            } else {
+                let mut a = n as u32 - 1;
+                while a != p {
+                    a = self.parent[a as usize];
+                    depth -= 1;
+                }
+                depth += 1;
+            }
+            max_depth = max_depth.max(depth);
+            leaves += usize::from(node.is_leaf());
+        }
+        (leaves, max_depth)
     }
 }
 
@@ -404,6 +438,45 @@ mod tests {
         let k2 = outer.insert(());
         assert!(!bvh.contains(k) && !bvh.contains(k2));
         bvh.validate();
+    }
+
+    /// `shape` walks without a stack; the reference keeps every node's level in a vector.
+    #[test]
+    fn shape_counts_leaves_and_levels() {
+        let mut rng = Rng::new(9);
+        for (split, n, spread) in [
+            (SplitMethod::Sah, 1, 1.0),
+            (SplitMethod::Sah, 3000, 40.0),
+            (SplitMethod::EqualCounts, 777, 5.0),
+            (SplitMethod::Middle, 300, 0.0),
+        ] {
+            // `spread` 0: boxes at 2^i, which the midpoint split peels off one by one.
+            let boxes: Vec<Aabb> = (0..n)
+                .map(|i| {
+                    let c = if spread == 0.0 {
+                        Vec3::splat(2f32.powi(i % 100))
+                    } else {
+                        rng.vec3_in(Vec3::splat(-spread), Vec3::splat(spread))
+                    };
+                    Aabb::from_center_radius(c, 0.5)
+                })
+                .collect();
+            let config = BvhConfig {
+                split,
+                max_leaf_size: 2,
+                ..BvhConfig::default()
+            };
+            let (bvh, _) = Bvh::from_aabbs(config, &boxes).unwrap();
+            let mut depth = vec![0usize; bvh.nodes.len()];
+            for n in 0..bvh.nodes.len() {
+                let p = bvh.parent[n];
+                depth[n] = if p == NONE { 1 } else { depth[p as usize] + 1 };
+            }
+            let leaves = bvh.nodes.iter().filter(|n| n.is_leaf()).count();
+            let max = depth.iter().copied().max().unwrap_or(0);
+            assert_eq!(bvh.shape(), (leaves, max), "{split:?} {n}");
+        }
+        assert_eq!(Bvh::new(BvhConfig::default()).unwrap().shape(), (0, 0));
     }
 
     /// Stands in for a counting allocator (which needs `unsafe impl GlobalAlloc`): after a

@@ -1,7 +1,7 @@
 //! The 32-byte node of the depth-first array, and the inline stack of the `&self` traversals.
 
-use crate::{Aabb, Vec3};
-use glam::{Vec3A, Vec4};
+use crate::geom::{Aabb, SimdBox};
+use glam::{Vec3, Vec3A, Vec4};
 
 /// One node of the depth-first array (pbrt's `LinearBVHNode`): a leaf holds the primitive
 /// range `first..first + count` (`count > 0`); an interior node has `count == 0`, its first
@@ -61,6 +61,12 @@ impl Node {
         self.max = aabb.max;
     }
 
+    #[inline]
+    pub(crate) fn set_box(&mut self, b: &SimdBox) {
+        self.min = b.min.into();
+        self.max = b.max.into();
+    }
+
     /// The leaf's primitive range, as `usize` bounds.
     #[inline]
     pub(crate) fn range(&self) -> core::ops::Range<usize> {
@@ -78,17 +84,14 @@ impl Node {
     /// read with its neighbouring `u32` as the fourth lane (which `Vec3A` ignores), so that
     /// the four consecutive fields load as one 16-byte vector.
     #[inline]
-    pub(crate) fn bounds(&self) -> PrimBox {
+    pub(crate) fn bounds(&self) -> SimdBox {
         let (min, max) = (self.min, self.max);
-        PrimBox {
+        SimdBox {
             min: Vec3A::from_vec4(Vec4::new(min.x, min.y, min.z, f32::from_bits(self.first))),
             max: Vec3A::from_vec4(Vec4::new(max.x, max.y, max.z, f32::from_bits(self.count))),
         }
     }
 }
-
-/// A primitive's current box in SIMD lanes: the crate's one hot-loop box type.
-pub(crate) use crate::geom::SimdBox as PrimBox;
 
 /// Entries a traversal keeps inline before it spills to the heap. A tree of 2⁶⁰ leaves built
 /// balanced needs about one entry per level, so only degenerate deep trees spill.

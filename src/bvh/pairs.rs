@@ -2,8 +2,10 @@
 //! lists against both (tree queries and sort-and-sweep on x).
 
 use super::Bvh;
-use super::node::{Node, PrimBox};
-use crate::ProxyKey;
+use super::node::Node;
+use crate::geom::SimdBox;
+use crate::pair::{Pair, ProxyKey};
+use crate::sweep::{self, Ordered};
 
 impl Bvh {
     /// Calls `f(a, b)` once for every unordered pair of live primitives whose current boxes
@@ -33,23 +35,7 @@ impl Bvh {
             let node = &t.nodes[a as usize];
             if node.is_leaf() {
                 let range = node.range();
-                let boxes = &t.boxes[range.clone()];
-                let keys = &t.keys[range];
-                for (i, (bi, &ki)) in boxes.iter().zip(keys).enumerate() {
-                    let rest = &boxes[i + 1..];
-                    if rest.len() <= 64 {
-                        // The tests into a mask, the pairs from its bits (see `leaf_pairs`).
-                        for k in bits(mask_of(rest, bi)) {
-                            f(ki, keys[i + 1 + k]);
-                        }
-                    } else {
-                        for (bj, &kj) in rest.iter().zip(&keys[i + 1..]) {
-                            if bi.overlaps(bj) {
-                                f(ki, kj);
-                            }
-                        }
-                    }
-                }
+                leaf_self_pairs(&t.boxes[range.clone()], &t.keys[range], &mut f);
             } else {
                 let (l, r) = node.children(a);
                 if t.nodes[l as usize]
@@ -68,20 +54,22 @@ impl Bvh {
             self.query_tree(&self.boxes[p], |i| f(self.keys[p], self.keys[i]));
         }
         let mut order = core::mem::take(&mut self.sweep_a);
-        sort_by_min_x(&mut order, self.tree_len..self.boxes.len(), &self.boxes);
-        for (n, &p) in order.iter().enumerate() {
-            let bp = &self.boxes[p as usize];
-            for &q in &order[n + 1..] {
-                let bq = &self.boxes[q as usize];
-                if bq.min.x > bp.max.x {
-                    break;
-                }
-                if bp.overlaps(bq) {
-                    f(self.keys[p as usize], self.keys[q as usize]);
-                }
-            }
-        }
+        let (boxes, keys) = (self.pending_boxes(), self.pending_keys());
+        sweep::sort_entries(&mut order, boxes, 0, |_| true);
+        let list = Ordered {
+            order: &order,
+            items: boxes,
+            axis: 0,
+        };
+        sweep::self_pairs_of(&list, |i, j| f(keys[i], keys[j]));
         self.sweep_a = order;
+    }
+
+    /// Appends every overlapping pair of [`Bvh::for_each_pair`], canonical (`a < b`) but
+    /// **unsorted**, to `out` (which is not cleared); sort with [`crate::pair::sort_dedup`] if
+    /// order matters.
+    pub fn pairs_into(&mut self, out: &mut Vec<Pair>) {
+        self.for_each_pair(|a, b| out.push(Pair::new(a, b)));
     }
 
     /// Calls `f(a, b)` once for every live primitive `a` of `self` and `b` of `other` whose
@@ -109,11 +97,23 @@ impl Bvh {
         }
         let mut xs = core::mem::take(&mut self.sweep_a);
         let mut ys = core::mem::take(&mut self.sweep_b);
-        sort_by_min_x(&mut xs, self.tree_len..self.boxes.len(), &self.boxes);
-        sort_by_min_x(&mut ys, other.tree_len..other.boxes.len(), &other.boxes);
-        sweep_cross(&xs, &self.boxes, &ys, &other.boxes, |i, j| {
-            f(self.keys[i], other.keys[j]);
-        });
+        let (bx, kx) = (self.pending_boxes(), self.pending_keys());
+        let (by, ky) = (other.pending_boxes(), other.pending_keys());
+        sweep::sort_entries(&mut xs, bx, 0, |_| true);
+        sweep::sort_entries(&mut ys, by, 0, |_| true);
+        let (lx, ly) = (
+            Ordered {
+                order: &xs,
+                items: bx,
+                axis: 0,
+            },
+            Ordered {
+                order: &ys,
+                items: by,
+                axis: 0,
+            },
+        );
+        sweep::cross_pairs_of(&lx, &ly, |i, j| f(kx[i], ky[j]));
         self.sweep_a = xs;
         self.sweep_b = ys;
     }
@@ -122,7 +122,7 @@ impl Bvh {
 /// The slices of a tree that the descents read (tree primitives only, not the pending ones).
 struct Tree<'a> {
     nodes: &'a [Node],
-    boxes: &'a [PrimBox],
+    boxes: &'a [SimdBox],
     keys: &'a [ProxyKey],
 }
 
@@ -191,21 +191,40 @@ fn cross_step(
     }
 }
 
+/// The most boxes whose tests fit one mask (`u64`) of [`mask_of`].
+const MASK_BITS: usize = u64::BITS as usize;
+
+/// Every overlapping pair within one leaf. Each box's tests against the boxes after it go into a
+/// bit mask and the pairs are read from its set bits (see [`leaf_pairs`]); leaves of more than
+/// `MASK_BITS + 1` boxes, which only a `max_leaf_size` above 64 makes, take the plain loop.
+#[inline]
+fn leaf_self_pairs(boxes: &[SimdBox], keys: &[ProxyKey], f: &mut impl FnMut(ProxyKey, ProxyKey)) {
+    if boxes.len() > MASK_BITS + 1 {
+        sweep::all_pairs(boxes, |i, j| f(keys[i], keys[j]));
+        return;
+    }
+    for (i, (bi, &ki)) in boxes.iter().zip(keys).enumerate() {
+        for k in bits(mask_of(&boxes[i + 1..], bi)) {
+            f(ki, keys[i + 1 + k]);
+        }
+    }
+}
+
 /// Every overlapping pair of the primitives of leaf `na` (in `ta`) × leaf `nb` (in `tb`). A
 /// box of either leaf that misses the other leaf's box pairs with nothing there, so the boxes
 /// of each leaf that meet the other leaf's box are noted in a bit mask first, and only those
 /// are tested against each other: two leaves that overlap at a corner cost one pass over each,
 /// not the product. Every test's result goes into a bit mask too, and the pairs are read from
 /// the set bits, so the loops branch on their counts, not on the tests (whose outcomes the
-/// branch predictor cannot guess). Leaves of more than 64 boxes, which only a `max_leaf_size`
-/// above 64 makes, take the plain loop.
+/// branch predictor cannot guess). Leaves of more than [`MASK_BITS`] boxes, which only a
+/// `max_leaf_size` above 64 makes, take the plain loop.
 #[inline]
 fn leaf_pairs(ta: &Tree, na: &Node, tb: &Tree, nb: &Node, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
     let (a_box, b_box) = (na.bounds(), nb.bounds());
     let (ra, rb) = (na.range(), nb.range());
     let (boxes_a, keys_a) = (&ta.boxes[ra.clone()], &ta.keys[ra]);
     let (boxes_b, keys_b) = (&tb.boxes[rb.clone()], &tb.keys[rb]);
-    if boxes_a.len() > 64 || boxes_b.len() > 64 {
+    if boxes_a.len() > MASK_BITS || boxes_b.len() > MASK_BITS {
         for (bi, &ki) in boxes_a.iter().zip(keys_a) {
             if bi.overlaps(&b_box) {
                 for (bj, &kj) in boxes_b.iter().zip(keys_b) {
@@ -233,10 +252,11 @@ fn leaf_pairs(ta: &Tree, na: &Node, tb: &Tree, nb: &Node, f: &mut impl FnMut(Pro
     }
 }
 
-/// Bit `k` set iff `boxes[k]` overlaps `b` (at most 64 boxes), computed without branches.
+/// Bit `k` set iff `boxes[k]` overlaps `b` (at most [`MASK_BITS`] boxes), computed without
+/// branches.
 #[inline]
-fn mask_of(boxes: &[PrimBox], b: &PrimBox) -> u64 {
-    debug_assert!(boxes.len() <= 64);
+fn mask_of(boxes: &[SimdBox], b: &SimdBox) -> u64 {
+    debug_assert!(boxes.len() <= MASK_BITS);
     boxes
         .iter()
         .enumerate()
@@ -253,54 +273,4 @@ fn bits(mut m: u64) -> impl Iterator<Item = usize> {
             k
         })
     })
-}
-
-/// Fills `order` with the indices `range`, sorted by `boxes[i].min.x`.
-fn sort_by_min_x(order: &mut Vec<u32>, range: core::ops::Range<usize>, boxes: &[PrimBox]) {
-    order.clear();
-    order.extend(range.map(|i| i as u32));
-    order.sort_unstable_by(|&i, &j| boxes[i as usize].min.x.total_cmp(&boxes[j as usize].min.x));
-}
-
-/// Every overlapping pair of `xs` × `ys` (index lists sorted by `min.x`), as `f(x, y)`.
-///
-/// Merge the two lists by `min.x` (ties: `xs` first). When a box is taken, every box of the
-/// other list it overlaps and that comes later in the merge lies at or after the other list's
-/// cursor and has `min.x <= its max.x`, so scanning from the cursor until `min.x` passes its
-/// `max.x` finds them all; a pair is found from whichever of its two boxes is taken first.
-fn sweep_cross(
-    xs: &[u32],
-    bx: &[PrimBox],
-    ys: &[u32],
-    by: &[PrimBox],
-    mut f: impl FnMut(usize, usize),
-) {
-    let (mut i, mut j) = (0, 0);
-    while i < xs.len() && j < ys.len() {
-        let x = xs[i] as usize;
-        let y = ys[j] as usize;
-        if bx[x].min.x <= by[y].min.x {
-            for &y2 in &ys[j..] {
-                let y2 = y2 as usize;
-                if by[y2].min.x > bx[x].max.x {
-                    break;
-                }
-                if bx[x].overlaps(&by[y2]) {
-                    f(x, y2);
-                }
-            }
-            i += 1;
-        } else {
-            for &x2 in &xs[i..] {
-                let x2 = x2 as usize;
-                if bx[x2].min.x > by[y].max.x {
-                    break;
-                }
-                if bx[x2].overlaps(&by[y]) {
-                    f(x2, y);
-                }
-            }
-            j += 1;
-        }
-    }
 }

@@ -3,9 +3,10 @@
 //! [`INLINE_STACK`].
 
 use super::Bvh;
-use super::node::{INLINE_STACK, Node, PrimBox, SmallStack};
-use crate::geom::{check_aabb, inverse_dir, ray_is_valid};
-use crate::{Aabb, ProxyKey, Vec3};
+use super::node::{INLINE_STACK, Node, SmallStack};
+use crate::geom::{Aabb, SimdBox, check_aabb, inverse_dir, ray_is_valid};
+use crate::pair::ProxyKey;
+use glam::Vec3;
 use slotmap::Key;
 
 impl Bvh {
@@ -22,7 +23,7 @@ impl Bvh {
     /// or body near `f32::MAX` has a box that overflows to ±∞ from finite input, and it must
     /// still find what it overlaps.
     pub(crate) fn query_aabb_unchecked(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
-        let q = PrimBox::new(aabb);
+        let q = SimdBox::new(aabb);
         self.query_tree(&q, |i| f(self.keys[i]));
         for (b, &key) in self.pending_boxes().iter().zip(self.pending_keys()) {
             if b.overlaps(&q) {
@@ -33,7 +34,7 @@ impl Bvh {
 
     /// The index of every tree primitive (tombstones excluded: their box is empty) whose
     /// box overlaps `aabb`.
-    pub(super) fn query_tree(&self, aabb: &PrimBox, mut f: impl FnMut(usize)) {
+    pub(super) fn query_tree(&self, aabb: &SimdBox, mut f: impl FnMut(usize)) {
         self.walk(
             |node| node.bounds().overlaps(aabb),
             |i| {
@@ -172,7 +173,7 @@ impl Bvh {
         );
     }
 
-    pub(super) fn pending_boxes(&self) -> &[PrimBox] {
+    pub(super) fn pending_boxes(&self) -> &[SimdBox] {
         &self.boxes[self.tree_len..]
     }
 

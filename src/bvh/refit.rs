@@ -1,9 +1,9 @@
 //! Keeping node boxes valid after updates: enlarging on `update`, tightening in one reverse
 //! sweep on `refit`, and the quality measure that decides when to rebuild instead.
 
-use super::node::{Node, PrimBox};
+use super::node::Node;
 use super::{Bvh, NONE};
-use crate::Aabb;
+use crate::geom::{Aabb, SimdBox};
 
 impl Bvh {
     /// Brings every node box to the exact union of its children, in one reverse sweep over the
@@ -41,13 +41,10 @@ impl Bvh {
         for n in (0..self.nodes.len()).rev() {
             let node = self.nodes[n];
             let aabb = if node.is_leaf() {
-                let b = self.boxes[node.range()]
+                self.boxes[node.range()]
                     .iter()
-                    .fold(PrimBox::EMPTY, |acc, b| PrimBox {
-                        min: acc.min.min(b.min),
-                        max: acc.max.max(b.max),
-                    });
-                b.aabb()
+                    .fold(SimdBox::EMPTY, |acc, b| acc.union(b))
+                    .aabb()
             } else {
                 let (a, b) = node.children(n as u32);
                 self.nodes[a as usize]
@@ -81,16 +78,15 @@ impl Bvh {
     /// Grows `leaf` and its ancestors until one already contains `aabb`: if the parent
     /// contains its child's old box and `aabb`, it contains their union, and so does every
     /// further ancestor.
-    pub(super) fn enlarge_ancestors(&mut self, leaf: u32, b: &PrimBox) {
+    pub(super) fn enlarge_ancestors(&mut self, leaf: u32, b: &SimdBox) {
         let mut n = leaf;
         while n != NONE {
             let node = &mut self.nodes[n as usize];
             let old = node.bounds();
-            if (old.min.cmple(b.min) & b.max.cmple(old.max)).all() {
+            if old.contains(b) {
                 return;
             }
-            node.min = old.min.min(b.min).into();
-            node.max = old.max.max(b.max).into();
+            node.set_box(&old.union(b));
             n = self.parent[n as usize];
         }
     }

@@ -1,6 +1,5 @@
 //! The whole-tree invariant check tests run after every mutation.
 
-use super::node::PrimBox;
 use super::{Bvh, NONE};
 use slotmap::Key;
 
@@ -38,7 +37,14 @@ impl Bvh {
             self.tree_len == 0,
             "nodes exist iff tree primitives do"
         );
+        self.check_nodes();
+        self.check_primitives();
+    }
 
+    /// Walks the tree from the root: depth-first layout, parent links, boxes containing their
+    /// children and primitives, every node and tree primitive reached once.
+    fn check_nodes(&self) {
+        let n_nodes = self.nodes.len();
         let mut node_seen = vec![false; n_nodes];
         let mut prim_seen = vec![false; self.tree_len];
         let mut stack = Vec::new();
@@ -91,13 +97,20 @@ impl Bvh {
         if let Some(i) = prim_seen.iter().position(|&s| !s) {
             panic!("tree primitive {i} is in no leaf");
         }
+    }
 
+    /// Keys against the key map, tombstones against their count and box, live boxes valid.
+    fn check_primitives(&self) {
         let mut live = 0;
         let mut tombstones = 0;
         for (i, (key, aabb)) in self.keys.iter().zip(&self.boxes).enumerate() {
             if key.is_null() {
                 assert!(i < self.tree_len, "pending primitive {i} is a tombstone");
-                assert_eq!(*aabb, PrimBox::EMPTY, "tombstone {i} has a box");
+                assert_eq!(
+                    *aabb,
+                    crate::geom::SimdBox::EMPTY,
+                    "tombstone {i} has a box"
+                );
                 tombstones += 1;
                 continue;
             }

@@ -8,18 +8,25 @@
 //!   whose split planes its AABB does not straddle. Spheres on the root's planes stay near the
 //!   root, so a sphere is tested against the filtered straddlers of all its ancestors. Pairs
 //!   come from a pass that radix-sorts the spheres into depth-first node order and streams over
-//!   the node runs with a filtered ancestor stack (module `pairs`).
+//!   the node runs with a filtered ancestor stack (module `strict`).
 //! - [`Placement::Loose`] (RTCD 7.3.6, looseness 2): a node's *loose bounds* are its cell grown
 //!   by half the cell size on every side, and a sphere lives at the deepest level whose cells
 //!   are at least its diameter, in the cell holding its centre; its box is then inside the
 //!   node's loose bounds wherever the centre is, so a sphere's level depends only on its radius
 //!   and nothing stays near the root for straddling a plane. Pairs are found between a node and
 //!   its 26 same-level neighbours, and across levels by descending the neighbours' occupied
-//!   subtrees (`loose.rs`). Use [`depth_for_loose`] for the depth.
+//!   subtrees (module `loose`). Use [`depth_for_loose`] for the depth.
 //!
 //! Queries and rays follow the per-node lists through occupied subtrees, testing nodes by
 //! their cells (strict) or loose bounds (loose) (module `query`); [`Octree::validate`] checks
 //! every invariant (module `validate`).
+//!
+//! The modules, each standing only on those before it: `cell` (implicit node indexing and
+//! Morton codes), `nodes` (paged per-node arrays and the one subtree walk), `placement` (both
+//! placement rules, the walk keys and the region a node's spheres reach: apart from
+//! [`Octree::for_each_pair`] choosing the pass, the only code that tells the placements apart), `walk` (the walk order, the test counter and the short and
+//! swept pair loops both passes use), then `strict` and `loose` (one pair pass each), `query`
+//! and `validate`.
 //!
 //! Memory: the tree is "preallocated" in the sense of implicit indexing (level `L` starts at
 //! node `(8^L − 1)/7`, a node's index within its level is its Morton code), but the per-node
@@ -27,20 +34,43 @@
 //! one of its nodes or below it. A depth-10 tree (1.2 G implicit nodes) therefore costs a
 //! 1.2 MB page table plus the pages its spheres touch, and a scene of 100k spheres at depth 5
 //! costs ten pages.
+//!
+//! # Conventions
+//! The same for [`Octree`] and [`Bvh`](crate::Bvh):
+//! - **Constructors refuse, never correct.** [`Octree::new`] and [`Octree::with_placement`]
+//!   return `Err` naming the first bad argument ([`Error::DepthOutOfRange`],
+//!   [`Error::InvalidBounds`]) and build nothing; no argument is clamped or replaced.
+//! - **`validate` panics, `check` returns.** [`Octree::validate`] checks every internal
+//!   invariant and panics on the first broken one (tests, debugging); a `check` method (such as
+//!   [`BvhConfig::check`](crate::BvhConfig::check)) tells a caller whether values it gives are
+//!   valid, as a `Result`.
+//! - **Pairs two ways.** [`Octree::for_each_pair`] calls a closure per overlapping pair;
+//!   [`Octree::pairs_into`] appends them to a `Vec<Pair>`, canonical and unsorted.
+//! - **Stats are cheap.** [`Octree::stats`] copies counters: no allocation, O(1).
 
+mod cell;
 mod loose;
-mod pairs;
-mod place;
+mod nodes;
+mod placement;
 mod query;
+mod strict;
 mod validate;
+mod walk;
 
-pub use place::{depth_for, depth_for_loose};
+pub use placement::{depth_for, depth_for_loose};
 
-use crate::{Aabb, Error, Pair, ProxyKey, Vec3, geom};
-use glam::Vec3A;
+use crate::error::Error;
+use crate::geom::{self, Aabb};
+use crate::pair::{Pair, ProxyKey};
+use cell::level_of;
+use glam::Vec3;
+use nodes::Nodes;
+use placement::Grid;
 use slotmap::{SecondaryMap, SlotMap};
 
-/// The deepest octree accepted by `Octree::new`: levels `0..=MAX_DEPTH`.
+/// The deepest octree accepted by `Octree::new`: levels `0..=MAX_DEPTH`. At depth 10 a cell's
+/// Morton code (10 bits per axis) still fits a `u32`, and so does the index of every node
+/// (1 227 133 513 of them).
 pub const MAX_DEPTH: u32 = 10;
 
 /// "No object" / "no node" in the flat arrays.
@@ -60,18 +90,6 @@ pub enum Placement {
     Loose,
 }
 
-impl Placement {
-    /// A sensible octree depth for spheres of about `typical_radius` in `bounds` under this
-    /// placement: [`depth_for`] for `Strict`, [`depth_for_loose`] for `Loose`.
-    #[must_use]
-    pub fn depth_for(self, bounds: &Aabb, typical_radius: f32) -> u32 {
-        match self {
-            Placement::Strict => depth_for(bounds, typical_radius),
-            Placement::Loose => depth_for_loose(bounds, typical_radius),
-        }
-    }
-}
-
 /// Per-sphere data, indexed by dense id (insertion order, so `update` streams). The pair pass
 /// reads `aabb`, `qmin`/`qmax` and `walk_key`; queries follow the node lists.
 #[derive(Clone, Copy, Debug)]
@@ -87,8 +105,7 @@ struct Obj {
     /// Neighbours in the node's list, `NONE` at the ends. 8 bytes.
     next: u32,
     prev: u32,
-    /// The node's key in depth-first walk order ([`Octree::walk_key`]), set on every link.
-    /// 8 bytes.
+    /// The node's walk key (`Grid::walk_key`), set on every link. 8 bytes.
     walk_key: u64,
 }
 const _: () = assert!(core::mem::size_of::<Obj>() == 56);
@@ -108,26 +125,31 @@ pub struct OctreeStats {
     pub nodes_visited: u32,
 }
 
+/// The cost of one pair pass.
+#[derive(Clone, Copy, Debug, Default)]
+struct PassCost {
+    /// AABB overlap tests.
+    tests: u64,
+    /// Nodes visited.
+    nodes_visited: u32,
+}
+
+/// Buffers of the pair passes, reused by every pass; they never shrink.
+#[derive(Clone, Debug, Default)]
+struct Passes {
+    walk: walk::Scratch,
+    strict: strict::Scratch,
+    loose: loose::Scratch,
+}
+
 /// A top-down octree over spheres with implicit node indexing; see the [module docs](self).
 ///
 /// Spheres outside [`Octree::bounds`] are kept in the root and paired correctly. Every `Err`
 /// leaves the tree exactly as it was.
 #[derive(Clone, Debug)]
 pub struct Octree {
-    bounds: Aabb,
-    depth: u32,
-    placement: Placement,
-    /// Bits per axis of the integer grid boxes are mapped to: `depth` (strict), or `depth + 1`
-    /// (loose: half the deepest cells, so every level's loose bounds lie on grid lines).
-    grid: u32,
-    /// Grid cells per unit length on each axis: `2^grid / extent`.
-    scale: Vec3A,
-    /// `bounds.min`, and the last grid cell `2^grid − 1` on every axis, for `quantize`.
-    grid_min: Vec3A,
-    grid_top: Vec3A,
-    /// Loose mode: the largest radius placed at level `L`, half the level's cell size on the
-    /// bounds' shortest axis (`min extent / 2^(L+1)`).
-    half_cell: [f32; MAX_DEPTH as usize + 1],
+    /// Bounds, depth, placement and the integer grid.
+    grid: Grid,
     /// Hot data by dense id.
     objs: Vec<Obj>,
     /// Centre and radius by dense id, exactly as given.
@@ -138,10 +160,12 @@ pub struct Octree {
     ids: SecondaryMap<ProxyKey, u32>,
     /// Mints keys for [`Octree::insert`].
     minted: SlotMap<ProxyKey, ()>,
-    nodes: place::Nodes,
+    nodes: Nodes,
     per_level: [u32; MAX_DEPTH as usize + 1],
     overflow: u32,
-    scratch: pairs::Scratch,
+    passes: Passes,
+    /// The cost of the last pair pass.
+    last_pass: PassCost,
 }
 
 impl Octree {
@@ -155,29 +179,24 @@ impl Octree {
     /// An empty octree with the given placement; same errors as [`Octree::new`].
     pub fn with_placement(bounds: Aabb, depth: u32, placement: Placement) -> Result<Octree, Error> {
         if depth > MAX_DEPTH {
-            return Err(Error::DepthOutOfRange(depth));
+            return Err(Error::DepthOutOfRange {
+                depth,
+                max: MAX_DEPTH,
+            });
         }
         geom::check_bounds(&bounds)?;
-        let grid = depth + u32::from(placement == Placement::Loose);
-        let shortest = bounds.extent().min_element();
         Ok(Octree {
-            bounds,
-            depth,
-            placement,
-            grid,
-            scale: (Vec3::splat((1u32 << grid) as f32) / bounds.extent()).into(),
-            grid_min: bounds.min.into(),
-            grid_top: Vec3A::splat(((1u32 << grid) - 1) as f32),
-            half_cell: core::array::from_fn(|l| shortest / (2u32 << l) as f32),
+            grid: Grid::new(bounds, depth, placement),
             objs: Vec::new(),
             spheres: Vec::new(),
             keys: Vec::new(),
             ids: SecondaryMap::new(),
             minted: SlotMap::with_key(),
-            nodes: place::Nodes::new(place::node_count(depth)),
+            nodes: Nodes::new(cell::node_count(depth)),
             per_level: [0; MAX_DEPTH as usize + 1],
             overflow: 0,
-            scratch: pairs::Scratch::default(),
+            passes: Passes::default(),
+            last_pass: PassCost::default(),
         })
     }
 
@@ -231,21 +250,21 @@ impl Octree {
         radius: f32,
     ) -> Result<(), Error> {
         let id = *self.ids.get(key).ok_or(Error::UnknownProxy)?;
-        let (aabb, qmin, qmax, node, outside) = self.locate(center, radius);
+        let at = self.grid.locate(center, radius);
         let i = id as usize;
         let was_outside = self.is_outside(id);
         self.spheres[i] = (center, radius);
         let old = self.objs[i];
-        self.overflow = self.overflow - u32::from(was_outside) + u32::from(outside);
+        self.overflow = self.overflow - u32::from(was_outside) + u32::from(at.outside);
         let o = &mut self.objs[i];
-        o.aabb = aabb;
-        o.qmin = qmin;
-        o.qmax = qmax;
-        if old.node != node {
-            self.per_level[self.nodes.level_of(old.node) as usize] -= 1;
-            self.per_level[self.nodes.level_of(node) as usize] += 1;
+        o.aabb = at.aabb;
+        o.qmin = at.qmin;
+        o.qmax = at.qmax;
+        if old.node != at.node {
+            self.per_level[level_of(old.node) as usize] -= 1;
+            self.per_level[level_of(at.node) as usize] += 1;
             self.unlink(id);
-            self.link(id, node);
+            self.link(id, at.node);
         }
         Ok(())
     }
@@ -257,7 +276,7 @@ impl Octree {
         self.unlink(id);
         let i = id as usize;
         let old = self.objs[i];
-        self.per_level[self.nodes.level_of(old.node) as usize] -= 1;
+        self.per_level[level_of(old.node) as usize] -= 1;
         self.overflow -= u32::from(self.is_outside(id));
         self.ids.remove(key);
         self.minted.remove(key);
@@ -307,37 +326,37 @@ impl Octree {
     pub fn level_of(&self, key: ProxyKey) -> Option<u32> {
         self.ids
             .get(key)
-            .map(|&id| self.nodes.level_of(self.objs[id as usize].node))
+            .map(|&id| level_of(self.objs[id as usize].node))
     }
 
     /// The world bounds given to [`Octree::new`].
     #[must_use]
     pub fn bounds(&self) -> Aabb {
-        self.bounds
+        self.grid.bounds
     }
 
     /// The deepest level: the tree has levels `0..=depth`.
     #[must_use]
     pub fn depth(&self) -> u32 {
-        self.depth
+        self.grid.depth
     }
 
     /// The placement given to [`Octree::with_placement`] ([`Placement::Strict`] for
     /// [`Octree::new`]).
     #[must_use]
     pub fn placement(&self) -> Placement {
-        self.placement
+        self.grid.placement
     }
 
     /// Calls `f(a, b)` once for every pair of spheres whose AABBs overlap (closed: touching
     /// boxes overlap), in no particular order and with no particular key order inside a pair.
     pub fn for_each_pair(&mut self, f: impl FnMut(ProxyKey, ProxyKey)) {
-        let mut scratch = core::mem::take(&mut self.scratch);
-        match self.placement {
-            Placement::Strict => self.walk_pairs(&mut scratch, f),
-            Placement::Loose => self.loose_pairs(&mut scratch, f),
-        }
-        self.scratch = scratch;
+        let mut p = core::mem::take(&mut self.passes);
+        self.last_pass = match self.grid.placement {
+            Placement::Strict => self.strict_pairs(&mut p.walk, &mut p.strict, f),
+            Placement::Loose => self.loose_pairs(&mut p.walk, &mut p.loose, f),
+        };
+        self.passes = p;
     }
 
     /// Appends every overlapping pair, canonical (`a < b`) but **unsorted**, to `out`
@@ -359,19 +378,19 @@ impl Octree {
         OctreeStats {
             per_level: self.per_level,
             overflow: self.overflow,
-            aabb_tests: self.scratch.tests,
-            nodes_visited: self.scratch.nodes_visited,
+            aabb_tests: self.last_pass.tests,
+            nodes_visited: self.last_pass.nodes_visited,
         }
     }
 
     /// Appends a sphere that passed the checks under `key`.
     fn push(&mut self, key: ProxyKey, center: Vec3, radius: f32) {
-        let (aabb, qmin, qmax, node, outside) = self.locate(center, radius);
+        let at = self.grid.locate(center, radius);
         let id = self.objs.len() as u32;
         self.objs.push(Obj {
-            aabb,
-            qmin,
-            qmax,
+            aabb: at.aabb,
+            qmin: at.qmin,
+            qmax: at.qmax,
             node: NONE,
             next: NONE,
             prev: NONE,
@@ -380,23 +399,19 @@ impl Octree {
         self.spheres.push((center, radius));
         self.keys.push(key);
         self.ids.insert(key, id);
-        self.per_level[self.nodes.level_of(node) as usize] += 1;
-        self.overflow += u32::from(outside);
-        self.link(id, node);
+        self.per_level[level_of(at.node) as usize] += 1;
+        self.overflow += u32::from(at.outside);
+        self.link(id, at.node);
     }
 
     /// True if the sphere with dense id `id` is counted in `overflow` (only root spheres can
     /// be).
     fn is_outside(&self, id: u32) -> bool {
         let o = &self.objs[id as usize];
-        o.node == 0
-            && match self.placement {
-                Placement::Strict => !self.bounds.contains(&o.aabb),
-                Placement::Loose => {
-                    let (c, r) = self.spheres[id as usize];
-                    self.locate(c, r).4
-                }
-            }
+        o.node == 0 && {
+            let (c, r) = self.spheres[id as usize];
+            self.grid.is_outside(&o.aabb, c, r)
+        }
     }
 
     /// Moves the unlinked-or-linked object `from` into dense slot `to` (whose own object was
@@ -416,6 +431,43 @@ impl Octree {
         let key = self.keys[from as usize];
         self.keys[to as usize] = key;
         self.ids.insert(key, to);
+    }
+
+    /// Pushes object `id` at the front of `node`'s list.
+    fn link(&mut self, id: u32, node: u32) {
+        let walk_key = self.grid.walk_key(node);
+        let became_occupied = self.nodes.is_empty(node);
+        let head = self.nodes.head(node);
+        let o = &mut self.objs[id as usize];
+        o.node = node;
+        o.walk_key = walk_key;
+        o.prev = NONE;
+        o.next = head;
+        if head != NONE {
+            self.objs[head as usize].prev = id;
+        }
+        self.nodes.set_head(node, id);
+        if became_occupied {
+            self.nodes.mark_occupied(node);
+        }
+    }
+
+    /// Takes object `id` out of its node's list (its `node` field is left as it was).
+    fn unlink(&mut self, id: u32) {
+        let Obj {
+            node, next, prev, ..
+        } = self.objs[id as usize];
+        if prev == NONE {
+            self.nodes.set_head(node, next);
+        } else {
+            self.objs[prev as usize].next = next;
+        }
+        if next != NONE {
+            self.objs[next as usize].prev = prev;
+        }
+        if self.nodes.is_empty(node) {
+            self.nodes.mark_empty(node);
+        }
     }
 }
 

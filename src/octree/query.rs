@@ -1,101 +1,34 @@
 //! Box, sphere and ray queries, and the occupied-cell iterator. None of them allocates: they
-//! walk occupied subtrees with a fixed inline stack (depth-first, at most 7 pending siblings
-//! per level plus the current node).
+//! follow the node lists through occupied subtrees ([`Nodes::walk`](super::nodes::Nodes::walk)),
+//! entering a node only if the region its spheres can reach meets the query.
 
-use super::place::node_index;
-use super::{MAX_DEPTH, NONE, Octree, Placement};
-use crate::{Aabb, ProxyKey, Vec3, geom};
-
-/// Capacity of the inline traversal stack: one node, then at most 7 pending siblings per level.
-const STACK: usize = 1 + 7 * MAX_DEPTH as usize + 8;
-
-/// A node on the traversal stack.
-#[derive(Clone, Copy, Debug, Default)]
-struct Cell {
-    code: u32,
-    level: u32,
-    xyz: [u32; 3],
-}
-
-impl Cell {
-    fn child(&self, c: u32) -> Cell {
-        Cell {
-            code: self.code * 8 + c,
-            level: self.level + 1,
-            xyz: [0, 1, 2].map(|a| self.xyz[a] * 2 + ((c >> a) & 1)),
-        }
-    }
-}
+use super::cell::Cell;
+use super::{NONE, Octree};
+use crate::geom::{self, Aabb};
+use crate::pair::ProxyKey;
+use glam::Vec3;
 
 impl Octree {
-    /// Depth-first over occupied nodes: `enter(cell)` decides whether to visit a node's
-    /// spheres (`visit(id)`) and children; the root is always entered.
-    fn traverse(&self, mut enter: impl FnMut(&Cell) -> bool, mut visit: impl FnMut(u32)) {
+    /// Depth-first over occupied nodes from the root: `enter(cell)` decides whether to visit a
+    /// node's spheres (`visit(id)`) and children; the root is always entered.
+    fn traverse(&self, enter: impl FnMut(&Cell) -> bool, mut visit: impl FnMut(u32)) {
         if self.objs.is_empty() {
             return;
         }
-        let mut stack = [Cell::default(); STACK];
-        let mut len = 1;
-        while len > 0 {
-            len -= 1;
-            let cell = stack[len];
-            let node = node_index(cell.level, cell.code);
-            let mut i = self.nodes.head(node);
+        self.nodes.walk(Cell::ROOT, enter, |_, slot| {
+            let mut i = self.nodes.head_at(slot);
             while i != NONE {
                 visit(i);
                 i = self.objs[i as usize].next;
             }
-            let mask = self.nodes.mask(node);
-            for c in (0..8).rev().filter(|c| mask & (1 << c) != 0) {
-                let child = cell.child(c);
-                if enter(&child) {
-                    stack[len] = child;
-                    len += 1;
-                }
-            }
-        }
-    }
-
-    /// The grid range that holds the ranges of the spheres placed in a node: its cell
-    /// (strict), or its loose bounds, the cell grown by half its size (loose; the low end is
-    /// clamped at 0, which no range is below).
-    fn cell_range(&self, cell: &Cell) -> ([u32; 3], [u32; 3]) {
-        let shift = self.grid - cell.level;
-        let lo = cell.xyz.map(|c| c << shift);
-        let hi = lo.map(|l| l + (1 << shift) - 1);
-        match self.placement {
-            Placement::Strict => (lo, hi),
-            Placement::Loose => {
-                let half = (1 << shift) >> 1;
-                (lo.map(|l| l.saturating_sub(half)), hi.map(|h| h + half))
-            }
-        }
-    }
-
-    /// The box that holds the spheres placed in a node: its cell (strict) or its loose bounds
-    /// (loose); rounded, so a sphere placed in it may poke out by an ulp.
-    fn cell_box(&self, cell: &Cell) -> Aabb {
-        let size = self.bounds.extent() / (1u32 << cell.level) as f32;
-        let min = self.bounds.min
-            + Vec3::new(cell.xyz[0] as f32, cell.xyz[1] as f32, cell.xyz[2] as f32) * size;
-        let b = Aabb::new(min, min + size);
-        match self.placement {
-            Placement::Strict => b,
-            Placement::Loose => Aabb::new(b.min - size * 0.5, b.max + size * 0.5),
-        }
+        });
     }
 
     /// Visits the ids of every sphere whose integer range overlaps `aabb`'s (a superset of
     /// the spheres overlapping `aabb`).
     fn candidates(&self, aabb: &Aabb, visit: impl FnMut(u32)) {
-        let (qlo, qhi) = (self.quantize(aabb.min), self.quantize(aabb.max));
-        self.traverse(
-            |cell| {
-                let (lo, hi) = self.cell_range(cell);
-                (0..3).all(|a| u32::from(qlo[a]) <= hi[a] && u32::from(qhi[a]) >= lo[a])
-            },
-            visit,
-        );
+        let (qlo, qhi) = (self.grid.quantize(aabb.min), self.grid.quantize(aabb.max));
+        self.traverse(|cell| self.grid.reaches(cell, qlo, qhi), visit);
     }
 
     /// Calls `f` with the key of every sphere whose AABB overlaps `aabb` (closed), once each,
@@ -142,12 +75,13 @@ impl Octree {
             return None;
         }
         let inv = geom::inverse_dir(dir);
-        let slack = self.cell_slack();
+        let slack = self.grid.slack();
         let best = core::cell::Cell::new(None::<(ProxyKey, f32)>);
         let limit = || best.get().map_or(max_t, |(_, t)| t);
         self.traverse(
             |cell| {
-                self.cell_box(cell)
+                self.grid
+                    .reach_box(cell)
                     .grown(slack)
                     .ray_entry(origin, inv, limit())
                     .is_some()
@@ -200,10 +134,11 @@ impl Octree {
             return;
         }
         let inv = geom::inverse_dir(dir);
-        let slack = self.cell_slack();
+        let slack = self.grid.slack();
         self.traverse(
             |cell| {
-                self.cell_box(cell)
+                self.grid
+                    .reach_box(cell)
                     .grown(slack)
                     .ray_entry(origin, inv, max_t)
                     .is_some()
@@ -221,32 +156,17 @@ impl Octree {
     /// their children: the cell itself in strict mode, its loose bounds (the cell grown by half
     /// its size) in loose mode. Overflow spheres live in the root.
     pub fn for_each_occupied_cell(&self, mut f: impl FnMut(u32, Aabb)) {
-        let mut stack = [Cell::default(); STACK];
-        let mut len = usize::from(!self.objs.is_empty());
-        while len > 0 {
-            len -= 1;
-            let cell = stack[len];
-            let node = node_index(cell.level, cell.code);
-            if self.nodes.head(node) != NONE {
-                f(cell.level, self.cell_box(&cell));
-            }
-            let mask = self.nodes.mask(node);
-            for c in (0..8).rev().filter(|c| mask & (1 << c) != 0) {
-                stack[len] = cell.child(c);
-                len += 1;
-            }
+        if self.objs.is_empty() {
+            return;
         }
-    }
-
-    /// How far a sphere placed in a cell may poke out of the cell's float box: the cell map
-    /// and the box corners each round by a few ulps of the coordinates involved.
-    fn cell_slack(&self) -> f32 {
-        let mag = self
-            .bounds
-            .min
-            .abs()
-            .max(self.bounds.max.abs())
-            .max_element();
-        mag * 1e-5 + self.bounds.extent().max_element() * 1e-6
+        self.nodes.walk(
+            Cell::ROOT,
+            |_| true,
+            |cell, slot| {
+                if self.nodes.head_at(slot) != NONE {
+                    f(cell.level, self.grid.reach_box(cell));
+                }
+            },
+        );
     }
 }

@@ -42,7 +42,10 @@ fn rtcd_example_straddler_stays_at_root() {
 fn depth_out_of_range_and_bad_bounds_are_refused() {
     assert_eq!(
         Octree::new(unit(), MAX_DEPTH + 1).unwrap_err(),
-        Error::DepthOutOfRange(MAX_DEPTH + 1)
+        Error::DepthOutOfRange {
+            depth: MAX_DEPTH + 1,
+            max: MAX_DEPTH
+        }
     );
     let flat = Aabb::new(Vec3::ZERO, Vec3::new(1.0, 0.0, 1.0));
     assert!(matches!(
@@ -207,18 +210,12 @@ fn loose_placement_follows_the_radius_and_the_centre() {
     let small = t.insert(Vec3::splat(-0.5), 0.1).unwrap();
     assert_eq!(t.level_of(small), Some(3));
     // The centre −0.5 is the low corner of cell 2 of 8 (`[-0.5, -0.25)`) on each axis.
-    assert_eq!(
-        node_of(&t, small),
-        place::node_index(3, place::morton([2, 2, 2]))
-    );
+    assert_eq!(node_of(&t, small), cell::Cell::at(3, [2, 2, 2]).node());
     // On the root's three planes: strict keeps it in the root, loose puts it at level 3, in
     // the cell whose low corner is the centre.
     let on_planes = t.insert(Vec3::ZERO, 0.1).unwrap();
     assert_eq!(t.level_of(on_planes), Some(3));
-    assert_eq!(
-        node_of(&t, on_planes),
-        place::node_index(3, place::morton([4, 4, 4]))
-    );
+    assert_eq!(node_of(&t, on_planes), cell::Cell::at(3, [4, 4, 4]).node());
     let mut strict = Octree::new(unit(), 3).unwrap();
     let k = strict.insert(Vec3::ZERO, 0.1).unwrap();
     assert_eq!(strict.level_of(k), Some(0));
@@ -267,7 +264,7 @@ fn validate_catches_a_loose_sphere_placed_too_shallow() {
     let k = t.insert(Vec3::splat(0.3), 0.01).unwrap();
     let id = t.ids[k];
     // Relink it in its level-2 ancestor: the box still fits, but the rule says level 3.
-    let node = place::node_index(2, place::morton([2, 2, 2]));
+    let node = cell::Cell::at(2, [2, 2, 2]).node();
     t.unlink(id);
     t.per_level[3] -= 1;
     t.per_level[2] += 1;

@@ -1,0 +1,369 @@
+//! What both pair passes stand on: the spheres radix-sorted by their node's walk key into
+//! contiguous walk-ordered copies ([`Hot`]), the runs of equal keys (one per occupied node), and
+//! the [`Tester`] that runs and counts the box tests of a pass through the sweep kernel.
+//!
+//! Order. Every sphere carries its node's walk key (`Grid::walk_key`). A pass LSD-radix-sorts
+//! `(walk key, id)` (two or three streaming passes; the order of the dense ids is left alone,
+//! so `update` keeps streaming in insertion order) and gathers each sphere's box and cell range
+//! into a contiguous walk-ordered array. A pass then never chases a list: each node is a run of
+//! that array.
+
+use super::Octree;
+use super::placement::walk_key_bits;
+use crate::geom::SimdBox;
+use crate::pair::ProxyKey;
+use crate::sweep::{self, Ordered};
+use core::borrow::Borrow;
+
+/// Lists with at most this many spheres are tested all against all; longer ones are swept:
+/// below it sorting the list costs more than the tests it saves.
+pub(super) const SHORT_SELF: usize = 16;
+/// Two lists with at most this many candidate pairs are tested all against all; larger ones
+/// are swept: a sweep sorts both lists first, which only pays once the tests it skips
+/// outnumber the sort's steps.
+pub(super) const SHORT_CROSS: usize = 1024;
+/// Two lists with a side of at most this many spheres are tested all against all: each sphere
+/// of the other side then costs at most this many tests, less than its share of a sort.
+pub(super) const SHORT_SIDE: usize = 4;
+/// Bits per radix-sort digit: 2048 counters (8 KB) stay in the first-level cache.
+const RADIX_BITS: u32 = 11;
+
+/// A sphere as the passes read it: box, integer cell range and walk position. 48 bytes.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Hot {
+    /// `center ± radius`. 32 bytes.
+    pub(super) bx: SimdBox,
+    /// Range on the integer grid, clamped to the grid. 12 bytes.
+    pub(super) qmin: [u16; 3],
+    pub(super) qmax: [u16; 3],
+    /// Position in walk order (index of `Scratch::keys`). 4 bytes.
+    pub(super) pos: u32,
+}
+const _: () = assert!(core::mem::size_of::<Hot>() == 48);
+
+impl Hot {
+    /// A placeholder for buffers about to be overwritten.
+    pub(super) const EMPTY: Hot = Hot {
+        bx: SimdBox::EMPTY,
+        qmin: [0; 3],
+        qmax: [0; 3],
+        pos: 0,
+    };
+
+    #[inline]
+    pub(super) fn overlaps(&self, o: &Hot) -> bool {
+        self.bx.overlaps(&o.bx)
+    }
+}
+
+impl Borrow<SimdBox> for Hot {
+    #[inline]
+    fn borrow(&self) -> &SimdBox {
+        &self.bx
+    }
+}
+
+/// The two sweep orders a cross sweep needs, reused by every pass.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Sweeps {
+    pub(super) a: Vec<u64>,
+    pub(super) b: Vec<u64>,
+}
+
+/// Buffers of the walk order, reused by every pass; they never shrink.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Scratch {
+    /// `(walk key << 32) | id`, sorted, and the radix sort's second buffer.
+    items: Vec<u64>,
+    items_tmp: Vec<u64>,
+    /// `(walk key, id)` for trees too deep for a 32-bit key (depth 10).
+    wide: Vec<(u64, u32)>,
+    counts: Vec<u32>,
+    /// By sphere id: its position in walk order.
+    rank: Vec<u32>,
+    /// Walk-ordered copies: hot data, walk key and proxy key of each sphere.
+    pub(super) hot: Vec<Hot>,
+    pub(super) node_key: Vec<u64>,
+    pub(super) keys: Vec<ProxyKey>,
+    pub(super) sweeps: Sweeps,
+}
+
+/// The runs of equal keys of `keys` (sorted): `(key, start, end)` for each, in order.
+#[inline]
+pub(super) fn runs(keys: &[u64]) -> impl Iterator<Item = (u64, usize, usize)> + '_ {
+    let mut i = 0;
+    core::iter::from_fn(move || {
+        let &key = keys.get(i)?;
+        let start = i;
+        i += keys[i..].iter().take_while(|&&k| k == key).count();
+        Some((key, start, i))
+    })
+}
+
+/// LSD radix sort of `items` by bits `lo..lo + bits`, stable; `tmp` and `counts` are scratch.
+/// Digits every item shares are skipped.
+fn radix_sort(items: &mut Vec<u64>, tmp: &mut Vec<u64>, counts: &mut Vec<u32>, lo: u32, bits: u32) {
+    let n = items.len();
+    let radix = 1usize << RADIX_BITS;
+    let mask = (radix - 1) as u64;
+    let passes = bits.div_ceil(RADIX_BITS) as usize;
+    counts.clear();
+    counts.resize(radix * passes, 0);
+    for &x in items.iter() {
+        for p in 0..passes {
+            let d = ((x >> (lo + p as u32 * RADIX_BITS)) & mask) as usize;
+            counts[p * radix + d] += 1;
+        }
+    }
+    tmp.resize(n, 0);
+    for p in 0..passes {
+        let c = &mut counts[p * radix..(p + 1) * radix];
+        if c.iter().any(|&k| k as usize == n) {
+            continue;
+        }
+        let mut sum = 0;
+        for k in c.iter_mut() {
+            let here = *k;
+            *k = sum;
+            sum += here;
+        }
+        let shift = lo + p as u32 * RADIX_BITS;
+        for &x in items.iter() {
+            let d = ((x >> shift) & mask) as usize;
+            tmp[c[d] as usize] = x;
+            c[d] += 1;
+        }
+        core::mem::swap(items, tmp);
+    }
+}
+
+/// A pass's view of the walk order: the sorted spheres and their node keys, the tester that
+/// runs and counts the pass's box tests, and the sweep buffers.
+pub(super) struct Walk<'a, F> {
+    pub(super) hot: &'a [Hot],
+    pub(super) node_key: &'a [u64],
+    pub(super) t: Tester<'a, F>,
+    pub(super) sweeps: &'a mut Sweeps,
+}
+
+/// Runs and counts the box tests of one pass, mapping walk positions to proxy keys.
+pub(super) struct Tester<'a, F> {
+    pub(super) keys: &'a [ProxyKey],
+    pub(super) tests: u64,
+    pub(super) emit: F,
+}
+
+/// True if `a × b` is tested all against all rather than swept.
+#[inline]
+pub(super) fn is_short_cross(a: usize, b: usize) -> bool {
+    a * b <= SHORT_CROSS || a.min(b) <= SHORT_SIDE
+}
+
+impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
+    /// Tests one pair and emits it if it overlaps.
+    #[inline]
+    pub(super) fn test(&mut self, a: &Hot, b: &Hot) {
+        self.tests += 1;
+        if a.overlaps(b) {
+            self.emit(a, b);
+        }
+    }
+
+    /// Emits a pair known to overlap.
+    #[inline]
+    pub(super) fn emit(&mut self, a: &Hot, b: &Hot) {
+        (self.emit)(self.keys[a.pos as usize], self.keys[b.pos as usize]);
+    }
+
+    /// Every pair within `list`: all against all when short, else a sweep along x.
+    #[inline]
+    pub(super) fn within(&mut self, list: &[Hot], sweeps: &mut Sweeps) {
+        if list.len() <= SHORT_SELF {
+            self.tests += sweep::all_pairs(list, |i, j| self.emit(&list[i], &list[j]));
+        } else {
+            self.sweep_within(list, &mut sweeps.a);
+        }
+    }
+
+    /// [`Tester::within`] for long lists.
+    #[inline(never)]
+    fn sweep_within(&mut self, list: &[Hot], order: &mut Vec<u64>) {
+        sweep::sort_entries(order, list, 0, |_| true);
+        let sorted = Ordered {
+            order,
+            items: list,
+            axis: 0,
+        };
+        self.tests += sweep::self_pairs_of(&sorted, |i, j| self.emit(&list[i], &list[j]));
+    }
+
+    /// Every pair across the disjoint lists `a` and `b`: all against all when small, else a
+    /// merged sweep along x.
+    #[inline]
+    pub(super) fn between(&mut self, a: &[Hot], b: &[Hot], sweeps: &mut Sweeps) {
+        if is_short_cross(a.len(), b.len()) {
+            self.tests += sweep::all_cross(a, b, |i, j| self.emit(&a[i], &b[j]));
+        } else {
+            self.sweep_between(a, b, |_| true, 0, sweeps);
+        }
+    }
+
+    /// Every pair across `a` (only the spheres `keep` accepts) and `b`, by a merged sweep along
+    /// `axis`.
+    #[inline(never)]
+    pub(super) fn sweep_between(
+        &mut self,
+        a: &[Hot],
+        b: &[Hot],
+        keep: impl Fn(&Hot) -> bool,
+        axis: usize,
+        sweeps: &mut Sweeps,
+    ) {
+        sweep::sort_entries(&mut sweeps.a, a, axis, keep);
+        if sweeps.a.is_empty() {
+            return;
+        }
+        sweep::sort_entries(&mut sweeps.b, b, axis, |_| true);
+        let (sa, sb) = (
+            Ordered {
+                order: &sweeps.a,
+                items: a,
+                axis,
+            },
+            Ordered {
+                order: &sweeps.b,
+                items: b,
+                axis,
+            },
+        );
+        self.tests += sweep::cross_pairs_of(&sa, &sb, |i, j| self.emit(&a[i], &b[j]));
+    }
+}
+
+impl Octree {
+    /// Sorts the spheres into walk order in `s` and returns a pass's view of it, with a tester
+    /// that hands the overlapping pairs to `emit`; `None` for an empty tree.
+    pub(super) fn begin_pass<'a, F>(&self, s: &'a mut Scratch, emit: F) -> Option<Walk<'a, F>> {
+        if self.objs.is_empty() {
+            return None;
+        }
+        self.sort_into_walk_order(s);
+        Some(Walk {
+            hot: &s.hot,
+            node_key: &s.node_key,
+            t: Tester {
+                keys: &s.keys,
+                tests: 0,
+                emit,
+            },
+            sweeps: &mut s.sweeps,
+        })
+    }
+
+    /// Sorts the spheres by walk key and fills the walk-ordered arrays of `s`: box and cell
+    /// range, walk key and proxy key.
+    fn sort_into_walk_order(&self, s: &mut Scratch) {
+        let Scratch {
+            items,
+            items_tmp,
+            wide,
+            counts,
+            hot,
+            node_key,
+            keys,
+            rank,
+            ..
+        } = s;
+        let key_bits = walk_key_bits(self.grid.depth);
+        if key_bits <= 32 {
+            items.clear();
+            items.extend(
+                self.objs
+                    .iter()
+                    .enumerate()
+                    .map(|(id, o)| (o.walk_key << 32) | id as u64),
+            );
+            radix_sort(items, items_tmp, counts, 32, key_bits);
+            self.scatter(
+                items.iter().map(|&x| (x >> 32, x as u32)),
+                rank,
+                hot,
+                node_key,
+                keys,
+            );
+        } else {
+            wide.clear();
+            wide.extend(
+                self.objs
+                    .iter()
+                    .enumerate()
+                    .map(|(id, o)| (o.walk_key, id as u32)),
+            );
+            wide.sort_unstable();
+            self.scatter(wide.iter().copied(), rank, hot, node_key, keys);
+        }
+    }
+
+    /// Fills the walk-ordered copies from the sorted `(walk key, id)` sequence. Each sphere's
+    /// walk position is noted by id first; then one pass reads the spheres in id order, as
+    /// they lie in memory, and stores each at its position: stores to scattered places do not
+    /// stall the loop the way loads from them would.
+    fn scatter(
+        &self,
+        order: impl Iterator<Item = (u64, u32)> + Clone,
+        rank: &mut Vec<u32>,
+        hot: &mut Vec<Hot>,
+        node_key: &mut Vec<u64>,
+        keys: &mut Vec<ProxyKey>,
+    ) {
+        let n = self.objs.len();
+        node_key.clear();
+        node_key.extend(order.clone().map(|(key, _)| key));
+        rank.resize(n, 0);
+        for (pos, (_, id)) in order.enumerate() {
+            rank[id as usize] = pos as u32;
+        }
+        // `rank` is a permutation of `0..n`: every entry below is overwritten, so the
+        // buffers only change length when the sphere count does.
+        hot.resize(n, Hot::EMPTY);
+        keys.resize(n, ProxyKey::default());
+        for ((o, &key), &pos) in self.objs.iter().zip(&self.keys).zip(rank.iter()) {
+            hot[pos as usize] = Hot {
+                bx: SimdBox::new(&o.aabb),
+                qmin: o.qmin,
+                qmax: o.qmax,
+                pos,
+            };
+            keys[pos as usize] = key;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn radix_sort_sorts_by_the_key_bits_and_is_stable() {
+        let mut seed = 3u64;
+        let mut items: Vec<u64> = (0..5000u64)
+            .map(|id| {
+                seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+                ((seed >> 40) & 0x3f_ffff) << 32 | id
+            })
+            .collect();
+        let mut want = items.clone();
+        want.sort_by_key(|x| x >> 32);
+        let (mut tmp, mut counts) = (Vec::new(), Vec::new());
+        radix_sort(&mut items, &mut tmp, &mut counts, 32, 22);
+        assert_eq!(items, want);
+    }
+
+    #[test]
+    fn runs_are_the_stretches_of_equal_keys() {
+        let keys = [1, 1, 3, 4, 4, 4, 9];
+        let got: Vec<_> = runs(&keys).collect();
+        assert_eq!(got, [(1, 0, 2), (3, 2, 3), (4, 3, 6), (9, 6, 7)]);
+        assert_eq!(runs(&[]).count(), 0);
+    }
+}
