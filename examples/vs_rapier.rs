@@ -1,7 +1,7 @@
 //! broadleaf's `BroadPhase` against rapier3d's broad phase on the same seeded scene.
 //!
 //! ```text
-//! cargo run --release --features rapier --example vs_rapier -- --scene gas --n 100000
+//! cargo run --release --features profiler --example vs_rapier -- --scene gas --n 100000
 //!     [--steps 30] [--warmup 5] [--index octree|bvh|auto] [--placement strict|loose] [--seed 1]
 //!     [--skin 0]
 //! ```
