@@ -1,7 +1,7 @@
 //! broadleaf's `BroadPhase` against rapier3d's broad phase on the same seeded scene.
 //!
 //! ```text
-//! cargo run --release --features rapier --example vs_rapier -- --scene gas --n 100000
+//! cargo run --release --features profiler --example vs_rapier -- --scene gas --n 100000
 //!     [--steps 30] [--warmup 5] [--index octree|bvh|auto] [--placement strict|loose] [--seed 1]
 //!     [--skin 0]
 //! ```
@@ -14,19 +14,20 @@
 //! only a fixed P % of its dynamic boxes (default 100). `--moving` takes a list
 //! (`--moving 0,1,2,5,10,20,50,100`): one row per P, and with more than one P and no
 //! `--scene` the scene is `idle`; `--plot PATH.svg` then draws ns/object/step against P (a
-//! linear P axis), otherwise against N (`--sizes`, log–log). `pile` is recorded first from a dynamic rapier run (`broadleaf::fixtures::rapier_world::record_pile`,
-//! 240 settling steps, untimed) and then replayed like the others. The scene's frames are
+//! linear P axis), otherwise against N (`--sizes`, log–log). `pile` is recorded first from a
+//! dynamic rapier run (`fixtures::rapier_world::record_pile`, 240 settling steps, untimed) and
+//! then replayed like the others. The scene's frames are
 //! generated first; then broadleaf runs all of them, then rapier does (`--interleave`
 //! alternates the two per step instead, so each also pays for the other evicting its caches).
 //! Each step the scene's motion is fed to both:
 //!
 //! - broadleaf: the frame's removes, inserts and new positions/boxes (one `update_spheres` and
 //!   one `update_bodies` batch; `--per-object` calls `update_sphere` / `update_body` for each
-//!   object instead), then `step()`; spheres go
-//!   in with `insert_sphere` (`--index octree` or `auto`) or as dynamic bodies by their box
-//!   (`--index bvh`); boxes always go in as bodies. The octree's placement is `--placement`
-//!   (default strict, depth `depth_for`; loose uses `depth_for_loose`), its pair cache's skin
-//!   `--skin` (`Config::skin`, default 0: no cache). Timed with `Instant` around all of it.
+//!   object instead), then `step()`; spheres go in with `insert_sphere` (`--index octree` or
+//!   `auto`) or as dynamic bodies by their box (`--index bvh`); boxes always go in as bodies.
+//!   `--placement` sets `Config::octree_placement` and `octree_depth` (which the broadphase
+//!   keeps for the standalone octree's vocabulary but does not read), `--skin` sets
+//!   `Config::skin` (default 0: adaptive fat margins). Timed with `Instant` around all of it.
 //! - rapier: kinematic position-based bodies, ball or cuboid colliders with
 //!   `ActiveCollisionTypes::all()`, fixed bodies for static boxes; moved with
 //!   `set_next_kinematic_translation`, then `PhysicsPipeline::step`. Its broad-phase time per
@@ -53,16 +54,17 @@
 //! `intersect_aabb_conservative` re-tested against each collider's exact AABB, so both return
 //! the same set, and `cast_ray` with `solid`). Every 100th query is checked: the same key set
 //! for a box; for a ray the same `t` within 1e-4 and the same collider, or (a tie, as for an
-//! origin inside two overlapping spheres) one broadleaf also hits at that `t`. Its own table; the last line is
-//! `queries mismatches=<n>`.
+//! origin inside two overlapping spheres) one of the scene's spheres hit at that `t`. Its own
+//! table; the last line is `queries mismatches=<n>`.
 
 use broadleaf::fixtures::rapier_world::{SceneWorld, record_pile};
 use broadleaf::fixtures::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Idle, Rng, Scene};
 use broadleaf::rapier::Comparison;
-use broadleaf::{Aabb, BroadPhase, Config, Passes, Placement, ProxyKey, Shape, Vec3, brute, geom};
+use broadleaf::{Aabb, BroadPhase, Config, Passes, Placement, ProxyKey, Vec3, brute, geom};
 use plotters::prelude::*;
 use rapier3d::parry::bounding_volume::BoundingVolume;
 use rapier3d::parry::query::Ray;
+use std::collections::HashMap;
 use std::hint::black_box;
 use std::process::exit;
 use std::time::Instant;
@@ -523,6 +525,22 @@ fn main() {
 
 /// Size of the plots in pixels.
 const PLOT_SIZE: (u32, u32) = (820, 500);
+/// Room right of the plot area, in pixels, so the last x label is not cut off.
+const PLOT_RIGHT_MARGIN: u32 = 40;
+
+/// A log axis's tick label: only 1, 2 and 5 times a power of ten are written, so the ticks
+/// that crowd at the top of each decade stay unlabelled.
+fn log_label(v: f64) -> String {
+    let mantissa = v / 10f64.powf(v.log10().floor());
+    if [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .any(|m| (mantissa - m).abs() < 1e-6)
+    {
+        format!("{v}")
+    } else {
+        String::new()
+    }
+}
 
 /// A plot's engine: name, colour, and which time of a row it draws.
 type Engine = (&'static str, RGBColor, fn(&Row) -> f64);
@@ -603,6 +621,7 @@ fn plot_sizes(rows: &[Row], path: &str) -> Plotted {
     let mut chart = ChartBuilder::on(&root)
         .caption("one broadphase step against N", ("sans-serif", 20))
         .margin(12)
+        .margin_right(PLOT_RIGHT_MARGIN)
         .x_label_area_size(45)
         .y_label_area_size(70)
         .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())?;
@@ -610,8 +629,8 @@ fn plot_sizes(rows: &[Row], path: &str) -> Plotted {
         .configure_mesh()
         .x_desc("objects N")
         .y_desc("ns / object / step")
-        .x_label_formatter(&|x| format!("{x:.0}"))
-        .y_label_formatter(&|y| format!("{y}"))
+        .x_label_formatter(&|x| log_label(*x))
+        .y_label_formatter(&|y| log_label(*y))
         .draw()?;
     let mut scenes: Vec<&str> = rows.iter().map(|r| r.scene.as_str()).collect();
     scenes.dedup();
@@ -657,6 +676,7 @@ fn plot_moving(rows: &[Row], path: &str) -> Plotted {
             ("sans-serif", 20),
         )
         .margin(12)
+        .margin_right(PLOT_RIGHT_MARGIN)
         .x_label_area_size(45)
         .y_label_area_size(70)
         .build_cartesian_2d(0.0..x1, (y0..y1).log_scale())?;
@@ -665,7 +685,7 @@ fn plot_moving(rows: &[Row], path: &str) -> Plotted {
         .x_desc("objects moving per step, %")
         .y_desc("ns / object / step (all objects)")
         .x_label_formatter(&|x| format!("{x:.0}"))
-        .y_label_formatter(&|y| format!("{y}"))
+        .y_label_formatter(&|y| log_label(*y))
         .draw()?;
     let mut groups: Vec<(String, usize)> = rows.iter().map(|r| (r.name.clone(), r.n)).collect();
     groups.dedup();
@@ -825,6 +845,13 @@ fn run_queries(args: &Args) -> usize {
 
     // The sample: every QUERY_CHECK_EVERY-th query, both engines' answers in broadleaf keys.
     let key_of = |h| theirs.scene_id(h).and_then(|id| ours.feed.key(id));
+    // The scene's own spheres by key, for the tie rule below (not the broadphase's record).
+    let center_of: HashMap<ProxyKey, Vec3> = scene
+        .centers
+        .iter()
+        .enumerate()
+        .filter_map(|(id, &c)| Some((ours.feed.key(u32::try_from(id).ok()?)?, c)))
+        .collect();
     let (mut box_bad, mut ray_bad, mut checked) = (0, 0, 0);
     for b in boxes.iter().step_by(QUERY_CHECK_EVERY) {
         let mut a: Vec<ProxyKey> = Vec::new();
@@ -843,12 +870,9 @@ fn run_queries(args: &Args) -> usize {
             .cast_ray(&Ray::new(o, d), max_t, true)
             .map(|(h, t)| (key_of(h), t));
         // A tie (two shapes hit at the same t, e.g. an origin inside two overlapping spheres,
-        // both t = 0) may go to either: rapier's pick agrees if broadleaf's own shape for
-        // that key is hit at the same t.
-        let t_of = |k: ProxyKey| match ours.bp.shape(k)? {
-            Shape::Sphere { center, radius } => geom::ray_sphere(o, d, center, radius, max_t),
-            Shape::Body { aabb, .. } => aabb.ray_entry(o, geom::inverse_dir(d), max_t),
-        };
+        // both t = 0) may go to either: rapier's pick agrees if the scene's sphere of that
+        // key is hit at the same t.
+        let t_of = |k: ProxyKey| geom::ray_sphere(o, d, *center_of.get(&k)?, scene.radius, max_t);
         let same = match (a, r) {
             (None, None) => true,
             (Some((ka, ta)), Some((Some(kr), tr))) => {

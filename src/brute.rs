@@ -123,7 +123,7 @@ fn closest(hits: impl Iterator<Item = (ProxyKey, f32)>) -> Option<(ProxyKey, f32
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fixtures::scene::Rng;
+    use crate::rng::Rng;
     use slotmap::SlotMap;
 
     #[test]

@@ -414,7 +414,7 @@ impl Bvh {
 mod tests {
     use super::*;
     use crate::Vec3;
-    use crate::fixtures::scene::Rng;
+    use crate::rng::Rng;
 
     #[test]
     fn insert_keyed_takes_the_callers_keys() {

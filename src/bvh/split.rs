@@ -571,7 +571,7 @@ fn partition(refs: &mut [SimdBox], ids: &mut [u32], left: impl Fn(&SimdBox) -> b
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fixtures::scene::Rng;
+    use crate::rng::Rng;
     use crate::{Aabb, Vec3};
 
     /// Unit boxes with their min corner at `(x, 0, 0)`, and their ids `0..`.

@@ -3,7 +3,7 @@
 
 use super::*;
 use crate::brute::{self, Proxy};
-use crate::fixtures::scene::Gas;
+use crate::test_gas::Gas;
 
 fn unit() -> Aabb {
     Aabb::new(Vec3::splat(-1.0), Vec3::ONE)
@@ -321,7 +321,7 @@ fn clustered_pair_pass_is_not_quadratic() {
 /// crowds, big, zero-radius, coincident and outside spheres, must give the brute-force set.
 #[test]
 fn walk_order_pairs_match_brute_force_at_every_depth() {
-    let mut rng = crate::fixtures::scene::Rng::new(17);
+    let mut rng = crate::rng::Rng::new(17);
     for (depth, p) in [0, 1, 3, 8, 9, MAX_DEPTH]
         .into_iter()
         .flat_map(|d| BOTH.map(|p| (d, p)))
