@@ -248,7 +248,7 @@ mod scene_benches {
 
     /// rapier: the same frames as kinematic targets; the time is rapier's own broad-phase
     /// counter for each `PhysicsPipeline::step`.
-    #[cfg(feature = "rapier")]
+    #[cfg(feature = "profiler")]
     fn rapier(scene: &mut dyn Scene, iters: u64) -> Duration {
         let mut world = broadleaf::fixtures::rapier_world::SceneWorld::new();
         let mut spawns: Vec<Spawn> = Vec::new();
@@ -270,7 +270,7 @@ mod scene_benches {
 
     /// The recorded `pile` (rapier feature): 10 000 settled spheres, replayed forwards and
     /// backwards so that every timed step moves them however many steps criterion asks for.
-    #[cfg(feature = "rapier")]
+    #[cfg(feature = "profiler")]
     mod pile {
         use broadleaf::fixtures::scene::{Frame, Object, Scene, Spawn};
         use broadleaf::{Aabb, Vec3};
@@ -344,7 +344,7 @@ mod scene_benches {
     }
 
     /// `pile/10000`: broadleaf without and with the pair cache (loose, skin 0.05), and rapier.
-    #[cfg(feature = "rapier")]
+    #[cfg(feature = "profiler")]
     fn register_pile(c: &mut Criterion) {
         let recorded = pile::record();
         let n = recorded.len();
@@ -389,7 +389,7 @@ mod scene_benches {
                     broadleaf(&mut Idle::new(IDLE_N, 1, p), iters, Placement::Strict, 0.0)
                 });
             });
-            #[cfg(feature = "rapier")]
+            #[cfg(feature = "profiler")]
             group.bench_function(BenchmarkId::new("rapier", p), |b| {
                 b.iter_custom(|iters| rapier(&mut Idle::new(IDLE_N, 1, p), iters));
             });
@@ -399,7 +399,7 @@ mod scene_benches {
 
     pub fn register(c: &mut Criterion) {
         register_idle(c);
-        #[cfg(feature = "rapier")]
+        #[cfg(feature = "profiler")]
         register_pile(c);
         for (name, mut make) in scenes() {
             let n = make().len();
@@ -416,7 +416,7 @@ mod scene_benches {
                     b.iter_custom(|iters| broadleaf(&mut *make(), iters, Placement::Loose, 0.0));
                 });
             }
-            #[cfg(feature = "rapier")]
+            #[cfg(feature = "profiler")]
             group.bench_function(BenchmarkId::new("rapier", n), |b| {
                 b.iter_custom(|iters| rapier(&mut *make(), iters));
             });
