@@ -54,7 +54,7 @@ pub fn pairs(proxies: &[Proxy]) -> Vec<Pair> {
 pub fn sweep_pairs(proxies: &[Proxy]) -> Vec<Pair> {
     let boxes: Vec<SimdBox> = proxies.iter().map(|p| SimdBox::new(&p.aabb)).collect();
     let mut order = Vec::new();
-    sweep::sort_entries(&mut order, &boxes, 0, |_| true);
+    sweep::sort_entries(&mut order, &boxes, 0);
     let list = Ordered {
         order: &order,
         items: &boxes,

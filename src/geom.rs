@@ -72,13 +72,14 @@ impl Aabb {
     #[must_use]
     #[inline]
     pub fn overlaps(&self, other: &Aabb) -> bool {
-        self.min.cmple(other.max).all() && other.min.cmple(self.max).all()
+        SimdBox::new(self).overlaps(&SimdBox::new(other))
     }
 
     /// True if `other` lies inside `self` (faces may coincide).
     #[must_use]
+    #[inline]
     pub fn contains(&self, other: &Aabb) -> bool {
-        self.min.cmple(other.min).all() && other.max.cmple(self.max).all()
+        SimdBox::new(self).contains(&SimdBox::new(other))
     }
 
     /// True if the point lies inside the closed box.
@@ -182,7 +183,7 @@ impl SimdBox {
         }
     }
 
-    /// True if `other` lies inside `self`, as [`Aabb::contains`].
+    /// True if `other` lies inside `self` (faces may coincide).
     #[inline]
     pub(crate) fn contains(&self, other: &SimdBox) -> bool {
         (self.min.cmple(other.min) & other.max.cmple(self.max)).all()
@@ -209,7 +210,8 @@ impl SimdBox {
         Aabb::new(self.min.into(), self.max.into())
     }
 
-    /// Closed overlap, as [`Aabb::overlaps`].
+    /// True if the closed boxes share at least one point; touching boxes overlap. Two
+    /// vector compares and one branch.
     #[inline]
     pub(crate) fn overlaps(&self, other: &SimdBox) -> bool {
         (self.min.cmple(other.max) & other.min.cmple(self.max)).all()

@@ -107,10 +107,24 @@ impl<T: Borrow<SimdBox>> Sorted for Ordered<'_, T> {
     }
 }
 
-/// Fills `order` with the entries `key(min[axis]) << 32 | index` of the items `keep` accepts,
-/// sorted: the order of an [`Ordered`] list. At most `u32::MAX` items.
+/// Fills `order` with the entries `key(min[axis]) << 32 | index` of `items`, sorted: the order
+/// of an [`Ordered`] list. At most `u32::MAX` items.
 #[inline]
-pub(crate) fn sort_entries<T: Borrow<SimdBox>>(
+pub(crate) fn sort_entries<T: Borrow<SimdBox>>(order: &mut Vec<u64>, items: &[T], axis: usize) {
+    debug_assert!(items.len() <= u32::MAX as usize);
+    order.clear();
+    order.extend(
+        items
+            .iter()
+            .enumerate()
+            .map(|(i, t)| key(t.borrow().min[axis]) << 32 | i as u64),
+    );
+    order.sort_unstable();
+}
+
+/// [`sort_entries`] of the items `keep` accepts only.
+#[inline]
+pub(crate) fn sort_entries_where<T: Borrow<SimdBox>>(
     order: &mut Vec<u64>,
     items: &[T],
     axis: usize,
@@ -227,45 +241,49 @@ pub(crate) fn scan<const AXIS: usize>(a: &SimdBox, rest: &[SimdBox], f: impl FnM
     scan_from(&Boxes::<AXIS>(rest), 0, a, a.max[AXIS], f);
 }
 
-/// Calls `f(i, j)`, `i < j`, for every overlapping pair of `items`, all against all: the loop
-/// for lists too short to be worth sorting. Returns the number of box tests.
+/// Calls `f(i, a, j, b)` (the indices and the items), `i < j`, for every overlapping pair of
+/// `items`, all against all: the loop for lists too short to be worth sorting. Returns the
+/// number of box tests.
 #[inline]
-pub(crate) fn all_pairs<T: Borrow<SimdBox>>(items: &[T], mut f: impl FnMut(usize, usize)) -> u64 {
+pub(crate) fn all_pairs<T: Borrow<SimdBox>>(
+    items: &[T],
+    mut f: impl FnMut(usize, &T, usize, &T),
+) -> u64 {
     for (i, a) in items.iter().enumerate() {
-        each_overlap(a.borrow(), &items[i + 1..], |k| f(i, i + 1 + k));
+        each_overlap(a.borrow(), &items[i + 1..], |k, b| f(i, a, i + 1 + k, b));
     }
     let n = items.len() as u64;
     n * n.saturating_sub(1) / 2
 }
 
-/// Calls `f(i, j)` for every overlapping pair `a[i]` × `b[j]`, all against all, `b` in the
-/// inner loop. Returns the number of box tests.
+/// Calls `f(i, a[i], j, b[j])` for every overlapping pair `a[i]` × `b[j]`, all against all,
+/// the longer list in the inner loop. Returns the number of box tests.
 #[inline]
 pub(crate) fn all_cross<T: Borrow<SimdBox>, U: Borrow<SimdBox>>(
     a: &[T],
     b: &[U],
-    mut f: impl FnMut(usize, usize),
+    mut f: impl FnMut(usize, &T, usize, &U),
 ) -> u64 {
     if a.len() <= b.len() {
         for (i, x) in a.iter().enumerate() {
-            each_overlap(x.borrow(), b, |j| f(i, j));
+            each_overlap(x.borrow(), b, |j, y| f(i, x, j, y));
         }
     } else {
         for (j, y) in b.iter().enumerate() {
-            each_overlap(y.borrow(), a, |i| f(i, j));
+            each_overlap(y.borrow(), a, |i, x| f(i, x, j, y));
         }
     }
     (a.len() * b.len()) as u64
 }
 
-/// Calls `f(k)` for every `list[k]` overlapping `a`. The loop keeps no index: `k` is worked
-/// out from the iterator's remaining length on a hit only.
+/// Calls `f(k, &list[k])` for every `list[k]` overlapping `a`. The loop keeps no index: `k` is
+/// worked out from the iterator's remaining length on a hit only.
 #[inline]
-fn each_overlap<T: Borrow<SimdBox>>(a: &SimdBox, list: &[T], mut f: impl FnMut(usize)) {
+fn each_overlap<T: Borrow<SimdBox>>(a: &SimdBox, list: &[T], mut f: impl FnMut(usize, &T)) {
     let mut rest = list.iter();
     while let Some(b) = rest.next() {
         if a.overlaps(b.borrow()) {
-            f(list.len() - 1 - rest.len());
+            f(list.len() - 1 - rest.len(), b);
         }
     }
 }
@@ -391,8 +409,8 @@ mod tests {
             let (a, b) = (signed_boxes(90, seed), signed_boxes(70, seed + 50));
             let (mut oa, mut ob) = (Vec::new(), Vec::new());
             for axis in 0..3 {
-                sort_entries(&mut oa, &a, axis, |_| true);
-                sort_entries(&mut ob, &b, axis, |_| true);
+                sort_entries(&mut oa, &a, axis);
+                sort_entries(&mut ob, &b, axis);
                 let la = Ordered {
                     order: &oa,
                     items: &a,
@@ -409,7 +427,7 @@ mod tests {
                 let want: Vec<_> = brute(&a, &a).into_iter().filter(|(i, j)| i < j).collect();
                 assert_eq!(got, want, "self, seed {seed} axis {axis}");
                 let mut short = Vec::new();
-                all_pairs(&a, |i, j| short.push((i, j)));
+                all_pairs(&a, |i, _, j, _| short.push((i, j)));
                 assert_eq!(short, want);
 
                 let mut got = Vec::new();
@@ -419,11 +437,11 @@ mod tests {
                 assert_eq!(got, want, "cross, seed {seed} axis {axis}");
                 for (x, y) in [(&a[..], &b[..]), (&a[..3], &b[..])] {
                     let mut short = Vec::new();
-                    all_cross(x, y, |i, j| short.push((i, j)));
+                    all_cross(x, y, |i, _, j, _| short.push((i, j)));
                     short.sort_unstable();
                     assert_eq!(short, brute(x, y));
                     let mut short = Vec::new();
-                    all_cross(y, x, |j, i| short.push((i, j)));
+                    all_cross(y, x, |j, _, i, _| short.push((i, j)));
                     short.sort_unstable();
                     assert_eq!(short, brute(x, y));
                 }
@@ -435,7 +453,7 @@ mod tests {
     fn entries_keep_only_what_is_kept_and_count_the_tests() {
         let v = boxes(100, 3);
         let mut order = Vec::new();
-        sort_entries(&mut order, &v, 2, |b| b.min.x < 8.0);
+        sort_entries_where(&mut order, &v, 2, |b| b.min.x < 8.0);
         let kept: Vec<usize> = (0..v.len()).filter(|&i| v[i].min.x < 8.0).collect();
         let mut listed: Vec<usize> = order.iter().map(|&e| e as u32 as usize).collect();
         assert!(order.is_sorted());
@@ -451,7 +469,7 @@ mod tests {
         });
         let n = kept.len() as u64;
         assert!(tests <= n * (n - 1) / 2);
-        assert_eq!(all_pairs(&v[..10], |_, _| {}), 45);
-        assert_eq!(all_cross(&v[..10], &v[..7], |_, _| {}), 70);
+        assert_eq!(all_pairs(&v[..10], |_, _, _, _| {}), 45);
+        assert_eq!(all_cross(&v[..10], &v[..7], |_, _, _, _| {}), 70);
     }
 }

@@ -55,7 +55,7 @@ impl Bvh {
         }
         let mut order = core::mem::take(&mut self.sweep_a);
         let (boxes, keys) = (self.pending_boxes(), self.pending_keys());
-        sweep::sort_entries(&mut order, boxes, 0, |_| true);
+        sweep::sort_entries(&mut order, boxes, 0);
         let list = Ordered {
             order: &order,
             items: boxes,
@@ -99,8 +99,8 @@ impl Bvh {
         let mut ys = core::mem::take(&mut self.sweep_b);
         let (bx, kx) = (self.pending_boxes(), self.pending_keys());
         let (by, ky) = (other.pending_boxes(), other.pending_keys());
-        sweep::sort_entries(&mut xs, bx, 0, |_| true);
-        sweep::sort_entries(&mut ys, by, 0, |_| true);
+        sweep::sort_entries(&mut xs, bx, 0);
+        sweep::sort_entries(&mut ys, by, 0);
         let (lx, ly) = (
             Ordered {
                 order: &xs,
@@ -200,7 +200,7 @@ const MASK_BITS: usize = u64::BITS as usize;
 #[inline]
 fn leaf_self_pairs(boxes: &[SimdBox], keys: &[ProxyKey], f: &mut impl FnMut(ProxyKey, ProxyKey)) {
     if boxes.len() > MASK_BITS + 1 {
-        sweep::all_pairs(boxes, |i, j| f(keys[i], keys[j]));
+        sweep::all_pairs(boxes, |i, _, j, _| f(keys[i], keys[j]));
         return;
     }
     for (i, (bi, &ki)) in boxes.iter().zip(keys).enumerate() {

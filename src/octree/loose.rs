@@ -294,16 +294,17 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
             z + 1 < side,
             y + 1 < side && z + 1 < side,
         ];
-        let (first, past) = (&mut self.first, &mut self.past);
+        let (mut first, mut past, offsets) = (self.first, self.past, self.offsets);
         for k in 0..ROWS.len() {
             if !inside[k] {
                 continue;
             }
-            let cell = key.0.wrapping_add(self.offsets[k]);
+            let cell = key.0.wrapping_add(offsets[k]);
             seek(run_key, &mut first[k], cell - back);
             seek(run_key, &mut past[k], cell + ahead);
             stretches[1 + k] = [run_start[first[k]], run_start[past[k]]];
         }
+        (self.first, self.past) = (first, past);
         stretches
     }
 

@@ -282,12 +282,15 @@ fn cross_pairs<F: FnMut(ProxyKey, ProxyKey)>(
     sweeps: &mut Sweeps,
 ) {
     if is_short_cross(cands.len(), own.len()) {
-        t.tests += sweep::all_cross(cands, own, |i, j| t.emit(&cands[i], &own[j]));
+        t.tests += sweep::all_cross(cands, own, |_, a, _, b| t.emit(a, b));
         return;
     }
     for axis in 0..3 {
         let of_axis = |h: &Hot| usize::from(group[h.pos as usize]) == axis;
-        t.sweep_between(cands, own, of_axis, axis, sweeps);
+        sweep::sort_entries_where(&mut sweeps.a, cands, axis, of_axis);
+        if !sweeps.a.is_empty() {
+            t.sweep_sorted(cands, own, axis, sweeps);
+        }
     }
 }
 
@@ -303,7 +306,7 @@ impl Parts {
         sweeps: &mut Sweeps,
     ) {
         if list.len() <= SHORT_SELF {
-            t.tests += sweep::all_pairs(list, |i, j| t.emit(&list[i], &list[j]));
+            t.tests += sweep::all_pairs(list, |_, a, _, b| t.emit(a, b));
             return;
         }
         self.buf.clear();
@@ -384,33 +387,37 @@ fn bits(mut m: u8) -> impl Iterator<Item = u32> {
     })
 }
 
-/// The pairs of a part that is not split further (short, or one deepest cell): all against
-/// all, or a sweep along x for a crowd in one deepest cell; only the pairs that meet in the
-/// part (corner `lo`) are reported.
+/// The pairs of a part that is not split further (short, or one deepest cell) that meet in the
+/// part (corner `lo`): all against all, testing only the pairs that meet here, or a sweep along
+/// x for a crowd in one deepest cell.
 fn leaf_part<F: FnMut(ProxyKey, ProxyKey)>(
     t: &mut Tester<'_, F>,
     list: &[Hot],
     lo: [u32; 3],
     sweeps: &mut Sweeps,
 ) {
-    let mut report = |i: usize, j: usize| {
+    if list.len() <= SHORT_SELF {
+        for (i, a) in list.iter().enumerate() {
+            for b in &list[i + 1..] {
+                if meets_in(a, b, lo) {
+                    t.test(a, b);
+                }
+            }
+        }
+        return;
+    }
+    sweep::sort_entries(&mut sweeps.a, list, 0);
+    let sorted = sweep::Ordered {
+        order: &sweeps.a,
+        items: list,
+        axis: 0,
+    };
+    let tests = sweep::self_pairs_of(&sorted, |i, j| {
         if meets_in(&list[i], &list[j], lo) {
             t.emit(&list[i], &list[j]);
         }
-    };
-    if list.len() <= SHORT_SELF {
-        let tests = sweep::all_pairs(list, &mut report);
-        t.tests += tests;
-    } else {
-        sweep::sort_entries(&mut sweeps.a, list, 0, |_| true);
-        let sorted = sweep::Ordered {
-            order: &sweeps.a,
-            items: list,
-            axis: 0,
-        };
-        let tests = sweep::self_pairs_of(&sorted, &mut report);
-        t.tests += tests;
-    }
+    });
+    t.tests += tests;
 }
 
 /// Tests the spheres of a part that reach all eight of its octants (`octs[i] == 0xFF`) against

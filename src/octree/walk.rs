@@ -176,10 +176,10 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
     }
 
     /// Every pair within `list`: all against all when short, else a sweep along x.
-    #[inline]
+    #[inline(never)]
     pub(super) fn within(&mut self, list: &[Hot], sweeps: &mut Sweeps) {
         if list.len() <= SHORT_SELF {
-            self.tests += sweep::all_pairs(list, |i, j| self.emit(&list[i], &list[j]));
+            self.tests += sweep::all_pairs(list, |_, a, _, b| self.emit(a, b));
         } else {
             self.sweep_within(list, &mut sweeps.a);
         }
@@ -188,7 +188,7 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
     /// [`Tester::within`] for long lists.
     #[inline(never)]
     fn sweep_within(&mut self, list: &[Hot], order: &mut Vec<u64>) {
-        sweep::sort_entries(order, list, 0, |_| true);
+        sweep::sort_entries(order, list, 0);
         let sorted = Ordered {
             order,
             items: list,
@@ -199,31 +199,22 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
 
     /// Every pair across the disjoint lists `a` and `b`: all against all when small, else a
     /// merged sweep along x.
-    #[inline]
+    #[inline(never)]
     pub(super) fn between(&mut self, a: &[Hot], b: &[Hot], sweeps: &mut Sweeps) {
         if is_short_cross(a.len(), b.len()) {
-            self.tests += sweep::all_cross(a, b, |i, j| self.emit(&a[i], &b[j]));
+            self.tests += sweep::all_cross(a, b, |_, x, _, y| self.emit(x, y));
         } else {
-            self.sweep_between(a, b, |_| true, 0, sweeps);
+            sweep::sort_entries(&mut sweeps.a, a, 0);
+            self.sweep_sorted(a, b, 0, sweeps);
         }
     }
 
-    /// Every pair across `a` (only the spheres `keep` accepts) and `b`, by a merged sweep along
-    /// `axis`.
+    /// Every pair across the spheres of `a` listed in `sweeps.a` (sorted along `axis` by
+    /// [`sweep::sort_entries`] or [`sweep::sort_entries_where`]) and all of `b`, by a merged
+    /// sweep along `axis`.
     #[inline(never)]
-    pub(super) fn sweep_between(
-        &mut self,
-        a: &[Hot],
-        b: &[Hot],
-        keep: impl Fn(&Hot) -> bool,
-        axis: usize,
-        sweeps: &mut Sweeps,
-    ) {
-        sweep::sort_entries(&mut sweeps.a, a, axis, keep);
-        if sweeps.a.is_empty() {
-            return;
-        }
-        sweep::sort_entries(&mut sweeps.b, b, axis, |_| true);
+    pub(super) fn sweep_sorted(&mut self, a: &[Hot], b: &[Hot], axis: usize, sweeps: &mut Sweeps) {
+        sweep::sort_entries(&mut sweeps.b, b, axis);
         let (sa, sb) = (
             Ordered {
                 order: &sweeps.a,
