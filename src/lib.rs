@@ -86,8 +86,6 @@ pub mod rapier;
 #[cfg(any(test, feature = "fixtures"))]
 mod rng;
 mod sweep;
-#[cfg(test)]
-mod test_gas;
 
 pub use broadphase::{BodyKind, BroadPhase, Config, Pass, Passes, Shape, StepPairs, StepStats};
 pub use bvh::{Bvh, BvhConfig, SplitMethod};

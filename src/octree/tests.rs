@@ -3,7 +3,9 @@
 
 use super::*;
 use crate::brute::{self, Proxy};
-use crate::test_gas::Gas;
+// The unit tests' scene is the benchmarks' own: test builds get `fixtures` through the
+// crate's dev-dependency on itself.
+use crate::fixtures::scene::Gas;
 
 fn unit() -> Aabb {
     Aabb::new(Vec3::splat(-1.0), Vec3::ONE)
