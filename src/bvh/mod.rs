@@ -412,8 +412,8 @@ impl Bvh {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Vec3;
     use crate::scene::Rng;
+    use glam::Vec3;
 
     #[test]
     fn insert_keyed_takes_the_callers_keys() {
