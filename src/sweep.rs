@@ -111,15 +111,7 @@ impl<T: Borrow<SimdBox>> Sorted for Ordered<'_, T> {
 /// of an [`Ordered`] list. At most `u32::MAX` items.
 #[inline]
 pub(crate) fn sort_entries<T: Borrow<SimdBox>>(order: &mut Vec<u64>, items: &[T], axis: usize) {
-    debug_assert!(items.len() <= u32::MAX as usize);
-    order.clear();
-    order.extend(
-        items
-            .iter()
-            .enumerate()
-            .map(|(i, t)| key(t.borrow().min[axis]) << 32 | i as u64),
-    );
-    order.sort_unstable();
+    fill_sorted(order, items.iter().enumerate(), axis);
 }
 
 /// [`sort_entries`] of the items `keep` accepts only.
@@ -130,15 +122,26 @@ pub(crate) fn sort_entries_where<T: Borrow<SimdBox>>(
     axis: usize,
     keep: impl Fn(&T) -> bool,
 ) {
-    debug_assert!(items.len() <= u32::MAX as usize);
-    order.clear();
-    order.extend(
-        items
-            .iter()
-            .enumerate()
-            .filter(|(_, t)| keep(t))
-            .map(|(i, t)| key(t.borrow().min[axis]) << 32 | i as u64),
+    fill_sorted(
+        order,
+        items.iter().enumerate().filter(|(_, t)| keep(t)),
+        axis,
     );
+}
+
+/// Fills `order` with the sorted entries of the `(index, item)`s (an exact-size iterator for
+/// [`sort_entries`], so the fill writes without a capacity check per entry).
+#[inline]
+fn fill_sorted<'a, T: Borrow<SimdBox> + 'a>(
+    order: &mut Vec<u64>,
+    items: impl Iterator<Item = (usize, &'a T)>,
+    axis: usize,
+) {
+    order.clear();
+    order.extend(items.map(|(i, t)| {
+        debug_assert!(i <= u32::MAX as usize);
+        key(t.borrow().min[axis]) << 32 | i as u64
+    }));
     order.sort_unstable();
 }
 

@@ -413,8 +413,8 @@ impl Bvh {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Vec3;
     use crate::rng::Rng;
+    use glam::Vec3;
 
     #[test]
     fn insert_keyed_takes_the_callers_keys() {

@@ -115,7 +115,7 @@ fn normalise(total: f64, nodes: &[Node]) -> f32 {
 mod tests {
     use super::super::BvhConfig;
     use super::*;
-    use crate::Vec3;
+    use glam::Vec3;
 
     fn unit_at(x: f32) -> Aabb {
         Aabb::new(Vec3::new(x, 0.0, 0.0), Vec3::new(x + 1.0, 1.0, 1.0))

@@ -571,8 +571,9 @@ fn partition(refs: &mut [SimdBox], ids: &mut [u32], left: impl Fn(&SimdBox) -> b
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geom::Aabb;
     use crate::rng::Rng;
-    use crate::{Aabb, Vec3};
+    use glam::Vec3;
 
     /// Unit boxes with their min corner at `(x, 0, 0)`, and their ids `0..`.
     fn refs(xs: &[f32]) -> (Vec<SimdBox>, Vec<u32>) {

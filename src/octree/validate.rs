@@ -105,8 +105,9 @@ impl Octree {
 
 #[cfg(test)]
 mod tests {
-    use crate::octree::Octree;
-    use crate::{Aabb, Vec3};
+    use super::super::Octree;
+    use crate::geom::Aabb;
+    use glam::Vec3;
 
     #[test]
     #[should_panic(expected = "not in the node placement gives")]
