@@ -58,7 +58,9 @@
 //! table; the last line is `queries mismatches=<n>`.
 
 use broadleaf::fixtures::rapier_world::{SceneWorld, record_pile};
-use broadleaf::fixtures::scene::{Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Idle, Rng, Scene};
+use broadleaf::fixtures::scene::{
+    Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Idle, Rng, Scene, Spawn,
+};
 use broadleaf::rapier::Comparison;
 use broadleaf::{Aabb, BroadPhase, Config, Passes, Placement, ProxyKey, Vec3, brute, geom};
 use plotters::prelude::*;
@@ -315,11 +317,8 @@ struct Row {
     cmp: Comparison,
 }
 
-fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
-    let steps = args.warmup + args.steps;
-    let mut scene =
-        make_scene(name, n, args.seed, steps, moving.unwrap_or(100.0)).expect("known scene");
-    let name = &label(name, moving);
+/// Both engines with `scene`'s objects inserted and one step taken; also the spawns.
+fn spawn_both(scene: &dyn Scene, args: &Args) -> (Ours, SceneWorld, Vec<Spawn>) {
     let mut ours = Ours::new(scene.bounds(), args.index, args);
     let mut theirs = SceneWorld::new();
     let mut spawns = Vec::new();
@@ -332,6 +331,15 @@ fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
     }
     ours.bp.step();
     theirs.step();
+    (ours, theirs, spawns)
+}
+
+fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
+    let steps = args.warmup + args.steps;
+    let mut scene =
+        make_scene(name, n, args.seed, steps, moving.unwrap_or(100.0)).expect("known scene");
+    let name = &label(name, moving);
+    let (mut ours, mut theirs, mut spawns) = spawn_both(&*scene, args);
     // The motion is generated up front, so each engine can run its steps back to back (a
     // real program runs one broadphase, and alternating the two per step makes each pay for
     // the other evicting its caches); `--interleave` alternates them as before.
@@ -768,18 +776,7 @@ fn run_queries(args: &Args) -> usize {
     let n = args.n.unwrap_or(100_000);
     let mut scene = Gas::new(n, args.seed);
     let bounds = scene.bounds;
-    let mut ours = Ours::new(bounds, args.index, args);
-    let mut theirs = SceneWorld::new();
-    let mut spawns = Vec::new();
-    scene.spawns(&mut spawns);
-    ours.feed
-        .spawn(&mut ours.bp, &spawns)
-        .expect("scene objects are finite");
-    for s in &spawns {
-        theirs.insert(s);
-    }
-    ours.bp.step();
-    theirs.step();
+    let (mut ours, mut theirs, _) = spawn_both(&scene, args);
     // One step of motion, so the queries see moved objects; rapier's second step moves
     // nothing and leaves its tree at the targets' poses.
     let mut frame = Frame::default();

@@ -217,7 +217,7 @@ impl Grid {
         if dense {
             self.counting_sort(large);
         } else {
-            self.comparison_sort(large);
+            self.comparison_sort();
         }
         self.normal = n - large;
         self.sorted = n;
@@ -410,7 +410,7 @@ impl Grid {
 
     /// The same order by a comparison sort, for sparse worlds whose dense table would be far
     /// larger than the entries.
-    fn comparison_sort(&mut self, _large: usize) {
+    fn comparison_sort(&mut self) {
         let n = self.slots.len();
         self.order.clear();
         self.order
