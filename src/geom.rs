@@ -189,16 +189,6 @@ impl SimdBox {
         (self.min.cmple(other.min) & other.max.cmple(self.max)).all()
     }
 
-    /// The box grown by `margin` on every side (`margin >= 0`; infinite faces stay infinite).
-    #[inline]
-    pub(crate) fn grown(&self, margin: f32) -> Self {
-        let m = Vec3A::splat(margin);
-        SimdBox {
-            min: self.min - m,
-            max: self.max + m,
-        }
-    }
-
     /// `max - min` per axis.
     #[inline]
     pub(crate) fn extent(&self) -> Vec3A {

@@ -87,7 +87,9 @@ pub mod rapier;
 mod rng;
 mod sweep;
 
-pub use broadphase::{BodyKind, BroadPhase, Config, Pass, Passes, Shape, StepPairs, StepStats};
+pub use broadphase::{
+    BodyKind, BroadPhase, CollisionGroups, Config, Pass, Passes, Shape, StepPairs, StepStats,
+};
 pub use bvh::{Bvh, BvhConfig, SplitMethod};
 pub use error::{BatchError, Error};
 pub use geom::Aabb;

@@ -1,24 +1,26 @@
 //! `BroadPhase`: spheres and rigid bodies behind one set of keys, one sorted pair list per step,
 //! and the pairs that started and stopped overlapping since the last step.
 //!
-//! Every proxy lives in a dense slot ([`store`]); the key is checked once, at the API boundary.
-//! Every box lives in one sorted column grid ([`grid`]). A step is one of two passes, chosen
-//! from the work each would do ([`step`]): the *full pass* sorts the grid and sweeps it for
-//! every overlapping pair; the *incremental pass* keeps, for every proxy, a fat box around its
-//! exact one and the candidate pairs of overlapping fat boxes, and re-tests only what moved.
+//! Every proxy has a dense slot ([`store`]); the key is checked once, at the API boundary.
+//! Its box lives in exactly one structure, under its key: a sphere in the [`Octree`], a dynamic
+//! body in the dynamic [`Bvh`], a static body in the static one. A step is one of two passes,
+//! chosen from the work each would do ([`step`]): the *full pass* runs the structures' own pair
+//! passes (octree, BVH self and dynamic × static traversals, and sphere × body queries); the
+//! *incremental pass* has the structures hold, for every proxy, a fat box around its exact one,
+//! keeps the candidate pairs of overlapping fat boxes, re-tests only what moved, and queries
+//! the structures for the proxies that left their fat box.
 
-mod grid;
 mod query;
 mod radix;
 mod step;
 mod store;
 mod validate;
 
+use crate::bvh::{Bvh, BvhConfig};
 use crate::geom::{self, SimdBox, check_aabb, check_sphere};
-use crate::octree::Placement;
+use crate::octree::{Octree, Placement};
 use crate::pair::{Pair, ProxyKey};
 use crate::{Aabb, BatchError, Error, Vec3};
-use grid::{Grid, STATIC_BIT};
 use store::{Kind, Store, flag};
 
 /// Whether a body moves. Static bodies never pair with each other.
@@ -89,20 +91,21 @@ impl Shape {
 /// choice for every kind of world: nothing here needs tuning for speed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Config {
-    /// The region the world is expected to occupy, in metres; finite with `min < max`. Only a
-    /// hint: objects outside it are kept and paired like any other.
+    /// The region the octree subdivides, in metres; finite with `min < max`. Spheres outside
+    /// it are kept (in the octree's root) and paired like any other, only less efficiently.
     pub bounds: Aabb,
-    /// Kept for the standalone [`Octree`](crate::Octree)'s vocabulary, `0..=octree::MAX_DEPTH`;
-    /// the broadphase sizes its grid cells from the objects themselves and does not read it.
+    /// Levels of the octree below the root, `0..=octree::MAX_DEPTH`: the deepest cells are
+    /// `bounds / 2^depth` wide. With the default [`Placement::Loose`] a sphere lives at the
+    /// deepest level whose cells are at least its diameter, so the depth only caps how small
+    /// a cell gets: spheres smaller than the deepest cells share them.
     pub octree_depth: u32,
-    /// Kept for the standalone [`Octree`](crate::Octree)'s vocabulary; the broadphase does
-    /// not read it.
+    /// Which node of the octree a sphere lives in ([`Placement`]).
     pub octree_placement: Placement,
     /// Every box is grown by this many metres on each side before pairing; `>= 0`. With the
     /// default 0 the pair set equals the brute-force set exactly.
     pub margin: f32,
-    /// Kept for the standalone [`Bvh`](crate::Bvh)'s vocabulary, finite and `>= 1`; the
-    /// broadphase does not read it.
+    /// The dynamic bodies' BVH is rebuilt when its SAH cost after a refit exceeds this many
+    /// times its cost at its last build; finite, `>= 1`.
     pub rebuild_threshold: f32,
     /// A fixed fat-box margin in metres (finite, `>= 0`) instead of the adaptive one; 0 (the
     /// default) lets every proxy's margin follow how far it moves per step. The pairs are the
@@ -126,13 +129,13 @@ pub enum Passes {
 }
 
 impl Default for Config {
-    /// Bounds ±512 m, octree depth 7, strict placement, margin 0, rebuild threshold 1.5,
-    /// adaptive fat margins (skin 0), adaptive passes.
+    /// Bounds ±512 m, octree depth 9 (deepest cells 2 m), loose placement, margin 0, rebuild
+    /// threshold 1.5, adaptive fat margins (skin 0), adaptive passes.
     fn default() -> Self {
         Self {
             bounds: Aabb::new(Vec3::splat(-512.0), Vec3::splat(512.0)),
-            octree_depth: 7,
-            octree_placement: Placement::Strict,
+            octree_depth: 9,
+            octree_placement: Placement::Loose,
             margin: 0.0,
             rebuild_threshold: 1.5,
             skin: 0.0,
@@ -171,6 +174,50 @@ impl Config {
         }
         Ok(())
     }
+
+    /// The configuration of both BVHs: fuller leaves than the standalone default, since the
+    /// pair passes are the hot path and a leaf's all-pairs loop is cheaper than the node pairs
+    /// it replaces.
+    fn bvh_config(&self) -> BvhConfig {
+        BvhConfig {
+            rebuild_threshold: self.rebuild_threshold,
+            max_leaf_size: 16,
+            traversal_cost: 8.0,
+            ..BvhConfig::default()
+        }
+    }
+}
+
+/// Which proxies may pair: a pair is reported only if
+/// `a.memberships & b.filter != 0 && b.memberships & a.filter != 0` (bevy_rapier's rule).
+/// The default is every group in both masks, so every pair is allowed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct CollisionGroups {
+    /// The groups this proxy belongs to, one bit each.
+    pub memberships: u32,
+    /// The groups this proxy may pair with.
+    pub filter: u32,
+}
+
+impl Default for CollisionGroups {
+    fn default() -> Self {
+        Self::ALL
+    }
+}
+
+impl CollisionGroups {
+    /// Member of every group, pairs with every group.
+    pub const ALL: CollisionGroups = CollisionGroups {
+        memberships: u32::MAX,
+        filter: u32::MAX,
+    };
+
+    /// True if proxies with `self` and `other` may pair.
+    #[inline]
+    #[must_use]
+    pub fn allows(self, other: CollisionGroups) -> bool {
+        self.memberships & other.filter != 0 && other.memberships & self.filter != 0
+    }
 }
 
 /// The result of one [`BroadPhase::step`]: all three lists sorted by `(a, b)`.
@@ -191,24 +238,25 @@ pub enum Pass {
     /// Nothing was inserted, updated or removed: the lists were left as they were.
     #[default]
     Unchanged,
-    /// The full pass over exact boxes: every box sorted into the grid and swept.
+    /// The full pass over exact boxes: the structures' pair passes.
     Full,
     /// The full pass over fat boxes, which (re)starts the candidate list.
     Rebuild,
     /// Only the candidates of what moved were re-tested, and the proxies that left their fat
-    /// box were queried.
+    /// box queried the structures.
     Incremental,
 }
 
-/// What the last [`BroadPhase::step`] did: how the adaptive choice went.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// What the last [`BroadPhase::step`] did: how the adaptive choice went, and the state of the
+/// structures after it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct StepStats {
     /// The pass that ran.
     pub pass: Pass,
     /// Proxies updated, inserted or removed since the previous step.
     pub updated: usize,
     /// Proxies given a new fat box (they left the old one, or are new): each one is one
-    /// query of the grid in an incremental step.
+    /// query of the structures in an incremental step.
     pub enlarged: usize,
     /// Candidate pairs whose exact boxes were tested.
     pub candidates_tested: usize,
@@ -216,6 +264,14 @@ pub struct StepStats {
     pub candidates: usize,
     /// Pairs reported.
     pub pairs: usize,
+    /// Spheres per octree level (`[0]` is the root, with the spheres outside the bounds).
+    pub octree_per_level: [u32; crate::octree::MAX_DEPTH as usize + 1],
+    /// The dynamic BVH's SAH cost over its cost at its last build (1 when just built).
+    pub dynamic_cost_ratio: f32,
+    /// Rebuilds of the dynamic BVH so far.
+    pub dynamic_rebuilds: u64,
+    /// Rebuilds of the static BVH so far.
+    pub static_rebuilds: u64,
 }
 
 /// The broadphase of a physics step: insert spheres and bodies, move them, and call
@@ -224,16 +280,26 @@ pub struct StepStats {
 pub struct BroadPhase {
     config: Config,
     store: Store,
-    grid: Grid,
-    /// True while the grid holds fat boxes and `cand` is complete.
+    /// The spheres, under their keys: each holds its `store.held` box as
+    /// `center ± held radius`.
+    octree: Octree,
+    /// The dynamic and the static bodies, under their keys, each holding its `store.held` box.
+    dynamic: Bvh,
+    statics: Bvh,
+    /// A body's held box changed (or one was inserted or removed) since the tree's last refit.
+    dynamic_changed: bool,
+    statics_changed: bool,
+    /// Dynamic bodies given a new fat box since the dynamic tree's last refit.
+    dynamic_escapes: usize,
+    /// True while the structures hold fat boxes and `cand` is complete.
     cached: bool,
+    /// True once any proxy was given groups other than the default: until then the pair
+    /// passes skip the groups test.
+    any_groups: bool,
     /// Slots updated (or inserted) since the last step, each once (`flag::MOVED`).
     movers: Vec<u32>,
     /// Slots given a new fat box since the last step, each once (`flag::ESCAPED`).
     escaped: Vec<u32>,
-    /// Slots whose grid entry is off its column since the last build, each once
-    /// (`flag::DIRTY`; a removed one stays listed until the build).
-    dirty: Vec<u32>,
     /// Proxies removed since the last step.
     removals: usize,
     /// Proxies updated since the last step that move far enough per step to outgrow the
@@ -251,8 +317,6 @@ pub struct BroadPhase {
     sort_buf: Vec<u64>,
     added_packed: Vec<u64>,
     removed_packed: Vec<u64>,
-    /// The dirty entries' fat boxes, sorted anew each incremental step.
-    side: Grid,
     /// The lists handed out by `step`.
     pairs: Vec<Pair>,
     added: Vec<Pair>,
@@ -299,15 +363,27 @@ impl BroadPhase {
         Ok(Self::build(config))
     }
 
+    /// Builds from a validated config: every structure's constructor accepts it.
     fn build(config: Config) -> Self {
+        let octree =
+            Octree::with_placement(config.bounds, config.octree_depth, config.octree_placement);
+        let bvh = config.bvh_config();
+        let (Ok(octree), Ok(dynamic), Ok(statics)) = (octree, Bvh::new(bvh), Bvh::new(bvh)) else {
+            unreachable!("Config::validate checks every field the structures check");
+        };
         Self {
             config,
             store: Store::default(),
-            grid: Grid::default(),
+            octree,
+            dynamic,
+            statics,
+            dynamic_changed: false,
+            statics_changed: false,
+            dynamic_escapes: 0,
             cached: false,
+            any_groups: false,
             movers: Vec::new(),
             escaped: Vec::new(),
-            dirty: Vec::new(),
             removals: 0,
             fast_movers: 0,
             cand: Vec::new(),
@@ -318,7 +394,6 @@ impl BroadPhase {
             sort_buf: Vec::new(),
             added_packed: Vec::new(),
             removed_packed: Vec::new(),
-            side: Grid::default(),
             pairs: Vec::new(),
             added: Vec::new(),
             removed: Vec::new(),
@@ -340,16 +415,34 @@ impl BroadPhase {
         self.stats
     }
 
+    /// The octree holding the spheres, under the broadphase's keys, for debug views and
+    /// stats. Each sphere is held as `center ± (radius + margin)`, or a larger box around it
+    /// while the incremental pass runs; its level is where that box lives.
+    #[must_use]
+    pub fn octree(&self) -> &Octree {
+        &self.octree
+    }
+
+    /// The BVH holding the dynamic or the static bodies, under the broadphase's keys. Each
+    /// body is held as its box grown by the margin, or a larger box around it while the
+    /// incremental pass runs.
+    #[must_use]
+    pub fn bvh(&self, kind: BodyKind) -> &Bvh {
+        match kind {
+            BodyKind::Dynamic => &self.dynamic,
+            BodyKind::Static => &self.statics,
+        }
+    }
+
     /// Heap bytes held by the broadphase (every buffer's capacity), for memory budgets.
     #[must_use]
     pub fn heap_bytes(&self) -> usize {
         let v = |n: usize, one: usize| n * one;
         self.store.heap_bytes()
-            + self.grid.heap_bytes()
-            + v(
-                self.movers.capacity() + self.escaped.capacity() + self.dirty.capacity(),
-                4,
-            )
+            + self.octree.heap_bytes()
+            + self.dynamic.heap_bytes()
+            + self.statics.heap_bytes()
+            + v(self.movers.capacity() + self.escaped.capacity(), 4)
             + v(
                 self.cand.capacity()
                     + self.packed.capacity()
@@ -361,7 +454,6 @@ impl BroadPhase {
                     + self.removed_packed.capacity(),
                 8,
             )
-            + self.side.heap_bytes()
             + v(
                 self.pairs.capacity() + self.added.capacity() + self.removed.capacity(),
                 core::mem::size_of::<Pair>(),
@@ -383,19 +475,39 @@ impl BroadPhase {
 
     fn insert(&mut self, shape: Shape) -> Result<ProxyKey, Error> {
         let exact = self.exact_box(&shape);
+        if self.octree.len() + self.dynamic.len() + self.statics.len() >= MAX_PROXIES {
+            return Err(Error::Full);
+        }
         let slot = self
             .store
             .alloc(shape, exact, self.now)
             .ok_or(Error::Full)?;
-        let stored = if self.cached {
-            self.fat_box(slot, &exact)
-        } else {
-            exact
-        };
-        let word = slot | if shape.is_static() { STATIC_BIT } else { 0 };
-        self.store.pos[slot as usize] = self.grid.push(stored, word);
-        self.mark(slot, flag::MOVED | flag::ESCAPED | flag::DIRTY);
-        Ok(self.store.key(slot))
+        let key = self.store.key(slot);
+        let held = self.held_shape(slot, self.cached);
+        self.store.held[slot as usize] = held.aabb;
+        match shape {
+            Shape::Sphere { center, .. } => self.octree.insert_checked(key, center, held.radius),
+            Shape::Body { kind, .. } => {
+                let tree = self.tree_mut(kind);
+                tree.insert_checked(key, &held.aabb.aabb());
+            }
+        }
+        self.mark(slot, flag::MOVED | flag::ESCAPED);
+        Ok(key)
+    }
+
+    /// The tree of bodies of `kind`, marked changed.
+    fn tree_mut(&mut self, kind: BodyKind) -> &mut Bvh {
+        match kind {
+            BodyKind::Dynamic => {
+                self.dynamic_changed = true;
+                &mut self.dynamic
+            }
+            BodyKind::Static => {
+                self.statics_changed = true;
+                &mut self.statics
+            }
+        }
     }
 
     /// Moves or resizes a sphere. `Err(UnknownProxy)` for a stale key, `Err(WrongKind)` for a
@@ -479,8 +591,8 @@ impl BroadPhase {
         }
     }
 
-    /// Applies a checked update: the new exact box, and in the grid either the same box (full
-    /// pass regime) or a new fat box if the exact one left the old.
+    /// Applies a checked update: the new exact box, and in its structure either the exact box
+    /// (full pass regime) or, if the exact box left the old fat box, a new fat box.
     #[inline]
     fn set_shape(&mut self, slot: u32, shape: Shape) {
         let s = slot as usize;
@@ -499,16 +611,33 @@ impl BroadPhase {
         self.store.stamp[s] = self.now;
         self.store.shape[s] = shape;
         self.store.exact[s] = exact;
-        let pos = self.store.pos[s] as usize;
-        if !self.cached {
-            self.grid.boxes[pos] = exact;
-            self.mark(slot, flag::MOVED | flag::DIRTY);
-        } else if self.grid.boxes[pos].contains(&exact) {
+        if self.cached && self.store.held[s].contains(&exact) {
             self.mark(slot, flag::MOVED);
         } else {
-            self.grid.boxes[pos] = self.fat_box(slot, &exact);
-            self.mark(slot, flag::MOVED | flag::ESCAPED | flag::DIRTY);
+            self.hold(slot, self.cached);
+            self.mark(slot, flag::MOVED | flag::ESCAPED);
         }
+    }
+
+    /// Gives `slot` a new held box (its exact box, or with `fat` a fat box around it) and
+    /// writes it to the slot's structure.
+    #[inline]
+    fn hold(&mut self, slot: u32, fat: bool) {
+        let s = slot as usize;
+        let held = self.held_shape(slot, fat);
+        self.store.held[s] = held.aabb;
+        let key = self.store.key(slot);
+        // The key is live: the structures hold every live proxy under its key.
+        let placed = match self.store.shape[s] {
+            Shape::Sphere { center, .. } => self.octree.update_checked(key, center, held.radius),
+            Shape::Body { kind, .. } => {
+                if kind == BodyKind::Dynamic && fat {
+                    self.dynamic_escapes += 1;
+                }
+                self.tree_mut(kind).update_checked(key, &held.aabb.aabb())
+            }
+        };
+        debug_assert!(placed.is_ok(), "a live proxy missing from its structure");
     }
 
     /// Sets `bits` on a slot and lists it where a bit is new.
@@ -522,9 +651,6 @@ impl BroadPhase {
         }
         if new & flag::ESCAPED != 0 {
             self.escaped.push(slot);
-        }
-        if new & flag::DIRTY != 0 {
-            self.dirty.push(slot);
         }
     }
 
@@ -540,28 +666,77 @@ impl BroadPhase {
         }
     }
 
-    /// A new fat box around `exact` for `slot`, its margin sized by the slot's speed.
+    /// What `slot`'s structure should hold: its exact box, or with `fat` one grown by a
+    /// margin sized by the slot's speed. A sphere is held as a sphere of the same centre and
+    /// a larger radius, whose box contains the exact one (rounding is monotone).
     #[inline]
-    fn fat_box(&self, slot: u32, exact: &SimdBox) -> SimdBox {
-        let margin = if self.config.skin > 0.0 {
+    fn held_shape(&self, slot: u32, fat: bool) -> Held {
+        let s = slot as usize;
+        let exact = self.store.exact[s];
+        let margin = if !fat {
+            0.0
+        } else if self.config.skin > 0.0 {
             self.config.skin
         } else {
-            let s = slot as usize;
             let resting = self.now.wrapping_sub(self.store.stamp[s]) > 1;
             let speed = if resting { 0.0 } else { self.store.speed[s] };
             step::margin(speed, exact.extent().max_element()) * step::jitter(slot)
         };
-        exact.grown(margin)
+        match self.store.shape[s] {
+            Shape::Sphere { center, radius } => {
+                // Huge finite radii stay finite: the octree places the sphere in its root.
+                let r = (radius + self.config.margin + margin).min(f32::MAX);
+                Held {
+                    aabb: SimdBox::from_center_radius(center, r),
+                    radius: r,
+                }
+            }
+            Shape::Body { .. } if margin == 0.0 => Held {
+                aabb: exact,
+                radius: 0.0,
+            },
+            Shape::Body { .. } => Held {
+                aabb: SimdBox::new(&finite_grown(&exact.aabb(), margin)),
+                radius: 0.0,
+            },
+        }
     }
 
     /// Removes a proxy; its pairs are reported in `removed` at the next step.
     /// `Err(UnknownProxy)` for a stale key.
     pub fn remove(&mut self, key: ProxyKey) -> Result<(), Error> {
         let slot = self.store.resolve(key).ok_or(Error::UnknownProxy)?;
-        self.grid.kill(self.store.pos[slot as usize]);
+        let removed = match self.store.shape[slot as usize] {
+            Shape::Sphere { .. } => self.octree.remove(key),
+            Shape::Body { kind, .. } => self.tree_mut(kind).remove(key),
+        };
+        debug_assert!(removed.is_ok(), "a live proxy missing from its structure");
         self.store.free(slot);
         self.removals += 1;
         Ok(())
+    }
+
+    /// Sets the collision groups of a proxy; the change shows in the next step's lists.
+    /// `Err(UnknownProxy)` for a stale key (nothing changes).
+    pub fn set_groups(&mut self, key: ProxyKey, groups: CollisionGroups) -> Result<(), Error> {
+        let slot = self.store.resolve(key).ok_or(Error::UnknownProxy)?;
+        let s = slot as usize;
+        if self.store.groups[s] == groups {
+            return Ok(());
+        }
+        self.store.groups[s] = groups;
+        self.any_groups |= groups != CollisionGroups::ALL;
+        // Its candidates were filtered by the old groups: it finds them again, like a proxy
+        // that left its fat box.
+        self.mark(slot, flag::MOVED | flag::ESCAPED);
+        Ok(())
+    }
+
+    /// The collision groups of a proxy, or `None` for a stale key.
+    #[must_use]
+    pub fn groups(&self, key: ProxyKey) -> Option<CollisionGroups> {
+        let slot = self.store.resolve(key)?;
+        Some(self.store.groups[slot as usize])
     }
 
     /// Number of live proxies.
@@ -608,6 +783,17 @@ impl BroadPhase {
             removed: &self.removed,
         }
     }
+}
+
+/// The most live proxies: the structures index their entries with `u32`.
+const MAX_PROXIES: usize = (u32::MAX - 2) as usize;
+
+/// What a structure holds for a proxy: its box, and for a sphere the radius that box is
+/// `center ± radius` of.
+#[derive(Clone, Copy, Debug)]
+struct Held {
+    aabb: SimdBox,
+    radius: f32,
 }
 
 /// `aabb` grown by `margin`, with coordinates that overflowed clamped to `±f32::MAX`.

@@ -1,13 +1,10 @@
-//! Box queries and ray casts of a [`BroadPhase`]: the grid's clean entries by column, the
-//! dirty ones (moved since the last build) one by one, each hit re-tested against the exact
-//! shape.
+//! Box queries and ray casts of a [`BroadPhase`]: the structures find the proxies whose held
+//! boxes (exact, or fat around the exact ones) the query meets, and each is re-tested against
+//! its exact shape.
 
-use super::grid::STATIC_BIT;
-use super::store::flag;
 use super::{BroadPhase, Shape};
 use crate::geom::{self, SimdBox, check_aabb};
 use crate::{Aabb, ProxyKey, Vec3};
-use glam::Vec3A;
 
 impl BroadPhase {
     /// Calls `f` with every proxy whose (margin-grown) box overlaps `aabb`, each once, in no
@@ -17,19 +14,15 @@ impl BroadPhase {
             return;
         }
         let q = SimdBox::new(aabb);
-        let (flags, exact) = (&self.store.flags, &self.store.exact);
-        self.grid.query(&q, |w| {
-            let s = (w & !STATIC_BIT) as usize;
-            if flags[s] & (flag::DIRTY | flag::GONE) == 0 && exact[s].overlaps(&q) {
-                f(self.store.key(s as u32));
+        let exact = &self.store.exact;
+        let mut test = |k: ProxyKey| {
+            if exact[crate::pair::slot(k) as usize].overlaps(&q) {
+                f(k);
             }
-        });
-        for &s in &self.dirty {
-            let s = s as usize;
-            if flags[s] & flag::GONE == 0 && exact[s].overlaps(&q) {
-                f(self.store.key(s as u32));
-            }
-        }
+        };
+        self.octree.query_aabb_unchecked(aabb, &mut test);
+        self.dynamic.query_aabb_unchecked(aabb, &mut test);
+        self.statics.query_aabb_unchecked(aabb, &mut test);
     }
 
     /// The nearest proxy hit by the segment `origin + t·dir`, `t ∈ [0, max_t]`, with its `t`
@@ -43,34 +36,28 @@ impl BroadPhase {
         }
         let inv = geom::inverse_dir(dir);
         let mut best: Option<(ProxyKey, f32)> = None;
-        let test = |s: usize, best: &mut Option<(ProxyKey, f32)>| {
-            let t = match self.store.shape[s] {
+        let mut test = |key: ProxyKey, _: f32| {
+            let t = match self.store.shape[crate::pair::slot(key) as usize] {
                 Shape::Sphere { center, radius } => {
                     geom::ray_sphere(origin, dir, center, radius, max_t)
                 }
                 Shape::Body { aabb, .. } => aabb.ray_entry(origin, inv, max_t),
             };
-            if let Some(t) = t {
-                let key = self.store.key(s as u32);
-                if best.is_none_or(|(k, b)| (t, key) < (b, k)) {
-                    *best = Some((key, t));
-                }
+            if let Some(t) = t
+                && best.is_none_or(|(k, b)| (t, key) < (b, k))
+            {
+                best = Some((key, t));
             }
         };
-        let flags = &self.store.flags;
-        for &s in &self.dirty {
-            if flags[s as usize] & flag::GONE == 0 {
-                test(s as usize, &mut best);
-            }
-        }
-        let (o, d) = (Vec3A::from(origin), Vec3A::from(dir));
-        self.grid.ray_candidates(o, d, max_t, |w| {
-            let s = (w & !STATIC_BIT) as usize;
-            if flags[s] & (flag::DIRTY | flag::GONE) == 0 {
-                test(s, &mut best);
-            }
-            best.map_or(max_t, |b| b.1)
-        });
+        self.octree.cast_ray_all_with(
+            origin,
+            dir,
+            max_t,
+            |c, r| Aabb::from_center_radius(c, r).ray_entry(origin, inv, max_t),
+            &mut test,
+        );
+        self.dynamic.cast_ray_all(origin, dir, max_t, &mut test);
+        self.statics.cast_ray_all(origin, dir, max_t, &mut test);
         best
     }
 }

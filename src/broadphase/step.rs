@@ -1,22 +1,25 @@
 //! One step: which pass runs, and the passes.
 //!
-//! The **full pass** sorts every exact box into the grid and sweeps it: its cost follows the
-//! number of proxies. The **incremental pass** needs the grid to hold *fat* boxes (each exact
-//! box grown by a margin that follows how far that proxy moves per step) and the sorted list of
-//! *candidates*, the pairs of overlapping fat boxes. Since an exact box lies in its fat box,
-//! every overlapping pair is a candidate. A step then
+//! The **full pass** runs the structures' own pair passes over the boxes they hold: the
+//! octree's for sphere × sphere, the dynamic BVH's self traversal and its traversal against the
+//! static BVH for body × body, and sphere × body by queries from the smaller side into the
+//! other's structure. Its cost follows the number of proxies. The **incremental pass** needs
+//! the structures to hold *fat* boxes (each exact box grown by a margin that follows how far
+//! that proxy moves per step) and the sorted list of *candidates*, the pairs of overlapping fat
+//! boxes. Since an exact box lies in its fat box, every overlapping pair is a candidate. A step
+//! then
 //! 1. drops the candidates of proxies that were removed or left their fat box ("escaped"),
-//! 2. queries the grid with each escaped proxy's new fat box for its new candidates (entries
-//!    off their column since the last build — "dirty" — are swept among themselves instead),
+//! 2. queries the octree and both BVHs with each escaped proxy's new fat box for its new
+//!    candidates (a pair of two escaped proxies is found from both sides and kept once),
 //! 3. merges old and new candidates in one pass, re-testing the exact boxes of those that name
 //!    a proxy updated this step and keeping the others' last outcome.
 //!
 //! Its cost follows what moved. Each step estimates both costs from what it is about to do
-//! (movers, escapes, candidates, dirty entries) and runs the cheaper pass, so the cost never
-//! jumps when a world wakes up or settles. Dirty entries cost a little every step until the
-//! grid is sorted again; that is done once their accumulated cost passes a build's.
+//! (movers, escapes, candidates) and runs the cheaper pass, so the cost never jumps when a
+//! world wakes up or settles. Collision groups are tested where a pair is first found (in the
+//! structures' passes and the escaped proxies' queries), so a filtered pair is never a
+//! candidate, never sorted and never diffed.
 
-use super::grid::DEAD;
 use super::radix::{bits_of, sort_u64};
 use super::*;
 
@@ -34,12 +37,8 @@ mod cost {
     pub(super) const CARRY: f64 = 1.5;
     /// Re-testing one candidate's exact boxes (two scattered reads).
     pub(super) const TEST: f64 = 9.0;
-    /// One escaped proxy: its grid query, its new candidates' sort and merge.
+    /// One escaped proxy: its structure queries, its new candidates' sort and merge.
     pub(super) const QUERY: f64 = 1200.0;
-    /// One dirty entry, per step, in the dirty entries' own grid.
-    pub(super) const DIRTY: f64 = 50.0;
-    /// Re-sorting the grid, per proxy.
-    pub(super) const RESORT: f64 = 45.0;
 }
 
 /// The incremental regime is entered when its estimated cost is below this fraction of the
@@ -100,20 +99,22 @@ pub(super) enum Plan {
     Incremental,
 }
 
+/// An incremental step refits the dynamic BVH once this fraction of its bodies got new fat
+/// boxes since its last refit: until then the boxes enlarged on update keep it exact, only
+/// looser.
+const REFIT_FRACTION: f64 = 0.125;
+
 /// What the cost estimates learn from the steps they watch.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Costs {
     /// Candidates per proxy at the last count.
     cand_per_proxy: f64,
-    /// Cost spent on dirty entries since the grid was last sorted.
-    dirty_spent: f64,
 }
 
 impl Default for Costs {
     fn default() -> Self {
         Costs {
             cand_per_proxy: 3.0,
-            dirty_spent: 0.0,
         }
     }
 }
@@ -162,7 +163,6 @@ impl BroadPhase {
         cands * cost::CARRY
             + (movers * self.costs.cand_per_proxy * 2.0).min(cands) * cost::TEST
             + escapes * cost::QUERY
-            + self.dirty.len() as f64 * cost::DIRTY
     }
 
     /// Runs `plan`, then clears the step's marks.
@@ -187,15 +187,14 @@ impl BroadPhase {
             }
             Plan::Full => self.full(false),
             Plan::Rebuild => self.full(true),
-            Plan::Incremental => {
-                self.incremental();
-                let n = self.store.len() as f64;
-                if self.costs.dirty_spent > n * cost::RESORT {
-                    self.resort();
-                }
-            }
+            Plan::Incremental => self.incremental(),
         }
         self.stats.pairs = self.pairs.len();
+        self.stats.octree_per_level = self.octree.stats().per_level;
+        let (d, st) = (self.dynamic.refit_stats(), self.statics.refit_stats());
+        self.stats.dynamic_cost_ratio = d.0;
+        self.stats.dynamic_rebuilds = d.1;
+        self.stats.static_rebuilds = st.1;
         self.stats.candidates = if self.cached { self.cand.len() } else { 0 };
         for &s in &self.movers {
             self.store.flags[s as usize] &= !(flag::MOVED | flag::ESCAPED);
@@ -223,8 +222,6 @@ impl BroadPhase {
         ahead(&mut self.packed);
         ahead(&mut self.prev_packed);
         ahead(&mut self.pairs);
-        ahead(&mut self.dirty);
-        self.side.reserve_ahead(self.dirty.len());
         let n = self.store.len();
         for v in [&mut self.added_packed, &mut self.removed_packed] {
             if v.capacity() < n / 8 {
@@ -238,30 +235,21 @@ impl BroadPhase {
         }
     }
 
-    /// The full pass: every box sorted into the grid and swept. With `fat`, the boxes are
-    /// first replaced by fat ones and the pairs found are the new candidate list.
+    /// The full pass: the structures' pair passes over the boxes they hold. With `fat`, every
+    /// proxy is first given a fat box and the pairs found are the new candidate list; without,
+    /// the structures first hold the exact boxes again if they held fat ones.
     fn full(&mut self, fat: bool) {
         core::mem::swap(&mut self.prev_packed, &mut self.packed);
         if self.cached || fat {
-            for i in 0..self.grid.len() {
-                let w = self.grid.slots[i];
-                if w == DEAD {
-                    continue;
+            for s in 0..self.store.slots() as u32 {
+                if self.store.kind[s as usize] != Kind::Free {
+                    self.hold(s, fat);
                 }
-                let s = w & !STATIC_BIT;
-                let exact = self.store.exact[s as usize];
-                self.grid.boxes[i] = if fat { self.fat_box(s, &exact) } else { exact };
             }
         }
-        self.grid.build(Some(&mut self.store.pos));
-        self.clear_dirty();
-        let fresh = &mut self.fresh;
-        fresh.clear();
-        self.grid.for_each_pair(|a, b| {
-            if a & b & STATIC_BIT == 0 {
-                fresh.push(pack(a & !STATIC_BIT, b & !STATIC_BIT));
-            }
-        });
+        self.refit(true);
+        self.fresh.clear();
+        self.structure_pairs();
         let bits = 32 + bits_of(self.store.slots() as u64);
         sort_u64(&mut self.fresh, &mut self.sort_buf, bits);
         self.packed.clear();
@@ -288,88 +276,90 @@ impl BroadPhase {
         self.emit();
     }
 
-    /// Re-sorts the grid with the fat boxes it holds (candidates stay valid): no more dirty
-    /// entries.
-    fn resort(&mut self) {
-        self.grid.build(Some(&mut self.store.pos));
-        self.clear_dirty();
+    /// Refits the trees whose held boxes changed: the static one always, the dynamic one
+    /// with `all`, else once enough of its bodies got new fat boxes since its last refit.
+    fn refit(&mut self, all: bool) {
+        if self.statics_changed {
+            self.statics.refit();
+            self.statics_changed = false;
+        }
+        let due = self.dynamic_escapes as f64 > REFIT_FRACTION * self.dynamic.len() as f64;
+        if self.dynamic_changed && (all || due) {
+            self.dynamic.refit();
+            self.dynamic_changed = false;
+            self.dynamic_escapes = 0;
+        }
     }
 
-    fn clear_dirty(&mut self) {
-        for &s in &self.dirty {
-            self.store.flags[s as usize] &= !flag::DIRTY;
+    /// Appends to `fresh` every pair of held boxes that overlap (never static × static) and
+    /// whose groups allow it, packed, each once, unsorted.
+    fn structure_pairs(&mut self) {
+        let (store, fresh, groups) = (&self.store, &mut self.fresh, self.any_groups);
+        let mut push = |a: ProxyKey, b: ProxyKey| {
+            let (a, b) = (crate::pair::slot(a), crate::pair::slot(b));
+            if !groups || store.groups[a as usize].allows(store.groups[b as usize]) {
+                fresh.push(pack(a, b));
+            }
+        };
+        self.octree.for_each_pair(&mut push);
+        self.dynamic.for_each_pair(&mut push);
+        self.dynamic.for_each_pair_with(&self.statics, &mut push);
+        // Sphere × body: the smaller side queries the other side's structure.
+        let bodies = self.dynamic.len() + self.statics.len();
+        if bodies == 0 || self.octree.is_empty() {
+            return;
         }
-        self.dirty.clear();
-        self.costs.dirty_spent = 0.0;
+        let octree = &self.octree;
+        if bodies <= octree.len() {
+            for tree in [&self.dynamic, &self.statics] {
+                tree.for_each(|body, aabb| {
+                    octree.query_aabb_unchecked(&aabb, |sphere| push(body, sphere));
+                });
+            }
+        } else {
+            let (dynamic, statics) = (&self.dynamic, &self.statics);
+            octree.for_each(|sphere, aabb| {
+                dynamic.query_aabb_unchecked(&aabb, |body| push(sphere, body));
+                statics.query_aabb_unchecked(&aabb, |body| push(sphere, body));
+            });
+        }
     }
 
     /// The incremental pass (see the module docs).
     fn incremental(&mut self) {
         core::mem::swap(&mut self.prev_packed, &mut self.packed);
+        self.refit(false);
         self.fresh.clear();
         self.query_escaped();
-        self.sweep_dirty();
         let bits = 32 + bits_of(self.store.slots() as u64);
         sort_u64(&mut self.fresh, &mut self.sort_buf, bits);
+        self.fresh.dedup();
         self.merge_candidates();
         self.emit();
     }
 
-    /// New candidates of each escaped proxy with the built, clean entries of the grid.
+    /// New candidates of each escaped proxy: every held box its own overlaps, in the octree
+    /// and both BVHs (a static proxy skips the static BVH), that its groups allow.
     fn query_escaped(&mut self) {
-        let (store, grid, fresh) = (&self.store, &self.grid, &mut self.fresh);
+        let (store, fresh, groups) = (&self.store, &mut self.fresh, self.any_groups);
         for &e in &self.escaped {
             let es = e as usize;
             if store.flags[es] & flag::GONE != 0 {
                 continue;
             }
-            let fat = grid.boxes[store.pos[es] as usize];
-            let statics = if store.kind[es] == Kind::Static {
-                STATIC_BIT
-            } else {
-                0
-            };
-            grid.query(&fat, |w| {
-                let s = w & !STATIC_BIT;
-                if s != e
-                    && store.flags[s as usize] & (flag::DIRTY | flag::GONE) == 0
-                    && w & statics == 0
-                {
+            let held = store.held[es].aabb();
+            let mut push = |k: ProxyKey| {
+                let s = crate::pair::slot(k);
+                if s != e && (!groups || store.groups[es].allows(store.groups[s as usize])) {
                     fresh.push(pack(e, s));
                 }
-            });
-        }
-    }
-
-    /// New candidates among the dirty entries (each pair with at least one escaped side): the
-    /// dirty entries' fat boxes are sorted into a grid of their own and swept.
-    fn sweep_dirty(&mut self) {
-        let (store, grid, side) = (&self.store, &self.grid, &mut self.side);
-        side.clear();
-        for &d in &self.dirty {
-            let ds = d as usize;
-            if store.flags[ds] & flag::GONE == 0 {
-                let word = d | if store.kind[ds] == Kind::Static {
-                    STATIC_BIT
-                } else {
-                    0
-                };
-                side.push(grid.boxes[store.pos[ds] as usize], word);
+            };
+            self.octree.query_aabb_unchecked(&held, &mut push);
+            self.dynamic.query_aabb_unchecked(&held, &mut push);
+            if store.kind[es] != Kind::Static {
+                self.statics.query_aabb_unchecked(&held, &mut push);
             }
         }
-        self.costs.dirty_spent += side.len() as f64 * cost::DIRTY;
-        if self.escaped.is_empty() {
-            return;
-        }
-        side.build(None);
-        let fresh = &mut self.fresh;
-        side.for_each_pair(|a, b| {
-            let (sa, sb) = (a & !STATIC_BIT, b & !STATIC_BIT);
-            let escaped = (store.flags[sa as usize] | store.flags[sb as usize]) & flag::ESCAPED;
-            if escaped != 0 && a & b & STATIC_BIT == 0 {
-                fresh.push(pack(sa, sb));
-            }
-        });
     }
 
     /// One pass over the old candidates (minus those of escaped or removed proxies) and the

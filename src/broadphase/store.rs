@@ -7,7 +7,7 @@
 //! packed slot pairs, and a slot reused within the same step would make an old pair and a new
 //! one look alike.
 
-use super::{BodyKind, Shape};
+use super::{BodyKind, CollisionGroups, Shape};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
 use slotmap::{Key, KeyData};
@@ -26,13 +26,10 @@ pub(super) enum Kind {
 pub(super) mod flag {
     /// Updated since the last step (its exact box must be re-tested against its candidates).
     pub(crate) const MOVED: u8 = 1;
-    /// Its grid entry is not where the last build put it (box changed, or inserted since):
-    /// queries test it from the dirty list instead of its column.
-    pub(crate) const DIRTY: u8 = 2;
     /// Its fat box was replaced since the last step: its candidates are found again.
     pub(crate) const ESCAPED: u8 = 4;
-    /// Removed: its candidates are dropped at the next step, and its grid entry is skipped;
-    /// the slot is not reused before the next step.
+    /// Removed: its candidates are dropped at the next step; the slot is not reused before
+    /// the next step.
     pub(crate) const GONE: u8 = 8;
 }
 
@@ -52,8 +49,11 @@ pub(super) struct Store {
     pub(super) shape: Vec<Shape>,
     /// The box pairs are computed on: the shape's box grown by `Config::margin`. 32 bytes.
     pub(super) exact: Vec<SimdBox>,
-    /// Index of the slot's entry in the grid's arrays. 4 bytes.
-    pub(super) pos: Vec<u32>,
+    /// The box its structure (octree or BVH) holds for it: the exact box, or a fat box
+    /// around it while the incremental pass runs. 32 bytes.
+    pub(super) held: Vec<SimdBox>,
+    /// Collision groups. 8 bytes.
+    pub(super) groups: Vec<CollisionGroups>,
     /// Distance the box moved per step, as last measured (metres, largest axis): sizes the fat
     /// margin. 4 bytes.
     pub(super) speed: Vec<f32>,
@@ -123,7 +123,8 @@ impl Store {
                 self.flags.push(0);
                 self.shape.push(shape);
                 self.exact.push(exact);
-                self.pos.push(u32::MAX);
+                self.held.push(exact);
+                self.groups.push(CollisionGroups::default());
                 self.speed.push(0.0);
                 self.stamp.push(step);
                 slot
@@ -132,10 +133,11 @@ impl Store {
         let s = slot as usize;
         self.version[s] += 1;
         self.kind[s] = kind;
-        // A slot still on the dirty list stays listed (and is marked dirty again on insert).
-        self.flags[s] &= flag::DIRTY;
+        self.flags[s] = 0;
         self.shape[s] = shape;
         self.exact[s] = exact;
+        self.held[s] = exact;
+        self.groups[s] = CollisionGroups::default();
         self.speed[s] = 0.0;
         self.stamp[s] = step;
         self.live += 1;
@@ -147,8 +149,7 @@ impl Store {
         let s = slot as usize;
         self.version[s] += 1;
         self.kind[s] = Kind::Free;
-        self.flags[s] = (self.flags[s] & flag::DIRTY) | flag::GONE;
-        self.pos[s] = u32::MAX;
+        self.flags[s] = flag::GONE;
         self.live -= 1;
         self.quarantine.push(slot);
     }
@@ -171,7 +172,8 @@ impl Store {
             + cap(self.flags.capacity(), 1)
             + cap(self.shape.capacity(), core::mem::size_of::<Shape>())
             + cap(self.exact.capacity(), 32)
-            + cap(self.pos.capacity(), 4)
+            + cap(self.held.capacity(), 32)
+            + cap(self.groups.capacity(), 8)
             + cap(self.speed.capacity(), 4)
             + cap(self.stamp.capacity(), 4)
             + cap(self.free.capacity() + self.quarantine.capacity(), 4)

@@ -1,21 +1,21 @@
 //! The whole-structure invariant check of a [`BroadPhase`].
 
-use super::grid::{DEAD, STATIC_BIT};
 use super::step::HIT;
 use super::store::{Kind, flag};
-use super::{BroadPhase, Pair};
+use super::{BodyKind, BroadPhase, Pair, Shape};
 use crate::geom::SimdBox;
 use crate::sweep;
 
 impl BroadPhase {
     /// Checks every internal invariant and panics with a message on the first broken one: each
-    /// live proxy in exactly one grid entry holding its exact box (or a fat box around it),
-    /// the grid's order, the dirty and step lists, and with candidates, that they are exactly
-    /// the pairs of overlapping fat boxes and that the pair list is their overlapping part.
-    /// For tests: O(n log n + candidates).
+    /// live proxy held under its key by exactly its own structure (octree, dynamic or static
+    /// BVH) with the box the broadphase recorded for it (its exact box, or a fat box around
+    /// it), every structure's own invariants, the step lists, and with candidates, that they
+    /// are exactly the allowed pairs of overlapping held boxes and that the pair list is their
+    /// overlapping part. For tests: O(n log n + candidates).
     pub fn validate(&self) {
         let st = &self.store;
-        let mut live = 0;
+        let mut live = [0usize; 3];
         for s in 0..st.slots() {
             let v = st.version[s];
             assert_eq!(
@@ -24,39 +24,47 @@ impl BroadPhase {
                 "slot {s}: version and kind"
             );
             if st.kind[s] == Kind::Free {
-                assert!(st.flags[s] & flag::GONE != 0 || v == 0 || st.flags[s] & !flag::DIRTY == 0);
                 continue;
             }
-            live += 1;
             assert_eq!(st.flags[s] & flag::GONE, 0, "slot {s}: live but gone");
             assert_eq!(
                 st.exact[s],
                 self.exact_box(&st.shape[s]),
                 "slot {s}: exact box stale"
             );
-            let pos = st.pos[s] as usize;
-            let word = s as u32
-                | if st.kind[s] == Kind::Static {
-                    STATIC_BIT
-                } else {
-                    0
-                };
+            let key = st.key(s as u32);
+            let held = st.held[s];
+            let (home, held_there) = match st.shape[s] {
+                Shape::Sphere { .. } => (0, self.octree.aabb(key)),
+                Shape::Body {
+                    kind: BodyKind::Dynamic,
+                    ..
+                } => (1, self.dynamic.aabb(key)),
+                Shape::Body {
+                    kind: BodyKind::Static,
+                    ..
+                } => (2, self.statics.aabb(key)),
+            };
+            live[home] += 1;
             assert_eq!(
-                self.grid.slots.get(pos),
-                Some(&word),
-                "slot {s}: grid entry"
+                held_there.map(|a| SimdBox::new(&a)),
+                Some(held),
+                "slot {s}: its structure does not hold its box"
             );
-            let stored = self.grid.boxes[pos];
+            let others = [
+                self.octree.contains(key),
+                self.dynamic.contains(key),
+                self.statics.contains(key),
+            ];
+            assert_eq!(
+                others.iter().filter(|&&c| c).count(),
+                1,
+                "slot {s}: held by more than one structure"
+            );
             if self.cached {
-                assert!(
-                    stored.contains(&st.exact[s]),
-                    "slot {s}: outside its fat box"
-                );
+                assert!(held.contains(&st.exact[s]), "slot {s}: outside its fat box");
             } else {
-                assert_eq!(
-                    stored, st.exact[s],
-                    "slot {s}: grid box is not the exact box"
-                );
+                assert_eq!(held, st.exact[s], "slot {s}: held box is not the exact box");
             }
             if st.flags[s] & flag::MOVED != 0 {
                 assert!(
@@ -64,24 +72,14 @@ impl BroadPhase {
                     "slot {s}: moved, not listed"
                 );
             }
-            if st.flags[s] & flag::DIRTY != 0 {
-                assert!(
-                    self.dirty.contains(&(s as u32)),
-                    "slot {s}: dirty, not listed"
-                );
-            }
         }
-        assert_eq!(live, st.len(), "live count");
-        let entries = self.grid.slots.iter().filter(|&&w| w != DEAD).count();
-        assert_eq!(entries, live, "grid holds unknown entries");
-        for i in self.grid.appended() {
-            let w = self.grid.slots[i];
-            assert!(w == DEAD || st.flags[(w & !STATIC_BIT) as usize] & flag::DIRTY != 0);
-        }
-        self.grid.validate(|i| {
-            let w = self.grid.slots[i];
-            w != DEAD && st.flags[(w & !STATIC_BIT) as usize] & flag::DIRTY == 0
-        });
+        assert_eq!(live.iter().sum::<usize>(), st.len(), "live count");
+        assert_eq!(self.octree.len(), live[0], "octree holds unknown spheres");
+        assert_eq!(self.dynamic.len(), live[1], "dynamic BVH holds unknown bodies");
+        assert_eq!(self.statics.len(), live[2], "static BVH holds unknown bodies");
+        self.octree.validate();
+        self.dynamic.validate();
+        self.statics.validate();
         if self.cached && self.movers.is_empty() && self.removals == 0 {
             self.validate_candidates();
         }
@@ -96,23 +94,23 @@ impl BroadPhase {
         assert_eq!(keys, self.pairs, "pair list and packed pairs differ");
     }
 
-    /// With no change pending: the candidates are exactly the pairs of overlapping fat boxes
-    /// (never static × static), sorted, and the pairs are the candidates marked overlapping.
+    /// With no change pending: the candidates are exactly the allowed pairs of overlapping
+    /// held boxes (never static × static), sorted, and the pairs are the candidates marked
+    /// overlapping.
     fn validate_candidates(&self) {
         let st = &self.store;
         let mut fat: Vec<(SimdBox, u32)> = (0..st.slots())
             .filter(|&s| st.kind[s] != Kind::Free)
-            .map(|s| (self.grid.boxes[st.pos[s] as usize], s as u32))
+            .map(|s| (st.held[s], s as u32))
             .collect();
         fat.sort_by(|p, q| p.0.min.x.total_cmp(&q.0.min.x));
         let boxes: Vec<SimdBox> = fat.iter().map(|p| p.0).collect();
         let mut want = Vec::new();
         sweep::self_pairs::<0>(&boxes, |i, j| {
-            let (a, b) = (fat[i].1, fat[j].1);
-            let both_static =
-                st.kind[a as usize] == Kind::Static && st.kind[b as usize] == Kind::Static;
-            if !both_static {
-                want.push(super::step::pack(a, b));
+            let (a, b) = (fat[i].1 as usize, fat[j].1 as usize);
+            let both_static = st.kind[a] == Kind::Static && st.kind[b] == Kind::Static;
+            if !both_static && st.groups[a].allows(st.groups[b]) {
+                want.push(super::step::pack(a as u32, b as u32));
             }
         });
         want.sort_unstable();

@@ -32,6 +32,17 @@ pub(crate) struct BuildScratch {
     work: Work,
 }
 
+impl BuildScratch {
+    /// Heap bytes held (capacities).
+    pub(crate) fn heap_bytes(&self) -> usize {
+        use core::mem::size_of;
+        (self.ids.capacity() + self.new_pos.capacity()) * 4
+            + self.tasks.capacity() * size_of::<Task>()
+            + self.keys.capacity() * 8
+            + self.work.heap_bytes()
+    }
+}
+
 impl Bvh {
     /// Rebuilds the whole tree from the current boxes with [`BvhConfig::split`]: pending
     /// inserts join the tree, tombstones are dropped, and the SAH cost is remembered as the
@@ -57,6 +68,7 @@ impl Bvh {
         self.tree_len = n;
         self.tombstones = 0;
         self.cost_at_build = self.sah_cost();
+        self.cost_last = self.cost_at_build;
         self.rebuilds += 1;
         self.scratch = s;
     }

@@ -183,6 +183,8 @@ pub struct Bvh {
     /// Primitive index (`< tree_len`) → its leaf node.
     leaf_of: Vec<u32>,
     cost_at_build: f32,
+    /// The SAH cost at the last build or refit.
+    cost_last: f32,
     rebuilds: u64,
     refits: u64,
     /// Scratch reused by every build and traversal.
@@ -209,6 +211,7 @@ impl Bvh {
             parent: Vec::new(),
             leaf_of: Vec::new(),
             cost_at_build: 0.0,
+            cost_last: 0.0,
             rebuilds: 0,
             refits: 0,
             scratch: BuildScratch::default(),
@@ -267,6 +270,27 @@ impl Bvh {
         Ok(())
     }
 
+    /// Appends a box its caller has checked under a key the caller minted and that is not
+    /// live in this tree (`BroadPhase`); pending until the next rebuild.
+    pub(crate) fn insert_checked(&mut self, key: ProxyKey, aabb: &Aabb) {
+        debug_assert!(check_aabb(aabb).is_ok());
+        debug_assert!(!key.is_null() && !self.ids.contains_key(key));
+        self.push_pending(key, *aabb);
+    }
+
+    /// Heap bytes held (capacities, not lengths), build and traversal scratch included.
+    #[must_use]
+    pub fn heap_bytes(&self) -> usize {
+        self.ids.capacity() * 12
+            + self.keys.capacity() * 8
+            + self.boxes.capacity() * 32
+            + self.nodes.capacity() * 32
+            + (self.parent.capacity() + self.leaf_of.capacity()) * 4
+            + self.pair_stack.capacity() * 8
+            + (self.sweep_a.capacity() + self.sweep_b.capacity()) * 8
+            + self.scratch.heap_bytes()
+    }
+
     fn check_room(&self) -> Result<(), Error> {
         if self.boxes.len() >= NONE as usize - 1 {
             return Err(Error::Full);
@@ -319,6 +343,19 @@ impl Bvh {
             }
         }
         Ok(())
+    }
+
+    /// The SAH cost at the last refit or build over the cost at the last build (1 when that
+    /// was 0), and the builds so far: [`Bvh::stats`]'s `cost_ratio` and `rebuilds` as of the
+    /// last refit, in O(1).
+    #[must_use]
+    pub fn refit_stats(&self) -> (f32, u64) {
+        let ratio = if self.cost_at_build > 0.0 {
+            self.cost_last / self.cost_at_build
+        } else {
+            1.0
+        };
+        (ratio, self.rebuilds)
     }
 
     /// Live primitives.

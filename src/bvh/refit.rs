@@ -20,6 +20,7 @@ impl Bvh {
             return;
         }
         let cost = self.refit_nodes();
+        self.cost_last = cost;
         self.refits += 1;
         if self.cost_at_build > 0.0 && cost > self.config.rebuild_threshold * self.cost_at_build {
             self.rebuild();

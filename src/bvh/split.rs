@@ -91,6 +91,16 @@ pub(super) struct Work {
 }
 
 impl Work {
+    /// Heap bytes held (capacities).
+    pub(super) fn heap_bytes(&self) -> usize {
+        use core::mem::size_of;
+        self.buckets.capacity() * size_of::<[Bucket; MAX_BUCKETS]>()
+            + self.order.capacity() * 8
+            + self.bins.capacity()
+            + self.tmp_refs.capacity() * 32
+            + (self.tmp_ids.capacity() + self.wrong[0].capacity() + self.wrong[1].capacity()) * 4
+    }
+
     /// Readies the buffers for a build: the bucket copies exist and large nodes use them all.
     pub(super) fn prepare(&mut self) {
         self.buckets.resize(BIN_SETS, [Bucket::EMPTY; MAX_BUCKETS]);

@@ -171,6 +171,13 @@ impl Octree {
 }
 
 impl Scratch {
+    /// Heap bytes held (capacities).
+    pub(super) fn heap_bytes(&self) -> usize {
+        (self.run_key.capacity()) * 8
+            + (self.run_start.capacity() + self.run_slot.capacity() + self.dense.capacity()) * 4
+            + self.run_of.capacity() * 8
+    }
+
     /// Lists the runs of `node_key` (and, for a pass with cross-level pairs, records each in
     /// `run_of` by its node's slot), with the sentinel.
     fn index_runs(&mut self, tree: &Octree, node_key: &[u64], cross: bool) {

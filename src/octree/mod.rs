@@ -142,6 +142,12 @@ struct Passes {
     loose: loose::Scratch,
 }
 
+impl Passes {
+    fn heap_bytes(&self) -> usize {
+        self.walk.heap_bytes() + self.strict.heap_bytes() + self.loose.heap_bytes()
+    }
+}
+
 /// A top-down octree over spheres with implicit node indexing; see the [module docs](self).
 ///
 /// Spheres outside [`Octree::bounds`] are kept in the root and paired correctly. Every `Err`
@@ -212,9 +218,16 @@ impl Octree {
         Ok(key)
     }
 
-    /// Inserts a sphere under a key minted by the caller (the `BroadPhase` owns the key
-    /// space). Same checks as [`Octree::insert`]; a key that is already live is updated
-    /// instead. A tree fed through this function must not also mint keys with `insert`.
+    /// Inserts a sphere its caller has checked (`check_sphere`) under a key the caller minted
+    /// (the `BroadPhase` owns the key space) and that is not live in this tree. A tree fed
+    /// through this function must not also mint keys with `insert`.
+    pub(crate) fn insert_checked(&mut self, key: ProxyKey, center: Vec3, radius: f32) {
+        debug_assert!(geom::check_sphere(center, radius).is_ok());
+        debug_assert!(!self.ids.contains_key(key));
+        self.push(key, center, radius);
+    }
+
+    /// Test support: [`Octree::insert_checked`] with the checks, updating a live key instead.
     #[cfg(test)]
     pub(crate) fn insert_keyed(
         &mut self,
@@ -231,6 +244,17 @@ impl Octree {
         }
         self.push(key, center, radius);
         Ok(())
+    }
+
+    /// Heap bytes held (capacities, not lengths), pair-pass scratch included.
+    #[must_use]
+    pub fn heap_bytes(&self) -> usize {
+        self.objs.capacity() * core::mem::size_of::<Obj>()
+            + self.spheres.capacity() * 16
+            + self.keys.capacity() * 8
+            + self.ids.capacity() * 12
+            + self.nodes.heap_bytes()
+            + self.passes.heap_bytes()
     }
 
     /// Moves and/or resizes a sphere. `Err(UnknownProxy)` for a stale or foreign key, `Err`

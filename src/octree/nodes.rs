@@ -41,6 +41,11 @@ pub(super) struct Nodes {
 }
 
 impl Nodes {
+    /// Heap bytes held (capacities).
+    pub(super) fn heap_bytes(&self) -> usize {
+        (self.table.capacity() + self.head.capacity()) * 4 + self.mask.capacity()
+    }
+
     pub(super) fn new(count: u32) -> Self {
         Nodes {
             table: vec![0; (count as usize).div_ceil(PAGE)],

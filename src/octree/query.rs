@@ -122,7 +122,7 @@ impl Octree {
 
     /// Calls `f(key, t)` for every sphere `(c, r)` of a cell the segment enters for which
     /// `hit(c, r)` gives a `t`.
-    fn cast_ray_all_with(
+    pub(crate) fn cast_ray_all_with(
         &self,
         origin: Vec3,
         dir: Vec3,

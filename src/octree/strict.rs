@@ -104,6 +104,20 @@ pub(super) struct Scratch {
     parts: Parts,
 }
 
+impl Scratch {
+    /// Heap bytes held (capacities).
+    pub(super) fn heap_bytes(&self) -> usize {
+        use core::mem::size_of;
+        self.group.capacity()
+            + self.path.capacity() * size_of::<Level>()
+            + (self.anc.capacity() + self.parts.buf.capacity()) * size_of::<Hot>()
+            + self.anc_oct.capacity()
+            + self.hot_oct.capacity()
+            + self.parts.stack.capacity() * size_of::<Part>()
+            + self.parts.octs.capacity()
+    }
+}
+
 /// Octants of a cell with mid cell `mid` that the range of `h` reaches (bit `x | y<<1 | z<<2`).
 #[inline]
 fn octants(h: &Hot, mid: [u32; 3]) -> u8 {

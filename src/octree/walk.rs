@@ -88,6 +88,20 @@ pub(super) struct Scratch {
     pub(super) sweeps: Sweeps,
 }
 
+impl Scratch {
+    /// Heap bytes held (capacities).
+    pub(super) fn heap_bytes(&self) -> usize {
+        use core::mem::size_of_val;
+        let v = |n: usize, one: usize| n * one;
+        v(self.items.capacity() + self.items_tmp.capacity(), 8)
+            + v(self.wide.capacity(), 16)
+            + v(self.counts.capacity() + self.rank.capacity(), 4)
+            + v(self.hot.capacity(), size_of_val(&Hot::EMPTY))
+            + v(self.node_key.capacity() + self.keys.capacity(), 8)
+            + v(self.sweeps.a.capacity() + self.sweeps.b.capacity(), 8)
+    }
+}
+
 /// The runs of equal keys of `keys` (sorted): `(key, start, end)` for each, in order.
 #[inline]
 pub(super) fn runs(keys: &[u64]) -> impl Iterator<Item = (u64, usize, usize)> + '_ {
