@@ -2,8 +2,7 @@
 //!
 //! ```text
 //! cargo run --release --features profiler --example vs_rapier -- --scene gas --n 100000
-//!     [--steps 30] [--warmup 5] [--index octree|bvh|auto] [--placement strict|loose] [--seed 1]
-//!     [--skin 0]
+//!     [--steps 30] [--warmup 5] [--placement strict|loose] [--depth D] [--seed 1] [--skin 0]
 //! ```
 //!
 //! `--scene` is `gas`, `clustered`, `bodies`, `churn`, `pile`, `idle` or `all` (every scene at
@@ -23,11 +22,10 @@
 //!
 //! - broadleaf: the frame's removes, inserts and new positions/boxes (one `update_spheres` and
 //!   one `update_bodies` batch; `--per-object` calls `update_sphere` / `update_body` for each
-//!   object instead), then `step()`; spheres go in with `insert_sphere` (`--index octree` or
-//!   `auto`) or as dynamic bodies by their box (`--index bvh`); boxes always go in as bodies.
-//!   `--placement` sets `Config::octree_placement` and `octree_depth` (which the broadphase
-//!   keeps for the standalone octree's vocabulary but does not read), `--skin` sets
-//!   `Config::skin` (default 0: adaptive fat margins). Timed with `Instant` around all of it.
+//!   object instead), then `step()`; spheres go in with `insert_sphere` (into the octree),
+//!   boxes as bodies (into the BVHs). `Config::bounds` is the scene's region; every other
+//!   field is `Config::default()` unless `--placement`, `--depth` (`Config::octree_depth`) or
+//!   `--skin` (`Config::skin`) is given. Timed with `Instant` around all of it.
 //! - rapier: kinematic position-based bodies, ball or cuboid colliders with
 //!   `ActiveCollisionTypes::all()`, fixed bodies for static boxes; moved with
 //!   `set_next_kinematic_translation`, then `PhysicsPipeline::step`. Its broad-phase time per
@@ -59,7 +57,7 @@
 
 use broadleaf::fixtures::rapier_world::{SceneWorld, record_pile};
 use broadleaf::fixtures::scene::{
-    Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Idle, Rng, Scene, Spawn,
+    Bodies, Churn, Feed, Frame, Gas, Idle, Rng, Scene, Spawn,
 };
 use broadleaf::rapier::Comparison;
 use broadleaf::{Aabb, BroadPhase, Config, Passes, Placement, ProxyKey, Vec3, brute, geom};
@@ -71,20 +69,13 @@ use std::hint::black_box;
 use std::process::exit;
 use std::time::Instant;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Index {
-    Octree,
-    Bvh,
-    Auto,
-}
-
 struct Args {
     scene: String,
     n: Option<usize>,
     steps: usize,
     warmup: usize,
-    index: Index,
-    placement: Placement,
+    placement: Option<Placement>,
+    depth: Option<u32>,
     /// `Config::skin`.
     skin: f32,
     /// `Config::passes`.
@@ -108,7 +99,7 @@ struct Args {
 }
 
 const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|idle|all] [--n N] \
-                     [--steps 30] [--warmup 5] [--index octree|bvh|auto] \
+                     [--steps 30] [--warmup 5] [--depth D] \
                      [--placement strict|loose] [--skin 0] [--passes adaptive|full|incremental] [--seed 1] \
                      [--sizes N1,N2,...] [--moving P1,P2,...] [--plot PATH.svg] [--interleave] \
                      [--per-object] [--queries]";
@@ -119,8 +110,8 @@ fn parse_args() -> Result<Args, String> {
         n: None,
         steps: 30,
         warmup: 5,
-        index: Index::Auto,
-        placement: Placement::Strict,
+        placement: None,
+        depth: None,
         skin: 0.0,
         passes: Passes::Adaptive,
         seed: 1,
@@ -190,20 +181,15 @@ fn parse_args() -> Result<Args, String> {
                     .parse::<f32>()
                     .map_err(|e| format!("{flag} {value}: {e}"))?;
             }
-            "--index" => {
-                args.index = match value.as_str() {
-                    "octree" => Index::Octree,
-                    "bvh" => Index::Bvh,
-                    "auto" => Index::Auto,
-                    other => return Err(format!("unknown index {other}")),
-                }
+            "--depth" => {
+                args.depth = Some(value.parse().map_err(|e| format!("--depth: {e}"))?);
             }
             "--placement" => {
-                args.placement = match value.as_str() {
+                args.placement = Some(match value.as_str() {
                     "strict" => Placement::Strict,
                     "loose" => Placement::Loose,
                     other => return Err(format!("unknown placement {other}")),
-                }
+                })
             }
             other => return Err(format!("unknown flag {other}")),
         }
@@ -272,6 +258,22 @@ fn default_n(scene: &str) -> usize {
     }
 }
 
+impl Args {
+    /// The broadphase's configuration for a scene in `bounds`: the defaults but for what the
+    /// flags set.
+    fn config(&self, bounds: Aabb) -> Config {
+        let d = Config::default();
+        Config {
+            bounds,
+            octree_depth: self.depth.unwrap_or(d.octree_depth),
+            octree_placement: self.placement.unwrap_or(d.octree_placement),
+            skin: self.skin,
+            passes: self.passes,
+            ..d
+        }
+    }
+}
+
 /// broadleaf's side: the broadphase and the key of each scene id.
 struct Ours {
     bp: BroadPhase,
@@ -279,18 +281,10 @@ struct Ours {
 }
 
 impl Ours {
-    fn new(bounds: broadleaf::Aabb, index: Index, args: &Args) -> Self {
-        let placement = args.placement;
+    fn new(bounds: broadleaf::Aabb, args: &Args) -> Self {
         Ours {
-            bp: BroadPhase::new(Config {
-                bounds,
-                octree_depth: placement.depth_for(&bounds, GAS_RADIUS),
-                octree_placement: placement,
-                skin: args.skin,
-                passes: args.passes,
-                ..Config::default()
-            }),
-            feed: Feed::new(index == Index::Bvh).per_object(args.per_object),
+            bp: BroadPhase::new(args.config(bounds)),
+            feed: Feed::new(false).per_object(args.per_object),
         }
     }
 }
@@ -319,7 +313,7 @@ struct Row {
 
 /// Both engines with `scene`'s objects inserted and one step taken; also the spawns.
 fn spawn_both(scene: &dyn Scene, args: &Args) -> (Ours, SceneWorld, Vec<Spawn>) {
-    let mut ours = Ours::new(scene.bounds(), args.index, args);
+    let mut ours = Ours::new(scene.bounds(), args);
     let mut theirs = SceneWorld::new();
     let mut spawns = Vec::new();
     scene.spawns(&mut spawns);
@@ -452,12 +446,16 @@ fn main() {
             exit(2);
         }
     };
+    let config = args.config(Aabb::new(Vec3::ZERO, Vec3::ONE));
     println!(
-        "index {:?}, octree placement {:?}, skin {}, {} measured steps after {} warm-up, seed {}, \
+        "spheres in the octree (depth {}, {:?} placement), bodies in the BVHs (rebuild at {}× \
+         the built SAH cost), skin {}, passes {:?}, {} measured steps after {} warm-up, seed {}, \
          {}; times: median ns/object/step",
-        args.index,
-        args.placement,
-        args.skin,
+        config.octree_depth,
+        config.octree_placement,
+        config.rebuild_threshold,
+        config.skin,
+        config.passes,
         args.steps,
         args.warmup,
         args.seed,
