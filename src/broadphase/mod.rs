@@ -515,7 +515,7 @@ impl BroadPhase {
     #[inline]
     pub fn update_sphere(&mut self, key: ProxyKey, center: Vec3, radius: f32) -> Result<(), Error> {
         let slot = self.check_sphere_update(key, center, radius)?;
-        self.set_shape(slot, Shape::Sphere { center, radius });
+        self.set_shape(key, slot, Shape::Sphere { center, radius });
         Ok(())
     }
 
@@ -524,7 +524,7 @@ impl BroadPhase {
     pub fn update_body(&mut self, key: ProxyKey, aabb: Aabb) -> Result<(), Error> {
         let slot = self.check_body_update(key, &aabb)?;
         let kind = self.body_kind(slot);
-        self.set_shape(slot, Shape::Body { aabb, kind });
+        self.set_shape(key, slot, Shape::Body { aabb, kind });
         Ok(())
     }
 
@@ -539,7 +539,7 @@ impl BroadPhase {
         }
         for &(key, center, radius) in updates {
             let slot = crate::pair::slot(key);
-            self.set_shape(slot, Shape::Sphere { center, radius });
+            self.set_shape(key, slot, Shape::Sphere { center, radius });
         }
         Ok(())
     }
@@ -556,7 +556,7 @@ impl BroadPhase {
         for &(key, aabb) in updates {
             let slot = crate::pair::slot(key);
             let kind = self.body_kind(slot);
-            self.set_shape(slot, Shape::Body { aabb, kind });
+            self.set_shape(key, slot, Shape::Body { aabb, kind });
         }
         Ok(())
     }
@@ -591,10 +591,11 @@ impl BroadPhase {
         }
     }
 
-    /// Applies a checked update: the new exact box, and in its structure either the exact box
-    /// (full pass regime) or, if the exact box left the old fat box, a new fat box.
+    /// Applies a checked update of the live proxy `key` in `slot`: the new exact box, and in
+    /// its structure either the exact box (full pass regime) or, if the exact box left the old
+    /// fat box, a new fat box.
     #[inline]
-    fn set_shape(&mut self, slot: u32, shape: Shape) {
+    fn set_shape(&mut self, key: ProxyKey, slot: u32, shape: Shape) {
         let s = slot as usize;
         let exact = self.exact_box(&shape);
         let old = self.store.exact[s];
@@ -611,10 +612,23 @@ impl BroadPhase {
         self.store.stamp[s] = self.now;
         self.store.shape[s] = shape;
         self.store.exact[s] = exact;
-        if self.cached && self.store.held[s].contains(&exact) {
+        if !self.cached {
+            // The structure holds the exact box; the next step is a full pass, which reads no
+            // escape marks.
+            self.store.held[s] = exact;
+            let placed = match shape {
+                Shape::Sphere { center, radius } => {
+                    let r = (radius + self.config.margin).min(f32::MAX);
+                    self.octree.update_checked(key, center, r)
+                }
+                Shape::Body { kind, .. } => self.tree_mut(kind).update_checked(key, &exact.aabb()),
+            };
+            debug_assert!(placed.is_ok(), "a live proxy missing from its structure");
+            self.mark(slot, flag::MOVED);
+        } else if self.store.held[s].contains(&exact) {
             self.mark(slot, flag::MOVED);
         } else {
-            self.hold(slot, self.cached);
+            self.hold(slot, true);
             self.mark(slot, flag::MOVED | flag::ESCAPED);
         }
     }
@@ -660,7 +674,9 @@ impl BroadPhase {
     fn exact_box(&self, shape: &Shape) -> SimdBox {
         let m = self.config.margin;
         match *shape {
-            Shape::Sphere { center, radius } => SimdBox::from_center_radius(center, radius + m),
+            Shape::Sphere { center, radius } => {
+                SimdBox::from_center_radius(center, (radius + m).min(f32::MAX))
+            }
             Shape::Body { aabb, .. } if m == 0.0 => SimdBox::new(&aabb),
             Shape::Body { aabb, .. } => SimdBox::new(&finite_grown(&aabb, m)),
         }

@@ -66,7 +66,7 @@ use cell::level_of;
 use glam::Vec3;
 use nodes::Nodes;
 use placement::Grid;
-use slotmap::{SecondaryMap, SlotMap};
+use slotmap::SlotMap;
 
 /// The deepest octree accepted by `Octree::new`: levels `0..=MAX_DEPTH`. At depth 10 a cell's
 /// Morton code (10 bits per axis) still fits a `u32`, and so does the index of every node
@@ -162,8 +162,9 @@ pub struct Octree {
     spheres: Vec<(Vec3, f32)>,
     /// Dense id → key.
     keys: Vec<ProxyKey>,
-    /// Key → dense id.
-    ids: SecondaryMap<ProxyKey, u32>,
+    /// Key slot index → dense id, `NONE` if no sphere has a key with that slot index; a key
+    /// is live iff `keys[ids[slot]]` is that key (see [`Octree::id_of`]).
+    ids: Vec<u32>,
     /// Mints keys for [`Octree::insert`].
     minted: SlotMap<ProxyKey, ()>,
     nodes: Nodes,
@@ -196,7 +197,7 @@ impl Octree {
             objs: Vec::new(),
             spheres: Vec::new(),
             keys: Vec::new(),
-            ids: SecondaryMap::new(),
+            ids: Vec::new(),
             minted: SlotMap::with_key(),
             nodes: Nodes::new(cell::node_count(depth)),
             per_level: [0; MAX_DEPTH as usize + 1],
@@ -223,7 +224,7 @@ impl Octree {
     /// through this function must not also mint keys with `insert`.
     pub(crate) fn insert_checked(&mut self, key: ProxyKey, center: Vec3, radius: f32) {
         debug_assert!(geom::check_sphere(center, radius).is_ok());
-        debug_assert!(!self.ids.contains_key(key));
+        debug_assert!(self.id_of(key).is_none());
         self.push(key, center, radius);
     }
 
@@ -236,7 +237,7 @@ impl Octree {
         radius: f32,
     ) -> Result<(), Error> {
         geom::check_sphere(center, radius)?;
-        if self.ids.contains_key(key) {
+        if self.id_of(key).is_some() {
             return self.update_checked(key, center, radius);
         }
         if self.objs.len() >= (u32::MAX - 1) as usize {
@@ -252,7 +253,7 @@ impl Octree {
         self.objs.capacity() * core::mem::size_of::<Obj>()
             + self.spheres.capacity() * 16
             + self.keys.capacity() * 8
-            + self.ids.capacity() * 12
+            + self.ids.capacity() * 4
             + self.nodes.heap_bytes()
             + self.passes.heap_bytes()
     }
@@ -273,7 +274,7 @@ impl Octree {
         center: Vec3,
         radius: f32,
     ) -> Result<(), Error> {
-        let id = *self.ids.get(key).ok_or(Error::UnknownProxy)?;
+        let id = self.id_of(key).ok_or(Error::UnknownProxy)?;
         let at = self.grid.locate(center, radius);
         let i = id as usize;
         let was_outside = self.is_outside(id);
@@ -296,13 +297,13 @@ impl Octree {
     /// Removes a sphere; its key is never valid again. `Err(UnknownProxy)` for a stale or
     /// foreign key (tree unchanged).
     pub fn remove(&mut self, key: ProxyKey) -> Result<(), Error> {
-        let id = *self.ids.get(key).ok_or(Error::UnknownProxy)?;
+        let id = self.id_of(key).ok_or(Error::UnknownProxy)?;
         self.unlink(id);
         let i = id as usize;
         let old = self.objs[i];
         self.per_level[level_of(old.node) as usize] -= 1;
         self.overflow -= u32::from(self.is_outside(id));
-        self.ids.remove(key);
+        self.ids[crate::pair::slot(key) as usize] = NONE;
         self.minted.remove(key);
         let last = self.objs.len() - 1;
         if i != last {
@@ -329,28 +330,27 @@ impl Octree {
     /// True if `key` names a live sphere of this tree.
     #[must_use]
     pub fn contains(&self, key: ProxyKey) -> bool {
-        self.ids.contains_key(key)
+        self.id_of(key).is_some()
     }
 
     /// The sphere's AABB `center ± radius`, or `None` for a stale or foreign key.
     #[must_use]
     pub fn aabb(&self, key: ProxyKey) -> Option<Aabb> {
-        self.ids.get(key).map(|&id| self.objs[id as usize].aabb)
+        self.id_of(key).map(|id| self.objs[id as usize].aabb)
     }
 
     /// The sphere's centre and radius exactly as last given, or `None` for a stale key.
     #[must_use]
     pub fn sphere(&self, key: ProxyKey) -> Option<(Vec3, f32)> {
-        self.ids.get(key).map(|&id| self.spheres[id as usize])
+        self.id_of(key).map(|id| self.spheres[id as usize])
     }
 
     /// The level (0 = root) of the node holding the sphere, or `None` for a stale key.
     /// Spheres outside the bounds are at level 0.
     #[must_use]
     pub fn level_of(&self, key: ProxyKey) -> Option<u32> {
-        self.ids
-            .get(key)
-            .map(|&id| level_of(self.objs[id as usize].node))
+        self.id_of(key)
+            .map(|id| level_of(self.objs[id as usize].node))
     }
 
     /// The world bounds given to [`Octree::new`].
@@ -407,6 +407,22 @@ impl Octree {
         }
     }
 
+    /// The dense id of the live sphere `key` names, if any.
+    #[inline]
+    fn id_of(&self, key: ProxyKey) -> Option<u32> {
+        let id = *self.ids.get(crate::pair::slot(key) as usize)?;
+        (id != NONE && self.keys[id as usize] == key).then_some(id)
+    }
+
+    /// Records that `key` names dense id `id`.
+    fn set_id(&mut self, key: ProxyKey, id: u32) {
+        let s = crate::pair::slot(key) as usize;
+        if self.ids.len() <= s {
+            self.ids.resize(s + 1, NONE);
+        }
+        self.ids[s] = id;
+    }
+
     /// Appends a sphere that passed the checks under `key`.
     fn push(&mut self, key: ProxyKey, center: Vec3, radius: f32) {
         let at = self.grid.locate(center, radius);
@@ -422,7 +438,7 @@ impl Octree {
         });
         self.spheres.push((center, radius));
         self.keys.push(key);
-        self.ids.insert(key, id);
+        self.set_id(key, id);
         self.per_level[level_of(at.node) as usize] += 1;
         self.overflow += u32::from(at.outside);
         self.link(id, at.node);
@@ -454,7 +470,7 @@ impl Octree {
         self.spheres[to as usize] = self.spheres[from as usize];
         let key = self.keys[from as usize];
         self.keys[to as usize] = key;
-        self.ids.insert(key, to);
+        self.set_id(key, to);
     }
 
     /// Pushes object `id` at the front of `node`'s list.

@@ -21,14 +21,15 @@ impl Octree {
             "spheres and objects differ in length"
         );
         assert_eq!(self.keys.len(), n, "keys and objects differ in length");
-        assert_eq!(self.ids.len(), n, "key map and objects differ in length");
+        let mapped = self.ids.iter().filter(|&&id| id != super::NONE).count();
+        assert_eq!(mapped, n, "key map and objects differ in length");
         let mut per_level = [0u32; MAX_DEPTH as usize + 1];
         let mut overflow = 0;
         for (id, o) in self.objs.iter().enumerate() {
             let key = self.keys[id];
             assert_eq!(
-                self.ids.get(key),
-                Some(&(id as u32)),
+                self.id_of(key),
+                Some(id as u32),
                 "key map disagrees at id {id}"
             );
             let (c, r) = self.spheres[id];
