@@ -35,7 +35,7 @@ fn rtcd_example_straddler_stays_at_root() {
     assert_eq!(t.level_of(big), Some(0));
     assert_eq!(t.level_of(small), Some(1));
     // Octant 0 is the node right after the root.
-    assert_eq!(t.objs[t.ids[small] as usize].node, 1);
+    assert_eq!(t.objs[t.id_of(small).unwrap() as usize].node, 1);
     assert_eq!(t.stats().per_level[..2], [1, 1]);
     t.validate();
 }
@@ -208,7 +208,7 @@ fn loose_placement_follows_the_radius_and_the_centre() {
     let mut t = Octree::with_placement(unit(), 3, Placement::Loose).unwrap();
     assert_eq!(t.placement(), Placement::Loose);
     // Cells at levels 0..=3 are 2, 1, 0.5, 0.25 wide: half cells 1, 0.5, 0.25, 0.125.
-    let node_of = |t: &Octree, k: ProxyKey| t.objs[t.ids[k] as usize].node;
+    let node_of = |t: &Octree, k: ProxyKey| t.objs[t.id_of(k).unwrap() as usize].node;
     let small = t.insert(Vec3::splat(-0.5), 0.1).unwrap();
     assert_eq!(t.level_of(small), Some(3));
     // The centre −0.5 is the low corner of cell 2 of 8 (`[-0.5, -0.25)`) on each axis.
@@ -264,7 +264,7 @@ fn loose_placement_follows_the_radius_and_the_centre() {
 fn validate_catches_a_loose_sphere_placed_too_shallow() {
     let mut t = Octree::with_placement(unit(), 3, Placement::Loose).unwrap();
     let k = t.insert(Vec3::splat(0.3), 0.01).unwrap();
-    let id = t.ids[k];
+    let id = t.id_of(k).unwrap();
     // Relink it in its level-2 ancestor: the box still fits, but the rule says level 3.
     let node = cell::Cell::at(2, [2, 2, 2]).node();
     t.unlink(id);
