@@ -9,7 +9,7 @@
 //! ```
 
 use broadleaf::fixtures::sim::{DropConfig, IndexKind, World};
-use broadleaf::octree::{Octree, Placement};
+use broadleaf::octree::Placement;
 use broadleaf::{Aabb, Pair, Vec3, brute};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::collections::BTreeSet;
@@ -24,9 +24,9 @@ usage: falling_spheres [--n N] [--steps S] [--index octree|bvh] [--placement str
                        [--skin S] [--verify] [--out PATH] [--png PATH] [--frames F] [--seed SEED]
   --n N          spheres to drop (default 4000)
   --steps S      steps of 1/60 s (default 480)
-  --index KIND   where the spheres live: octree (default) or bvh
-  --placement P  the octree's placement: strict (default, RTCD 7.3) or loose
-  --skin S       the broadphase's pair cache skin in metres (Config::skin; default 0: off)
+  --index KIND   where the spheres live: octree (default) or, as dynamic bodies, the BVH
+  --placement P  the octree's placement: loose (the Config default) or strict (RTCD 7.3)
+  --skin S       a fixed fat-box margin in metres (Config::skin; default 0: adaptive)
   --verify       check every step's pairs against brute force over the spheres and walls
                  the world handed the broadphase
   --out PATH     animated GIF to write (default falling_spheres.gif)
@@ -47,7 +47,7 @@ struct Args {
     n: usize,
     steps: usize,
     index: IndexKind,
-    placement: Placement,
+    placement: Option<Placement>,
     skin: f32,
     verify: bool,
     out: PathBuf,
@@ -61,7 +61,7 @@ fn parse_args() -> Result<Args, String> {
         n: 4000,
         steps: 480,
         index: IndexKind::Octree,
-        placement: Placement::Strict,
+        placement: None,
         skin: 0.0,
         verify: false,
         out: PathBuf::from("falling_spheres.gif"),
@@ -86,11 +86,11 @@ fn parse_args() -> Result<Args, String> {
                 }
             }
             "--placement" => {
-                args.placement = match value()?.as_str() {
+                args.placement = Some(match value()?.as_str() {
                     "strict" => Placement::Strict,
                     "loose" => Placement::Loose,
                     other => return Err(format!("--placement {other}: expected strict or loose")),
-                }
+                })
             }
             "--verify" => args.verify = true,
             "--skin" => {
@@ -130,7 +130,9 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
     let mut config = DropConfig::new(args.n, RADIUS, args.seed);
     config.world.index = args.index;
     config.world.broadphase.skin = args.skin;
-    config.world.broadphase.octree_placement = args.placement;
+    if let Some(placement) = args.placement {
+        config.world.broadphase.octree_placement = placement;
+    }
     let scene = config.build()?;
     let mut world = scene.world;
     let view = View::new(&world, scene.interior);
@@ -141,10 +143,10 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         scene.interior.extent().x,
         scene.interior.extent().z,
         args.steps,
-        match (args.index, args.placement) {
+        match (args.index, world.broadphase().octree().placement()) {
             (IndexKind::Octree, Placement::Strict) => "octree (strict placement)",
             (IndexKind::Octree, Placement::Loose) => "octree (loose placement)",
-            (IndexKind::Bvh, _) => "BVH",
+            (IndexKind::Bvh, _) => "dynamic BVH",
         }
     );
 
@@ -323,26 +325,17 @@ type SphereView = (Vec3, f32, u32);
 type CellView = (u32, Aabb);
 
 /// Each sphere as `(centre, radius, octree level)` and the occupied octree cells as
-/// `(level, cell box)`: the picture files the spheres in a standalone [`Octree`] with the
-/// broadphase's bounds, depth and placement (the broadphase itself keeps a sorted grid).
+/// `(level, cell box)`, read from the broadphase's own octree (`BroadPhase::octree`): the level
+/// a sphere lives at is the one the step used.
 fn octree_view(world: &World) -> (Vec<SphereView>, Vec<CellView>) {
-    let config = world.broadphase().config();
-    let octree =
-        Octree::with_placement(config.bounds, config.octree_depth, config.octree_placement);
-    let Ok(mut octree) = octree else {
-        return (Vec::new(), Vec::new());
-    };
+    let octree = world.broadphase().octree();
     let spheres = world
         .positions()
         .iter()
         .zip(world.radii())
-        .map(|(&center, &radius)| {
-            let level = octree
-                .insert(center, radius)
-                .ok()
-                .and_then(|key| octree.level_of(key))
-                .unwrap_or(NO_LEVEL);
-            (center, radius, level)
+        .zip(world.sphere_keys())
+        .map(|((&center, &radius), &key)| {
+            (center, radius, octree.level_of(key).unwrap_or(NO_LEVEL))
         })
         .collect();
     let mut cells = Vec::new();
