@@ -6,19 +6,21 @@
 //! the last step.
 //!
 //! # Which structure when
-//! - **[`BroadPhase`]** — start here. One key space for spheres and rigid bodies, one sorted
-//!   pair list per [`BroadPhase::step`], plus `added` / `removed` events, ray casts and box
-//!   queries. It adapts by itself to how much of the world moves: a step is either a full
-//!   sorted sweep of every box or an incremental pass over the candidates of what moved
-//!   (fat boxes whose margin follows each proxy's own motion), whichever its work estimate
-//!   says is cheaper; [`BroadPhase::stats`] says which ran. Nothing in [`Config`] needs tuning
-//!   for speed.
+//! - **[`BroadPhase`]** — start here. One key space for spheres and rigid bodies: each sphere
+//!   lives in an [`Octree`] ([`BroadPhase::octree`]), each body in a dynamic or a static
+//!   [`Bvh`] ([`BroadPhase::bvh`]), all under the broadphase's keys. One sorted pair list per
+//!   [`BroadPhase::step`], plus `added` / `removed` events, collision groups, ray casts and box
+//!   queries. It adapts by itself to how much of the world moves: a step either runs the
+//!   structures' own pair passes over exact boxes, or has them hold fat boxes (whose margin
+//!   follows each proxy's own motion) and re-tests only the candidates of what moved, whichever
+//!   its work estimate says is cheaper; [`BroadPhase::stats`] says which ran. Nothing in
+//!   [`Config`] needs tuning for speed.
 //! - **[`Octree`]** — many moving spheres of similar size in a known region, on their own. A
 //!   top-down preallocated octree (Ericson, *Real-Time Collision Detection* 7.3), and a move
-//!   that keeps the node costs one store. Two [`Placement`]s: `Strict` (the default) keeps a
-//!   sphere in the deepest node whose split planes it does not straddle; `Loose` (RTCD 7.3.6,
-//!   looseness 2) puts every sphere at the level its radius fits (pick the depth with
-//!   [`octree::depth_for_loose`]).
+//!   that keeps the node costs one store. Two [`Placement`]s: `Strict` (the standalone
+//!   default) keeps a sphere in the deepest node whose split planes it does not straddle;
+//!   `Loose` (RTCD 7.3.6, looseness 2; the [`BroadPhase`] default) puts every sphere at the
+//!   level its radius fits (pick the depth with [`octree::depth_for_loose`]).
 //! - **[`Bvh`]** — rigid bodies of any shape and size, given by their world AABBs, on their own.
 //!   A binned-SAH bounding-volume hierarchy in a flat depth-first array, refitted bottom-up and
 //!   rebuilt when its quality degrades. Use it for static geometry queries too.

@@ -378,6 +378,40 @@ impl Grid {
         }
     }
 
+    /// The cells of `level` whose reach ([`Grid::reach_range`]) overlaps the grid range
+    /// `[lo, hi]`, as an inclusive range of cell coordinates per axis (empty if `lo > hi` on
+    /// some axis after clamping to the level).
+    #[inline]
+    pub(super) fn reaching_cells(
+        &self,
+        level: u32,
+        lo: [u16; 3],
+        hi: [u16; 3],
+    ) -> ([u32; 3], [u32; 3]) {
+        let shift = self.bits - level;
+        let size = 1i64 << shift;
+        let last = (1i64 << level) - 1;
+        let (grow_lo, grow_hi) = match self.placement {
+            Placement::Strict => (0, 0),
+            // A loose cell `k` reaches `[k·S − S/2, k·S + S − 1 + S/2]`.
+            Placement::Loose => (size / 2, size / 2),
+        };
+        let mut a = [0u32; 3];
+        let mut b = [0u32; 3];
+        for axis in 0..3 {
+            // Cells with `k·S − grow_lo <= hi` and `k·S + S − 1 + grow_hi >= lo`: `k` from
+            // `ceil((lo − grow_hi − S + 1) / S)` to `floor((hi + grow_lo) / S)`.
+            let n = i64::from(lo[axis]) - grow_hi - size + 1;
+            let first = (n.div_euclid(size) + i64::from(n.rem_euclid(size) != 0)).max(0);
+            let end = ((i64::from(hi[axis]) + grow_lo).div_euclid(size)).min(last);
+            if end < first {
+                return ([1; 3], [0; 3]);
+            }
+            (a[axis], b[axis]) = (first as u32, end as u32);
+        }
+        (a, b)
+    }
+
     /// True if the grid range of `cell`'s spheres ([`Grid::reach_range`]) overlaps the grid
     /// range `[lo, hi]`: the node may hold a sphere whose box overlaps a box with that range.
     #[inline]

@@ -8,6 +8,10 @@ use crate::geom::{self, Aabb};
 use crate::pair::ProxyKey;
 use glam::Vec3;
 
+/// Queries whose reaching cells over the occupied levels are at most this many read those
+/// cells' lists directly; larger ones walk the occupied subtrees.
+const DIRECT_CELLS: u64 = 96;
+
 impl Octree {
     /// Depth-first over occupied nodes from the root: `enter(cell)` decides whether to visit a
     /// node's spheres (`visit(id)`) and children; the root is always entered.
@@ -26,9 +30,49 @@ impl Octree {
 
     /// Visits the ids of every sphere whose integer range overlaps `aabb`'s (a superset of
     /// the spheres overlapping `aabb`).
-    fn candidates(&self, aabb: &Aabb, visit: impl FnMut(u32)) {
+    ///
+    /// A small query reads the lists of the cells that reach it directly, level by occupied
+    /// level: no walk down from the root, whose upper levels cost a visit each while holding
+    /// few spheres. A large one walks the occupied subtrees instead, whose masks skip empty
+    /// regions.
+    fn candidates(&self, aabb: &Aabb, mut visit: impl FnMut(u32)) {
         let (qlo, qhi) = (self.grid.quantize(aabb.min), self.grid.quantize(aabb.max));
-        self.traverse(|cell| self.grid.reaches(cell, qlo, qhi), visit);
+        let mut cells = 0u64;
+        for level in 1..=self.grid.depth {
+            if self.per_level[level as usize] > 0 {
+                let (a, b) = self.grid.reaching_cells(level, qlo, qhi);
+                cells += (0..3)
+                    .map(|i| u64::from((b[i] + 1).saturating_sub(a[i])))
+                    .product::<u64>();
+            }
+        }
+        if cells > DIRECT_CELLS {
+            self.traverse(|cell| self.grid.reaches(cell, qlo, qhi), visit);
+            return;
+        }
+        let mut list = |node: u32| {
+            let mut i = self.nodes.head(node);
+            while i != NONE {
+                visit(i);
+                i = self.objs[i as usize].next;
+            }
+        };
+        if self.per_level[0] > 0 {
+            list(0);
+        }
+        for level in 1..=self.grid.depth {
+            if self.per_level[level as usize] == 0 {
+                continue;
+            }
+            let (a, b) = self.grid.reaching_cells(level, qlo, qhi);
+            for z in a[2]..=b[2] {
+                for y in a[1]..=b[1] {
+                    for x in a[0]..=b[0] {
+                        list(Cell::at(level, [x, y, z]).node());
+                    }
+                }
+            }
+        }
     }
 
     /// Calls `f` with the key of every sphere whose AABB overlaps `aabb` (closed), once each,
