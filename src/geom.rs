@@ -365,6 +365,12 @@ pub(crate) fn ray_is_valid(origin: Vec3, dir: Vec3, max_t: f32) -> bool {
 
 use glam::DVec3;
 
+/// Relative size of the pad the structures add to their pruning distances and ray inflations
+/// for the queries that re-test exact shapes: far above the rounding of the `f32` node and
+/// slab tests (a few `2⁻²⁴` of the coordinates involved), so a shape the exact test accepts is
+/// never pruned by a node or candidate test that rounded the other way.
+const QUERY_PAD: f32 = 1e-5;
+
 /// The Euclidean distance from `p` to the closed box `b`, 0 when `p` is inside or on a face.
 /// Computed in `f64` and rounded once (to `+∞` only past `f32::MAX`), so no intermediate
 /// overflows, and it never decreases as `b` shrinks. An infinite face is fine; a NaN anywhere
@@ -533,6 +539,19 @@ fn at_most(t: f64, max_t: f32) -> Option<f32> {
 /// and `max_t`, both `>= 0`.
 pub(crate) fn cast_is_valid(center: Vec3, radius: f32, dir: Vec3, max_t: f32) -> bool {
     check_sphere(center, radius).is_ok() && dir.is_finite() && max_t.is_finite() && max_t >= 0.0
+}
+
+/// What the structures add to `radius` when they look for the boxes a sphere cast may touch
+/// ([`QUERY_PAD`] times the magnitude of the coordinates along the cast); `+∞` for a cast too
+/// long for `f32`, which then tests every candidate.
+pub(crate) fn cast_pad(center: Vec3, radius: f32, dir: Vec3, max_t: f32) -> f32 {
+    (center.abs().max_element() + dir.abs().max_element() * max_t + radius) * QUERY_PAD
+}
+
+/// What the structures add to `radius` when they look for the shapes within `radius` of `p`
+/// ([`QUERY_PAD`] times the magnitude of the coordinates involved).
+pub(crate) fn distance_pad(p: Vec3, radius: f32) -> f32 {
+    (p.abs().max_element() + radius) * QUERY_PAD
 }
 
 #[cfg(test)]
