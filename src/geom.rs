@@ -353,6 +353,197 @@ pub(crate) fn ray_is_valid(origin: Vec3, dir: Vec3, max_t: f32) -> bool {
     origin.is_finite() && dir.is_finite() && max_t >= 0.0
 }
 
+use glam::DVec3;
+
+/// Relative size of the pad the structures add to their pruning distances and ray inflations
+/// for the queries that re-test exact shapes: far above the rounding of the `f32` node and
+/// slab tests (a few `2⁻²⁴` of the coordinates involved), so a shape the exact test accepts is
+/// never pruned by a node or candidate test that rounded the other way.
+const QUERY_PAD: f32 = 1e-5;
+
+/// The Euclidean distance from `p` to the closed box `b`, 0 when `p` is inside or on a face.
+/// Computed in `f64` and rounded once (to `+∞` only past `f32::MAX`), so no intermediate
+/// overflows, and it never decreases as `b` shrinks. An infinite face is fine; a NaN anywhere
+/// or a non-finite `p` gives `+∞`, and an inverted box (such as [`Aabb::EMPTY`]) is at a
+/// positive distance from every point.
+#[must_use]
+pub fn point_aabb_distance(p: Vec3, b: &Aabb) -> f32 {
+    if !p.is_finite() || b.min.is_nan() || b.max.is_nan() {
+        return f32::INFINITY;
+    }
+    let (p, lo, hi) = (p.as_dvec3(), b.min.as_dvec3(), b.max.as_dvec3());
+    let gap = (lo - p).max(p - hi).max(DVec3::ZERO);
+    gap.length() as f32
+}
+
+/// The distance from `p` to the solid sphere, `max(|p − center| − radius, 0)`, computed in
+/// `f64` and rounded once; `+∞` if an input is not finite or the radius is negative.
+#[must_use]
+pub fn point_sphere_distance(p: Vec3, center: Vec3, radius: f32) -> f32 {
+    if !(p.is_finite() && check_sphere(center, radius).is_ok()) {
+        return f32::INFINITY;
+    }
+    let d = (p.as_dvec3() - center.as_dvec3()).length() - f64::from(radius);
+    d.max(0.0) as f32 + 0.0
+}
+
+/// The first `t ∈ [0, max_t]` at which the sphere `center + t·dir`, `radius` touches the
+/// sphere `other_center`, `other_radius` (centre distance `<= radius + other_radius`), `t` in
+/// units of `dir`: 0 if they touch or overlap at the start, and for a zero `dir` either 0 or
+/// `None`. `None` if they never touch in that range, if an input is not finite, or if a radius
+/// or `max_t` is negative.
+#[must_use]
+pub fn sphere_cast_sphere(
+    center: Vec3,
+    radius: f32,
+    dir: Vec3,
+    max_t: f32,
+    other_center: Vec3,
+    other_radius: f32,
+) -> Option<f32> {
+    if !cast_is_valid(center, radius, dir, max_t)
+        || check_sphere(other_center, other_radius).is_err()
+    {
+        return None;
+    }
+    let m = center.as_dvec3() - other_center.as_dvec3();
+    let r = f64::from(radius) + f64::from(other_radius);
+    first_touch(m, dir.as_dvec3(), r).and_then(|t| at_most(t, max_t))
+}
+
+/// The first `t ∈ [0, max_t]` at which the sphere `center + t·dir`, `radius` touches the closed
+/// box `b` (some point of the box within `radius` of the centre: touching counts), `t` in units
+/// of `dir`: 0 if they touch or overlap at the start, and for a zero `dir` either 0 or `None`.
+/// Exact up to rounding, corners and edges included. `None` if they never touch in that range,
+/// if an input is not finite, if `radius` or `max_t` is negative, or if `b` is inverted.
+///
+/// Ericson, *Real-Time Collision Detection* 5.5.7. The centres at which the sphere touches the
+/// box form the box's Minkowski sum with the sphere: a box with rounded edges and corners,
+/// the union of the three boxes `b` grown by `radius` along one axis only and the twelve
+/// capsules of radius `radius` around the edges. It lies inside `b` grown by `radius` on every
+/// side, so a ray missing that box misses it. Where the ray enters the grown box, the entry
+/// point is outside `b`'s slab on zero, one, two or three axes. Zero (a start inside `b`) or
+/// one: the point is on the rounded box itself (in `b` or on a face part), and nothing was
+/// touched earlier. Two: the point is in an
+/// edge's region, where the rounded box is that edge's capsule; a ray missing it can reach
+/// the rest of the rounded box only through that capsule or through the corner spheres at its
+/// ends, so the capsule decides. Three: a corner's region, and the ray can go on only through
+/// the regions of the three edges meeting there, so their three capsules decide. All of it is
+/// done in `f64` from the `f32` inputs, so no intermediate overflows.
+#[must_use]
+pub fn sphere_cast_aabb(center: Vec3, radius: f32, dir: Vec3, max_t: f32, b: &Aabb) -> Option<f32> {
+    if !cast_is_valid(center, radius, dir, max_t) || check_aabb(b).is_err() {
+        return None;
+    }
+    let (o, d, r) = (center.as_dvec3(), dir.as_dvec3(), f64::from(radius));
+    let (lo, hi) = (b.min.as_dvec3(), b.max.as_dvec3());
+    let (mut t0, mut t1) = (0.0f64, f64::from(max_t));
+    for a in 0..3 {
+        let (slab_lo, slab_hi) = (lo[a] - r, hi[a] + r);
+        if d[a] == 0.0 {
+            if o[a] < slab_lo || o[a] > slab_hi {
+                return None;
+            }
+            continue;
+        }
+        let (ta, tb) = ((slab_lo - o[a]) / d[a], (slab_hi - o[a]) / d[a]);
+        t0 = t0.max(ta.min(tb));
+        t1 = t1.min(ta.max(tb));
+        if t0 > t1 {
+            return None;
+        }
+    }
+    let p = o + d * t0;
+    let below = p.cmplt(lo).bitmask();
+    let above = p.cmpgt(hi).bitmask();
+    // The corner of `b` nearest the entry point on the axes where it is outside the slab.
+    let corner = DVec3::select(p.cmplt(lo), lo, hi);
+    let t = match (below | above).count_ones() {
+        0 | 1 => Some(t0),
+        2 => {
+            let axis = (!(below | above) & 7).trailing_zeros() as usize;
+            capsule_touch(o, d, r, corner, axis, lo[axis], hi[axis])
+        }
+        _ => (0..3)
+            .filter_map(|axis| capsule_touch(o, d, r, corner, axis, lo[axis], hi[axis]))
+            .reduce(f64::min),
+    }?;
+    // The rounded box lies inside the grown box: nothing touches before `t0`.
+    at_most(t.max(t0), max_t)
+}
+
+/// The first `t >= 0` at which `|m + t·d| <= r` (`m` is the start relative to the centre), in
+/// `f64`. With `c = |m|² − r²`, `b = m·d`, `a = |d|²`, the roots of `a t² + 2 b t + c` are
+/// `(−b ± √(b² − ac)) / a`; the smaller one is computed as `c / (−b + √(b² − ac))`, which does
+/// not cancel when `b < 0` (a ray moving towards the centre, the only case that can touch
+/// later). `c <= 0` touches at once; `b >= 0` never touches later (this includes `d = 0`).
+fn first_touch(m: DVec3, d: DVec3, r: f64) -> Option<f64> {
+    let c = m.length_squared() - r * r;
+    if c <= 0.0 {
+        return Some(0.0);
+    }
+    let b = m.dot(d);
+    if b >= 0.0 {
+        return None;
+    }
+    let disc = b * b - d.length_squared() * c;
+    (disc >= 0.0).then(|| c / (-b + disc.sqrt()))
+}
+
+/// The first `t >= 0` at which `o + t·d` is within `r` of the edge through `corner` along
+/// `axis`, spanning `lo..=hi` on that axis: the finite cylinder's side (the infinite cylinder,
+/// entered where the axis coordinate is in range) or either end sphere (which holds the
+/// cylinder's end disk, so a ray entering through a disk touches the sphere no later).
+fn capsule_touch(
+    o: DVec3,
+    d: DVec3,
+    r: f64,
+    corner: DVec3,
+    axis: usize,
+    lo: f64,
+    hi: f64,
+) -> Option<f64> {
+    let mut m = o - corner;
+    let mut dd = d;
+    m[axis] = 0.0;
+    dd[axis] = 0.0;
+    let side = first_touch(m, dd, r).filter(|&t| (lo..=hi).contains(&(o[axis] + t * d[axis])));
+    let end = |at: f64| {
+        let mut c = corner;
+        c[axis] = at;
+        first_touch(o - c, d, r)
+    };
+    [side, end(lo), end(hi)]
+        .into_iter()
+        .flatten()
+        .reduce(f64::min)
+}
+
+/// `t` rounded to `f32` if it is at most `max_t`.
+fn at_most(t: f64, max_t: f32) -> Option<f32> {
+    let t = t as f32;
+    (t <= max_t).then_some(t)
+}
+
+/// True if a sphere cast's arguments are usable: finite centre and direction, finite radius
+/// and `max_t`, both `>= 0`.
+pub(crate) fn cast_is_valid(center: Vec3, radius: f32, dir: Vec3, max_t: f32) -> bool {
+    check_sphere(center, radius).is_ok() && dir.is_finite() && max_t.is_finite() && max_t >= 0.0
+}
+
+/// What the structures add to `radius` when they look for the boxes a sphere cast may touch
+/// ([`QUERY_PAD`] times the magnitude of the coordinates along the cast); `+∞` for a cast too
+/// long for `f32`, which then tests every candidate.
+pub(crate) fn cast_pad(center: Vec3, radius: f32, dir: Vec3, max_t: f32) -> f32 {
+    (center.abs().max_element() + dir.abs().max_element() * max_t + radius) * QUERY_PAD
+}
+
+/// What the structures add to `radius` when they look for the shapes within `radius` of `p`
+/// ([`QUERY_PAD`] times the magnitude of the coordinates involved).
+pub(crate) fn distance_pad(p: Vec3, radius: f32) -> f32 {
+    (p.abs().max_element() + radius) * QUERY_PAD
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

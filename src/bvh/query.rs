@@ -1,10 +1,13 @@
-//! Box queries and ray casts against the current boxes (tree, then pending list). They take
-//! `&self` and keep their stack inline, so they do not allocate unless the tree is deeper than
-//! [`INLINE_STACK`].
+//! Box, sphere, ray, sphere-cast and nearest queries against the current boxes (tree and
+//! pending list), and the box-based candidate traversals the `BroadPhase` re-tests exactly.
+//! They take `&self` and keep their stack inline, so they do not allocate unless the tree is
+//! deeper than [`INLINE_STACK`], except [`Bvh::nearest`] for its result.
 
 use super::Bvh;
 use super::node::{INLINE_STACK, Node, SmallStack};
-use crate::geom::{Aabb, SimdBox, check_aabb, inverse_dir, ray_is_valid};
+use crate::geom::{
+    self, Aabb, SimdBox, check_aabb, check_sphere, inverse_dir, point_aabb_distance, ray_is_valid,
+};
 use crate::pair::ProxyKey;
 use glam::Vec3;
 use slotmap::Key;
@@ -173,11 +176,416 @@ impl Bvh {
         );
     }
 
+    /// Calls `visit(key, aabb)` for every live box `aabb` that, grown by `inflate` on every
+    /// side, the segment `origin + t·dir`, `t ∈ [0, best]` enters ([`Aabb::ray_entry`],
+    /// touching counts), once each; `best` starts at `max_t` and becomes
+    /// `min(best, returned value)` after each visit (a NaN return leaves it), so a box entered
+    /// exactly at `best` is still visited. The pending boxes come first, then the tree, nearer
+    /// child first. Nothing for a non-finite origin or direction, a NaN or negative `max_t`, or
+    /// a NaN or negative `inflate`.
+    pub(crate) fn ray_candidates(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        max_t: f32,
+        inflate: f32,
+        mut visit: impl FnMut(ProxyKey, &Aabb) -> f32,
+    ) {
+        if !ray_is_valid(origin, dir, max_t) || inflate.is_nan() || inflate < 0.0 {
+            return;
+        }
+        let inv = inverse_dir(dir);
+        let entry = |b: Aabb, limit: f32| b.grown(inflate).ray_entry(origin, inv, limit);
+        let mut best = max_t;
+        let mut consider = |key: ProxyKey, b: &SimdBox, best: &mut f32| {
+            let aabb = b.aabb();
+            if !key.is_null() && entry(aabb, *best).is_some() {
+                *best = best.min(visit(key, &aabb));
+            }
+        };
+        for (b, &key) in self.pending_boxes().iter().zip(self.pending_keys()) {
+            consider(key, b, &mut best);
+        }
+        let Some(root) = self.nodes.first() else {
+            return;
+        };
+        let Some(t_root) = entry(root.aabb(), best) else {
+            return;
+        };
+        let mut stack = SmallStack::<(u32, f32), INLINE_STACK>::new((0, 0.0));
+        stack.push((0, t_root));
+        while let Some((n, t_enter)) = stack.pop() {
+            if t_enter > best {
+                continue;
+            }
+            let node = &self.nodes[n as usize];
+            if node.is_leaf() {
+                for i in node.range() {
+                    consider(self.keys[i], &self.boxes[i], &mut best);
+                }
+                continue;
+            }
+            let (a, b) = node.children(n);
+            let ta = entry(self.nodes[a as usize].aabb(), best);
+            let tb = entry(self.nodes[b as usize].aabb(), best);
+            match (ta, tb) {
+                (Some(ta), Some(tb)) if tb < ta => {
+                    stack.push((a, ta));
+                    stack.push((b, tb));
+                }
+                (Some(ta), Some(tb)) => {
+                    stack.push((b, tb));
+                    stack.push((a, ta));
+                }
+                (Some(ta), None) => stack.push((a, ta)),
+                (None, Some(tb)) => stack.push((b, tb)),
+                (None, None) => {}
+            }
+        }
+    }
+
+    /// Calls `f(key, aabb)` for every live box `aabb` within `radius` of `p`
+    /// ([`geom::point_aabb_distance`] `<= radius`, so touching counts), once each, in no
+    /// particular order. Nodes are pruned by the same distance, which never decreases as a box
+    /// shrinks, so no box within `radius` is missed. Nothing for a non-finite `p` or a NaN or
+    /// negative `radius`.
+    pub(crate) fn within_distance(&self, p: Vec3, radius: f32, mut f: impl FnMut(ProxyKey, &Aabb)) {
+        if !p.is_finite() || radius.is_nan() || radius < 0.0 {
+            return;
+        }
+        let near = |b: &Aabb| point_aabb_distance(p, b) <= radius;
+        let mut consider = |key: ProxyKey, b: &SimdBox| {
+            let aabb = b.aabb();
+            if !key.is_null() && near(&aabb) {
+                f(key, &aabb);
+            }
+        };
+        for (b, &key) in self.pending_boxes().iter().zip(self.pending_keys()) {
+            consider(key, b);
+        }
+        self.walk(
+            |node| near(&node.aabb()),
+            |i| consider(self.keys[i], &self.boxes[i]),
+        );
+    }
+
+    /// Calls `f` with the key of every live box within `radius` of `center`
+    /// ([`geom::point_aabb_distance`] `<= radius`: the box overlaps the closed ball, touching
+    /// counts), each once, in no particular order. Nothing for a non-finite `center` or
+    /// `radius`, or a negative `radius`.
+    pub fn query_sphere(&self, center: Vec3, radius: f32, mut f: impl FnMut(ProxyKey)) {
+        if check_sphere(center, radius).is_ok() {
+            self.within_distance(center, radius, |key, _| f(key));
+        }
+    }
+
+    /// The first live box touched by the sphere `center + t·dir`, `radius`, `t ∈ [0, max_t]`,
+    /// with its `t` in units of `dir` (0 if it touches at the start), per
+    /// [`geom::sphere_cast_aabb`] (exact: edges and corners are rounded); ties go to the smaller
+    /// key. `None` if nothing is touched, or for a non-finite argument, a negative `radius` or
+    /// a negative `max_t`.
+    ///
+    /// Candidates are the boxes grown by `radius` plus a relative pad
+    /// ([`geom::sphere_cast_aabb`] works in `f64`, the slab tests in `f32`), nearer first.
+    #[must_use]
+    pub fn cast_sphere(
+        &self,
+        center: Vec3,
+        radius: f32,
+        dir: Vec3,
+        max_t: f32,
+    ) -> Option<(ProxyKey, f32)> {
+        if !geom::cast_is_valid(center, radius, dir, max_t) {
+            return None;
+        }
+        let inflate = radius + geom::cast_pad(center, radius, dir, max_t);
+        let mut best: Option<(ProxyKey, f32)> = None;
+        self.ray_candidates(center, dir, max_t, inflate, |key, aabb| {
+            let limit = best.map_or(max_t, |(_, t)| t);
+            if let Some(t) = geom::sphere_cast_aabb(center, radius, dir, limit, aabb) {
+                if best.is_none_or(|(bk, bt)| (t, key) < (bt, bk)) {
+                    best = Some((key, t));
+                }
+            }
+            best.map_or(max_t, |(_, t)| t)
+        });
+        best
+    }
+
+    /// The `k` live boxes nearest `point` by [`geom::point_aabb_distance`] (0 inside a box),
+    /// with their distances, sorted by `(distance, key)`: the first `k` of all boxes in that
+    /// order (all of them if there are fewer). Empty for `k == 0` or a non-finite `point`.
+    ///
+    /// An expanding search: starting from the distance to the boxes' bounds plus the spacing
+    /// `k` boxes spread evenly over those bounds would have, each round collects the boxes
+    /// within the radius and doubles it until `k` are within it or every box was; a box not
+    /// collected is farther than the radius, so the first `k` collected in `(distance, key)`
+    /// order are the answer.
+    #[must_use]
+    pub fn nearest(&self, point: Vec3, k: usize) -> Vec<(ProxyKey, f32)> {
+        let mut out = Vec::new();
+        let n = self.len();
+        if k == 0 || n == 0 || !point.is_finite() {
+            return out;
+        }
+        let bounds = self.pending_boxes().iter().fold(
+            self.nodes.first().map_or(Aabb::EMPTY, |r| r.aabb()),
+            |u, b| u.union(&b.aabb()),
+        );
+        let spacing =
+            bounds.extent().max_element().max(0.0) * (k as f32 / n as f32).min(1.0).cbrt();
+        let mut radius = point_aabb_distance(point, &bounds) + spacing;
+        loop {
+            out.clear();
+            self.within_distance(point, radius, |key, aabb| {
+                out.push((key, point_aabb_distance(point, aabb)));
+            });
+            if out.len() >= k.min(n) {
+                break;
+            }
+            radius = (radius * 2.0).max(f32::MIN_POSITIVE);
+        }
+        out.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        out.truncate(k);
+        out
+    }
+
     pub(super) fn pending_boxes(&self) -> &[SimdBox] {
         &self.boxes[self.tree_len..]
     }
 
     pub(super) fn pending_keys(&self) -> &[ProxyKey] {
         &self.keys[self.tree_len..]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bvh::BvhConfig;
+    use crate::rng::Rng;
+    use std::collections::BTreeMap;
+
+    /// The part of `t ∈ [0, max_t]` the segment `o + t·d` spends in the box `lo..=hi`, in
+    /// `f64`, by the test's own slab loop; `None` if it misses.
+    fn segment_in_box(o: Vec3, d: Vec3, max_t: f32, lo: Vec3, hi: Vec3) -> Option<(f64, f64)> {
+        let (mut t0, mut t1) = (0.0f64, f64::from(max_t));
+        for a in 0..3 {
+            let (o, d, lo, hi) = (
+                f64::from(o[a]),
+                f64::from(d[a]),
+                f64::from(lo[a]),
+                f64::from(hi[a]),
+            );
+            if d == 0.0 {
+                if o < lo || o > hi {
+                    return None;
+                }
+            } else {
+                let (a, b) = ((lo - o) / d, (hi - o) / d);
+                t0 = t0.max(a.min(b));
+                t1 = t1.min(a.max(b));
+            }
+        }
+        (t0 <= t1).then_some((t0, t1))
+    }
+
+    /// The distance from `p` to the box `lo..=hi`, in `f64`: `p` minus its clamp to the box.
+    fn box_distance(p: Vec3, b: &Aabb) -> f64 {
+        (0..3)
+            .map(|a| {
+                let x = f64::from(p[a]);
+                let q = x.clamp(f64::from(b.min[a]), f64::from(b.max[a]));
+                (x - q) * (x - q)
+            })
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    fn random_box(rng: &mut Rng) -> Aabb {
+        let c = rng.vec3_in(Vec3::splat(-25.0), Vec3::splat(25.0));
+        let half = match rng.below(8) {
+            0 => Vec3::ZERO,
+            1 => Vec3::new(rng.range(0.0, 10.0), 0.1, rng.range(0.0, 10.0)),
+            _ => rng.vec3_in(Vec3::splat(0.05), Vec3::splat(2.0)),
+        };
+        Aabb::new(c - half, c + half)
+    }
+
+    /// A tree with a built part, pending inserts, tombstones and boxes updated since the last
+    /// refit, with its own list of `(key, box)`.
+    fn world(seed: u64) -> (Bvh, Vec<(ProxyKey, Aabb)>) {
+        let mut rng = Rng::new(seed);
+        let boxes: Vec<Aabb> = (0..300).map(|_| random_box(&mut rng)).collect();
+        let config = BvhConfig {
+            max_leaf_size: 4,
+            ..BvhConfig::default()
+        };
+        let (mut bvh, keys) = Bvh::from_aabbs(config, &boxes).unwrap();
+        let mut shapes: Vec<(ProxyKey, Aabb)> = keys.into_iter().zip(boxes).collect();
+        for _ in 0..40 {
+            let b = random_box(&mut rng);
+            shapes.push((bvh.insert(b).unwrap(), b));
+        }
+        for _ in 0..30 {
+            let i = rng.below(shapes.len() as u32) as usize;
+            bvh.remove(shapes.swap_remove(i).0).unwrap();
+        }
+        for _ in 0..30 {
+            let i = rng.below(shapes.len() as u32) as usize;
+            let b = random_box(&mut rng);
+            bvh.update(shapes[i].0, b).unwrap();
+            shapes[i].1 = b;
+        }
+        (bvh, shapes)
+    }
+
+    #[test]
+    fn ray_candidates_visit_every_hit_box_exactly_once() {
+        let (bvh, shapes) = world(1);
+        let mut rng = Rng::new(101);
+        for q in 0..300 {
+            let o = rng.vec3_in(Vec3::splat(-30.0), Vec3::splat(30.0));
+            let d = match q % 7 {
+                0 => Vec3::ZERO,
+                1 => Vec3::Y * rng.range(-2.0, 2.0),
+                _ => rng.vec3_in(Vec3::splat(-2.0), Vec3::splat(2.0)),
+            };
+            let max_t = rng.range(0.0, 40.0);
+            let inflate = if q % 3 == 0 { 0.0 } else { rng.range(0.0, 3.0) };
+            let mut seen = BTreeMap::new();
+            bvh.ray_candidates(o, d, max_t, inflate, |key, aabb| {
+                assert_eq!(Some(*aabb), bvh.aabb(key));
+                *seen.entry(key).or_insert(0) += 1;
+                max_t
+            });
+            assert!(seen.values().all(|&n| n == 1), "a box visited twice");
+            let inv = inverse_dir(d);
+            for &(key, b) in &shapes {
+                let hit = b.grown(inflate).ray_entry(o, inv, max_t).is_some();
+                assert_eq!(seen.contains_key(&key), hit, "query {q} key {key:?}");
+                let m = Vec3::splat(inflate);
+                let inside = segment_in_box(o, d, max_t, b.min - m, b.max + m);
+                if inside.is_some_and(|(t0, t1)| t1 - t0 > 1e-3) {
+                    assert!(hit, "query {q}: a box the segment crosses was skipped");
+                }
+                let near = segment_in_box(o, d, max_t, b.min - m - 1e-3, b.max + m + 1e-3);
+                if near.is_none() {
+                    assert!(!hit, "query {q}: a box the segment misses was visited");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn ray_candidates_shrink_to_the_returned_value_and_keep_ties() {
+        let (mut bvh, mut shapes) = world(2);
+        let twin = Aabb::new(Vec3::new(5.0, 0.5, -2.5), Vec3::new(6.0, 1.5, -1.5));
+        for _ in 0..2 {
+            shapes.push((bvh.insert(twin).unwrap(), twin));
+        }
+        bvh.rebuild();
+        let mut rng = Rng::new(202);
+        for q in 0..300 {
+            let (o, d) = if q == 0 {
+                (Vec3::new(-30.0, 1.0, -2.0), Vec3::X)
+            } else {
+                (
+                    rng.vec3_in(Vec3::splat(-30.0), Vec3::splat(30.0)),
+                    rng.vec3_in(Vec3::splat(-1.0), Vec3::splat(1.0)),
+                )
+            };
+            let (max_t, inflate) = (60.0, 0.25);
+            let inv = inverse_dir(d);
+            let entry = |b: &Aabb| b.grown(inflate).ray_entry(o, inv, max_t);
+            let mut seen = Vec::new();
+            let mut last = f32::INFINITY;
+            bvh.ray_candidates(o, d, max_t, inflate, |key, aabb| {
+                seen.push(key);
+                let t = entry(aabb).unwrap_or(f32::NAN);
+                // No box entered behind the best so far is visited.
+                assert!(
+                    t <= last,
+                    "query {q}: visited a box entered behind the best"
+                );
+                last = last.min(t);
+                t
+            });
+            let best = shapes.iter().filter_map(|s| entry(&s.1)).reduce(f32::min);
+            let Some(best) = best else {
+                assert!(seen.is_empty());
+                continue;
+            };
+            for (key, b) in &shapes {
+                if entry(b) == Some(best) {
+                    assert!(
+                        seen.contains(key),
+                        "query {q}: a tie at the best t was skipped"
+                    );
+                }
+            }
+            if q == 0 {
+                assert!(shapes.iter().filter(|s| entry(&s.1) == Some(best)).count() >= 2);
+            }
+        }
+    }
+
+    #[test]
+    fn within_distance_visits_every_near_box_exactly_once() {
+        let (bvh, shapes) = world(3);
+        let mut rng = Rng::new(303);
+        for q in 0..300 {
+            let p = rng.vec3_in(Vec3::splat(-30.0), Vec3::splat(30.0));
+            let radius = match q % 5 {
+                0 => 0.0,
+                1 => rng.range(10.0, 40.0),
+                _ => rng.range(0.0, 5.0),
+            };
+            let mut seen = BTreeMap::new();
+            bvh.within_distance(p, radius, |key, aabb| {
+                assert_eq!(Some(*aabb), bvh.aabb(key));
+                *seen.entry(key).or_insert(0) += 1;
+            });
+            assert!(seen.values().all(|&n| n == 1), "a box visited twice");
+            for (key, b) in &shapes {
+                let near = point_aabb_distance(p, b) <= radius;
+                assert_eq!(seen.contains_key(key), near, "query {q} key {key:?}");
+                let (d, r) = (box_distance(p, b), f64::from(radius));
+                if near {
+                    assert!(d <= r + 1e-4, "query {q}: a box at {d} > {r} visited");
+                } else {
+                    assert!(d >= r - 1e-4, "query {q}: a box at {d} <= {r} skipped");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn candidate_traversals_refuse_bad_arguments() {
+        let (bvh, _) = world(4);
+        let mut n = 0;
+        let nan = f32::NAN;
+        for (o, d, max_t, inflate) in [
+            (Vec3::new(nan, 0.0, 0.0), Vec3::X, 10.0, 0.0),
+            (Vec3::ZERO, Vec3::new(0.0, f32::INFINITY, 0.0), 10.0, 0.0),
+            (Vec3::ZERO, Vec3::X, nan, 0.0),
+            (Vec3::ZERO, Vec3::X, -1.0, 0.0),
+            (Vec3::ZERO, Vec3::X, 10.0, -1.0),
+            (Vec3::ZERO, Vec3::X, 10.0, nan),
+        ] {
+            bvh.ray_candidates(o, d, max_t, inflate, |_, _| {
+                n += 1;
+                0.0
+            });
+        }
+        for (p, radius) in [
+            (Vec3::new(nan, 0.0, 0.0), 100.0),
+            (Vec3::splat(f32::INFINITY), 100.0),
+            (Vec3::ZERO, -1.0),
+            (Vec3::ZERO, nan),
+        ] {
+            bvh.within_distance(p, radius, |_, _| n += 1);
+        }
+        assert_eq!(n, 0);
     }
 }

@@ -1,6 +1,8 @@
-//! Box, sphere and ray queries, and the occupied-cell iterator. None of them allocates: they
-//! follow the node lists through occupied subtrees ([`Nodes::walk`](super::nodes::Nodes::walk)),
-//! entering a node only if the region its spheres can reach meets the query.
+//! Box, sphere, ray, sphere-cast and nearest queries, the box-based candidate traversals the
+//! `BroadPhase` re-tests exactly, and the occupied-cell iterator. They follow the node lists
+//! through occupied subtrees ([`Nodes::walk`](super::nodes::Nodes::walk)), entering a node only
+//! if the region its spheres can reach meets the query; none allocates but
+//! [`Octree::nearest`], for its result.
 
 use super::cell::Cell;
 use super::{NONE, Octree};
@@ -196,6 +198,174 @@ impl Octree {
         );
     }
 
+    /// Calls `visit(id, best)` for every sphere of every node whose reach box, grown by the
+    /// slack and by `inflate`, the segment `origin + t·dir`, `t ∈ [0, best]` enters, where
+    /// `best` starts at `max_t` and becomes `min(best, returned value)` after each visit (a NaN
+    /// return leaves it). Every sphere whose box grown by `inflate` the segment enters is
+    /// among them: the root is always entered, and below it a sphere's box lies in its node's
+    /// reach box grown by the slack.
+    fn ray_ids(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        max_t: f32,
+        inflate: f32,
+        mut visit: impl FnMut(u32, f32) -> f32,
+    ) {
+        let inv = geom::inverse_dir(dir);
+        let slack = self.grid.slack();
+        let best = core::cell::Cell::new(max_t);
+        self.traverse(
+            |cell| {
+                self.grid
+                    .reach_box(cell)
+                    .grown(slack)
+                    .grown(inflate)
+                    .ray_entry(origin, inv, best.get())
+                    .is_some()
+            },
+            |id| best.set(best.get().min(visit(id, best.get()))),
+        );
+    }
+
+    /// Calls `visit(key, aabb)` for every sphere whose stored box `aabb` (`center ± radius`),
+    /// grown by `inflate` on every side, the segment `origin + t·dir`, `t ∈ [0, best]` enters
+    /// ([`Aabb::ray_entry`], touching counts), once each; `best` starts at `max_t` and becomes
+    /// `min(best, returned value)` after each visit (a NaN return leaves it), so a sphere
+    /// entered exactly at `best` is still visited. Nodes come in walk order, not by distance.
+    /// Nothing for a non-finite origin or direction, a NaN or negative `max_t`, or a NaN or
+    /// negative `inflate`; no allocation.
+    #[allow(
+        dead_code,
+        reason = "a candidate traversal for `BroadPhase`, which re-tests exact shapes itself"
+    )]
+    pub(crate) fn ray_candidates(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        max_t: f32,
+        inflate: f32,
+        mut visit: impl FnMut(ProxyKey, &Aabb) -> f32,
+    ) {
+        if !geom::ray_is_valid(origin, dir, max_t) || inflate.is_nan() || inflate < 0.0 {
+            return;
+        }
+        let inv = geom::inverse_dir(dir);
+        self.ray_ids(origin, dir, max_t, inflate, |id, best| {
+            let aabb = &self.objs[id as usize].aabb;
+            match aabb.grown(inflate).ray_entry(origin, inv, best) {
+                Some(_) => visit(self.keys[id as usize], aabb),
+                None => best,
+            }
+        });
+    }
+
+    /// Calls `visit(id)` for every sphere of every node whose reach box, grown by the slack, is
+    /// within `radius` of `p` ([`geom::point_aabb_distance`]): a superset of the spheres whose
+    /// box is within `radius`, since that box lies in the grown reach box and the distance
+    /// does not decrease as a box shrinks.
+    fn near_ids(&self, p: Vec3, radius: f32, visit: impl FnMut(u32)) {
+        let slack = self.grid.slack();
+        self.traverse(
+            |cell| geom::point_aabb_distance(p, &self.grid.reach_box(cell).grown(slack)) <= radius,
+            visit,
+        );
+    }
+
+    /// Calls `f(key, aabb)` for every sphere whose stored box `aabb` (`center ± radius`) is
+    /// within `radius` of `p` ([`geom::point_aabb_distance`] `<= radius`, so touching counts),
+    /// once each, in no particular order. Nothing for a non-finite `p` or a NaN or negative
+    /// `radius`; no allocation.
+    #[allow(
+        dead_code,
+        reason = "a candidate traversal for `BroadPhase`, which re-tests exact shapes itself"
+    )]
+    pub(crate) fn within_distance(&self, p: Vec3, radius: f32, mut f: impl FnMut(ProxyKey, &Aabb)) {
+        if !p.is_finite() || radius.is_nan() || radius < 0.0 {
+            return;
+        }
+        self.near_ids(p, radius, |id| {
+            let aabb = &self.objs[id as usize].aabb;
+            if geom::point_aabb_distance(p, aabb) <= radius {
+                f(self.keys[id as usize], aabb);
+            }
+        });
+    }
+
+    /// The first sphere touched by the sphere `center + t·dir`, `radius`, `t ∈ [0, max_t]`,
+    /// with its `t` in units of `dir` (0 if it touches at the start), per
+    /// [`geom::sphere_cast_sphere`]; ties go to the smaller key. `None` if nothing is touched,
+    /// or for a non-finite argument, a negative `radius` or a negative `max_t`.
+    ///
+    /// Nodes are pruned by their reach box grown by `radius` plus a relative pad
+    /// ([`geom::sphere_cast_sphere`] works in `f64`, the node test in `f32`), and every sphere
+    /// of an entered node is tested exactly.
+    #[must_use]
+    pub fn cast_sphere(
+        &self,
+        center: Vec3,
+        radius: f32,
+        dir: Vec3,
+        max_t: f32,
+    ) -> Option<(ProxyKey, f32)> {
+        if !geom::cast_is_valid(center, radius, dir, max_t) {
+            return None;
+        }
+        let inflate = radius + geom::cast_pad(center, radius, dir, max_t);
+        let mut best: Option<(ProxyKey, f32)> = None;
+        self.ray_ids(center, dir, max_t, inflate, |id, limit| {
+            let (c, r) = self.spheres[id as usize];
+            if let Some(t) = geom::sphere_cast_sphere(center, radius, dir, limit, c, r) {
+                let key = self.keys[id as usize];
+                if best.is_none_or(|(bk, bt)| (t, key) < (bt, bk)) {
+                    best = Some((key, t));
+                }
+            }
+            best.map_or(max_t, |(_, t)| t)
+        });
+        best
+    }
+
+    /// The `k` spheres nearest `point` by [`geom::point_sphere_distance`] (0 inside a sphere),
+    /// with their distances, sorted by `(distance, key)`: the first `k` of all spheres in that
+    /// order (all of them if there are fewer). Empty for `k == 0` or a non-finite `point`.
+    ///
+    /// An expanding search: starting from the distance to the bounds plus the spacing `k`
+    /// spheres spread evenly over the bounds would have, each round computes the exact
+    /// distance of every sphere of the nodes within the radius (plus a relative pad, as the
+    /// node test rounds differently from the `f32` box corners) and doubles the radius until
+    /// `k` spheres are within it or every sphere was seen. A sphere not seen is farther than
+    /// the radius, so the first `k` seen in `(distance, key)` order are the answer.
+    #[must_use]
+    pub fn nearest(&self, point: Vec3, k: usize) -> Vec<(ProxyKey, f32)> {
+        let mut out = Vec::new();
+        let n = self.objs.len();
+        if k == 0 || n == 0 || !point.is_finite() {
+            return out;
+        }
+        let bounds = self.grid.bounds;
+        let spacing = bounds.extent().max_element() * (k as f32 / n as f32).min(1.0).cbrt();
+        let mut radius = geom::point_aabb_distance(point, &bounds) + spacing;
+        loop {
+            out.clear();
+            let mut within = 0;
+            let reach = radius + geom::distance_pad(point, radius);
+            self.near_ids(point, reach, |id| {
+                let (c, r) = self.spheres[id as usize];
+                let d = geom::point_sphere_distance(point, c, r);
+                within += usize::from(d <= radius);
+                out.push((self.keys[id as usize], d));
+            });
+            if within >= k || out.len() == n {
+                break;
+            }
+            radius = (radius * 2.0).max(f32::MIN_POSITIVE);
+        }
+        out.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        out.truncate(k);
+        out
+    }
+
     /// Calls `f(level, cell)` for every node that holds at least one sphere, parents before
     /// their children: the cell itself in strict mode, its loose bounds (the cell grown by half
     /// its size) in loose mode. Overflow spheres live in the root.
@@ -212,5 +382,256 @@ impl Octree {
                 }
             },
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Placement;
+    use crate::rng::Rng;
+    use std::collections::BTreeMap;
+
+    /// The part of `t ∈ [0, max_t]` the segment `o + t·d` spends in the box `lo..=hi`, in
+    /// `f64`, by the test's own slab loop; `None` if it misses.
+    fn segment_in_box(o: Vec3, d: Vec3, max_t: f32, lo: Vec3, hi: Vec3) -> Option<(f64, f64)> {
+        let (mut t0, mut t1) = (0.0f64, f64::from(max_t));
+        for a in 0..3 {
+            let (o, d, lo, hi) = (
+                f64::from(o[a]),
+                f64::from(d[a]),
+                f64::from(lo[a]),
+                f64::from(hi[a]),
+            );
+            if d == 0.0 {
+                if o < lo || o > hi {
+                    return None;
+                }
+            } else {
+                let (a, b) = ((lo - o) / d, (hi - o) / d);
+                t0 = t0.max(a.min(b));
+                t1 = t1.min(a.max(b));
+            }
+        }
+        (t0 <= t1).then_some((t0, t1))
+    }
+
+    /// The distance from `p` to the box `lo..=hi`, in `f64`: `p` minus its clamp to the box.
+    fn box_distance(p: Vec3, lo: Vec3, hi: Vec3) -> f64 {
+        (0..3)
+            .map(|a| {
+                let x = f64::from(p[a]);
+                let q = x.clamp(f64::from(lo[a]), f64::from(hi[a]));
+                (x - q) * (x - q)
+            })
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    /// A tree with spheres inside and outside its bounds (some of radius 0, some large,
+    /// some coincident), with its own list of `(key, centre, radius)`.
+    fn world(seed: u64, placement: Placement) -> (Octree, Vec<(ProxyKey, Vec3, f32)>) {
+        let mut rng = Rng::new(seed);
+        let bounds = Aabb::new(Vec3::splat(-20.0), Vec3::splat(20.0));
+        let mut tree = Octree::with_placement(bounds, 4, placement).unwrap();
+        let mut shapes = Vec::new();
+        for i in 0..300 {
+            let c = rng.vec3_in(Vec3::splat(-24.0), Vec3::splat(24.0));
+            let r = match i % 10 {
+                0 => 0.0,
+                1 => rng.range(4.0, 12.0),
+                _ => rng.range(0.05, 2.0),
+            };
+            let (c, r) = match shapes.last() {
+                Some(&(_, c, r)) if i % 50 == 7 => (c, r),
+                _ => (c, r),
+            };
+            shapes.push((tree.insert(c, r).unwrap(), c, r));
+        }
+        // Removals move other spheres to new dense slots; the list keeps what is live.
+        for _ in 0..30 {
+            let i = rng.below(shapes.len() as u32) as usize;
+            tree.remove(shapes.swap_remove(i).0).unwrap();
+        }
+        (tree, shapes)
+    }
+
+    fn own_box(c: Vec3, r: f32) -> (Vec3, Vec3) {
+        (
+            Vec3::new(c.x - r, c.y - r, c.z - r),
+            Vec3::new(c.x + r, c.y + r, c.z + r),
+        )
+    }
+
+    #[test]
+    fn ray_candidates_visit_every_hit_box_exactly_once() {
+        for (seed, placement) in [(1, Placement::Strict), (2, Placement::Loose)] {
+            let (tree, shapes) = world(seed, placement);
+            let mut rng = Rng::new(seed + 100);
+            for q in 0..300 {
+                let o = rng.vec3_in(Vec3::splat(-30.0), Vec3::splat(30.0));
+                let d = match q % 7 {
+                    0 => Vec3::ZERO,
+                    1 => Vec3::X * rng.range(-2.0, 2.0),
+                    _ => rng.vec3_in(Vec3::splat(-2.0), Vec3::splat(2.0)),
+                };
+                let max_t = rng.range(0.0, 40.0);
+                let inflate = if q % 3 == 0 { 0.0 } else { rng.range(0.0, 3.0) };
+                let mut seen = BTreeMap::new();
+                tree.ray_candidates(o, d, max_t, inflate, |key, aabb| {
+                    assert_eq!(Some(*aabb), tree.aabb(key));
+                    *seen.entry(key).or_insert(0) += 1;
+                    max_t
+                });
+                assert!(seen.values().all(|&n| n == 1), "a sphere visited twice");
+                let inv = geom::inverse_dir(d);
+                for &(key, c, r) in &shapes {
+                    let (lo, hi) = own_box(c, r);
+                    let grown = Aabb::new(lo, hi).grown(inflate);
+                    // The contract, box by box.
+                    let hit = grown.ray_entry(o, inv, max_t).is_some();
+                    assert_eq!(seen.contains_key(&key), hit, "query {q} key {key:?}");
+                    // The test's own slab loop agrees wherever it is clear-cut.
+                    let m = Vec3::splat(inflate);
+                    let inside = segment_in_box(o, d, max_t, lo - m, hi + m);
+                    if inside.is_some_and(|(t0, t1)| t1 - t0 > 1e-3) {
+                        assert!(hit, "query {q}: a box the segment crosses was skipped");
+                    }
+                    let near = segment_in_box(o, d, max_t, lo - m - 1e-3, hi + m + 1e-3);
+                    if near.is_none() {
+                        assert!(!hit, "query {q}: a box the segment misses was visited");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn ray_candidates_shrink_to_the_returned_value_and_keep_ties() {
+        let (mut tree, mut shapes) = world(3, Placement::Strict);
+        // Two coincident spheres: one entry t, two keys, both must be seen.
+        for _ in 0..2 {
+            let c = Vec3::new(5.0, 1.0, -2.0);
+            shapes.push((tree.insert(c, 0.5).unwrap(), c, 0.5));
+        }
+        let mut rng = Rng::new(33);
+        for q in 0..300 {
+            let o = if q == 0 {
+                Vec3::new(-30.0, 1.0, -2.0)
+            } else {
+                rng.vec3_in(Vec3::splat(-30.0), Vec3::splat(30.0))
+            };
+            let d = if q == 0 {
+                Vec3::X
+            } else {
+                rng.vec3_in(Vec3::splat(-1.0), Vec3::splat(1.0))
+            };
+            let (max_t, inflate) = (60.0, 0.25);
+            let inv = geom::inverse_dir(d);
+            let entry = |c: Vec3, r: f32| {
+                let (lo, hi) = own_box(c, r);
+                Aabb::new(lo, hi).grown(inflate).ray_entry(o, inv, max_t)
+            };
+            let mut seen = Vec::new();
+            let mut last = f32::INFINITY;
+            tree.ray_candidates(o, d, max_t, inflate, |key, aabb| {
+                seen.push(key);
+                let (c, r) = tree.sphere(key).unwrap();
+                assert_eq!(*aabb, Aabb::from_center_radius(c, r));
+                let t = entry(c, r).unwrap_or(f32::NAN);
+                assert!(
+                    t <= last,
+                    "query {q}: visited a box entered behind the best"
+                );
+                last = last.min(t);
+                t
+            });
+            let best = shapes
+                .iter()
+                .filter_map(|s| entry(s.1, s.2))
+                .reduce(f32::min);
+            let Some(best) = best else {
+                assert!(seen.is_empty());
+                continue;
+            };
+            for &(key, c, r) in &shapes {
+                if entry(c, r) == Some(best) {
+                    assert!(
+                        seen.contains(&key),
+                        "query {q}: a tie at the best t was skipped"
+                    );
+                }
+            }
+            if q == 0 {
+                let ties = shapes
+                    .iter()
+                    .filter(|s| entry(s.1, s.2) == Some(best))
+                    .count();
+                assert!(ties >= 2);
+            }
+        }
+    }
+
+    #[test]
+    fn within_distance_visits_every_near_box_exactly_once() {
+        for (seed, placement) in [(4, Placement::Strict), (5, Placement::Loose)] {
+            let (tree, shapes) = world(seed, placement);
+            let mut rng = Rng::new(seed + 100);
+            for q in 0..300 {
+                let p = rng.vec3_in(Vec3::splat(-30.0), Vec3::splat(30.0));
+                let radius = match q % 5 {
+                    0 => 0.0,
+                    1 => rng.range(10.0, 40.0),
+                    _ => rng.range(0.0, 5.0),
+                };
+                let mut seen = BTreeMap::new();
+                tree.within_distance(p, radius, |key, aabb| {
+                    assert_eq!(Some(*aabb), tree.aabb(key));
+                    *seen.entry(key).or_insert(0) += 1;
+                });
+                assert!(seen.values().all(|&n| n == 1), "a sphere visited twice");
+                for &(key, c, r) in &shapes {
+                    let (lo, hi) = own_box(c, r);
+                    let near = geom::point_aabb_distance(p, &Aabb::new(lo, hi)) <= radius;
+                    assert_eq!(seen.contains_key(&key), near, "query {q} key {key:?}");
+                    let d = box_distance(p, lo, hi);
+                    let r = f64::from(radius);
+                    if near {
+                        assert!(d <= r + 1e-4, "query {q}: a box at {d} > {r} visited");
+                    } else {
+                        assert!(d >= r - 1e-4, "query {q}: a box at {d} <= {r} skipped");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn candidate_traversals_refuse_bad_arguments() {
+        let (tree, _) = world(6, Placement::Strict);
+        let mut n = 0;
+        let nan = f32::NAN;
+        for (o, d, max_t, inflate) in [
+            (Vec3::new(nan, 0.0, 0.0), Vec3::X, 10.0, 0.0),
+            (Vec3::ZERO, Vec3::new(0.0, f32::INFINITY, 0.0), 10.0, 0.0),
+            (Vec3::ZERO, Vec3::X, nan, 0.0),
+            (Vec3::ZERO, Vec3::X, -1.0, 0.0),
+            (Vec3::ZERO, Vec3::X, 10.0, -1.0),
+            (Vec3::ZERO, Vec3::X, 10.0, nan),
+        ] {
+            tree.ray_candidates(o, d, max_t, inflate, |_, _| {
+                n += 1;
+                0.0
+            });
+        }
+        for (p, radius) in [
+            (Vec3::new(nan, 0.0, 0.0), 100.0),
+            (Vec3::splat(f32::INFINITY), 100.0),
+            (Vec3::ZERO, -1.0),
+            (Vec3::ZERO, nan),
+        ] {
+            tree.within_distance(p, radius, |_, _| n += 1);
+        }
+        assert_eq!(n, 0);
     }
 }
