@@ -56,9 +56,7 @@
 //! table; the last line is `queries mismatches=<n>`.
 
 use broadleaf::fixtures::rapier_world::{SceneWorld, record_pile};
-use broadleaf::fixtures::scene::{
-    Bodies, Churn, Feed, Frame, Gas, Idle, Rng, Scene, Spawn,
-};
+use broadleaf::fixtures::scene::{Bodies, Churn, Feed, Frame, Gas, Idle, Rng, Scene, Spawn};
 use broadleaf::rapier::Comparison;
 use broadleaf::{Aabb, BroadPhase, Config, Passes, Placement, ProxyKey, Vec3, brute, geom};
 use plotters::prelude::*;

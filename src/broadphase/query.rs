@@ -35,29 +35,146 @@ impl BroadPhase {
             return None;
         }
         let inv = geom::inverse_dir(dir);
-        let mut best: Option<(ProxyKey, f32)> = None;
-        let mut test = |key: ProxyKey, _: f32| {
-            let t = match self.store.shape[crate::pair::slot(key) as usize] {
-                Shape::Sphere { center, radius } => {
-                    geom::ray_sphere(origin, dir, center, radius, max_t)
-                }
-                Shape::Body { aabb, .. } => aabb.ray_entry(origin, inv, max_t),
-            };
-            if let Some(t) = t
-                && best.is_none_or(|(k, b)| (t, key) < (b, k))
-            {
-                best = Some((key, t));
+        self.first_hit(origin, dir, max_t, 0.0, |shape, limit| match shape {
+            Shape::Sphere { center, radius } => {
+                geom::ray_sphere(origin, dir, center, radius, limit)
             }
+            Shape::Body { aabb, .. } => aabb.ray_entry(origin, inv, limit),
+        })
+    }
+
+    /// The first proxy touched by the sphere `center + t·dir` of radius `radius`, for `t` in
+    /// `[0, max_t]`, with its `t` in units of `dir` (0 if it touches at the start; touching
+    /// counts). Shapes as the user gave them: spheres as spheres ([`geom::sphere_cast_sphere`]),
+    /// bodies as their boxes ([`geom::sphere_cast_aabb`]); ties go to the smaller key. `None`
+    /// for a non-finite argument, a negative radius or a negative `max_t`.
+    #[must_use]
+    pub fn cast_sphere(
+        &self,
+        center: Vec3,
+        radius: f32,
+        dir: Vec3,
+        max_t: f32,
+    ) -> Option<(ProxyKey, f32)> {
+        if !geom::cast_is_valid(center, radius, dir, max_t) {
+            return None;
+        }
+        let inflate = radius + geom::cast_pad(center, radius, dir, max_t);
+        self.first_hit(center, dir, max_t, inflate, |shape, limit| match shape {
+            Shape::Sphere {
+                center: c,
+                radius: r,
+            } => geom::sphere_cast_sphere(center, radius, dir, limit, c, r),
+            Shape::Body { aabb, .. } => geom::sphere_cast_aabb(center, radius, dir, limit, &aabb),
+        })
+    }
+
+    /// The smallest `(t, key)` of `hit(shape, limit)` over the proxies whose held boxes, grown
+    /// by `inflate`, the segment `origin + t·dir` meets before the best `t` so far: each
+    /// structure is walked nearer subtrees first and prunes what lies behind that `t`.
+    fn first_hit(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        max_t: f32,
+        inflate: f32,
+        hit: impl Fn(Shape, f32) -> Option<f32>,
+    ) -> Option<(ProxyKey, f32)> {
+        let best = core::cell::Cell::new(None::<(ProxyKey, f32)>);
+        let limit = || best.get().map_or(max_t, |(_, t)| t);
+        let visit = |key: ProxyKey, _: &Aabb| {
+            let shape = self.store.shape[crate::pair::slot(key) as usize];
+            if let Some(t) = hit(shape, limit())
+                && best.get().is_none_or(|(k, b)| (t, key) < (b, k))
+            {
+                best.set(Some((key, t)));
+            }
+            limit()
         };
-        self.octree.cast_ray_all_with(
-            origin,
-            dir,
-            max_t,
-            |c, r| Aabb::from_center_radius(c, r).ray_entry(origin, inv, max_t),
-            &mut test,
-        );
-        self.dynamic.cast_ray_all(origin, dir, max_t, &mut test);
-        self.statics.cast_ray_all(origin, dir, max_t, &mut test);
-        best
+        self.octree
+            .ray_candidates(origin, dir, max_t, inflate, visit);
+        self.dynamic
+            .ray_candidates(origin, dir, limit(), inflate, visit);
+        self.statics
+            .ray_candidates(origin, dir, limit(), inflate, visit);
+        best.get()
+    }
+
+    /// Calls `f` with every proxy whose shape, as the user gave it, is within `radius` of
+    /// `center` (touching counts): a sphere whose centre is within `radius + its radius`, a
+    /// body whose box is within `radius`. Each once, in no particular order; nothing for a
+    /// non-finite argument or a negative radius.
+    pub fn query_sphere(&self, center: Vec3, radius: f32, mut f: impl FnMut(ProxyKey)) {
+        if geom::check_sphere(center, radius).is_err() {
+            return;
+        }
+        let reach = radius + geom::distance_pad(center, radius);
+        self.within(center, reach, |key, shape| {
+            let inside = match shape {
+                Shape::Sphere {
+                    center: c,
+                    radius: r,
+                } => (c - center).length_squared() <= (r + radius) * (r + radius),
+                Shape::Body { aabb, .. } => geom::point_aabb_distance(center, &aabb) <= radius,
+            };
+            if inside {
+                f(key);
+            }
+        });
+    }
+
+    /// The `k` proxies whose shapes, as the user gave them, are nearest `point` (distance 0
+    /// inside: [`geom::point_sphere_distance`], [`geom::point_aabb_distance`]), with their
+    /// distances, sorted by `(distance, key)`; all of them if there are fewer. Empty for
+    /// `k == 0` or a non-finite `point`.
+    ///
+    /// An expanding search: from the distance to `Config::bounds` plus the spacing `k` proxies
+    /// spread evenly over the bounds would have, each round takes every proxy whose held box
+    /// is within the radius and doubles the radius until `k` of them are within it by their
+    /// exact distance (or every proxy was seen). A proxy not seen is farther than the radius.
+    #[must_use]
+    pub fn nearest(&self, point: Vec3, k: usize) -> Vec<(ProxyKey, f32)> {
+        let mut out = Vec::new();
+        let n = self.len();
+        if k == 0 || n == 0 || !point.is_finite() {
+            return out;
+        }
+        let bounds = self.config.bounds;
+        let spacing = bounds.extent().max_element() * (k as f32 / n as f32).min(1.0).cbrt();
+        let mut radius = geom::point_aabb_distance(point, &bounds) + spacing;
+        loop {
+            out.clear();
+            let mut within = 0;
+            let reach = radius + geom::distance_pad(point, radius);
+            self.within(point, reach, |key, shape| {
+                let d = match shape {
+                    Shape::Sphere { center, radius } => {
+                        geom::point_sphere_distance(point, center, radius)
+                    }
+                    Shape::Body { aabb, .. } => geom::point_aabb_distance(point, &aabb),
+                };
+                within += usize::from(d <= radius);
+                out.push((key, d));
+            });
+            if within >= k || out.len() >= n || radius == f32::INFINITY {
+                break;
+            }
+            radius = (radius * 2.0).max(f32::MIN_POSITIVE);
+        }
+        out.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        out.truncate(k);
+        out
+    }
+
+    /// Calls `f(key, shape)` for every proxy whose held box is within `radius` of `p`: a
+    /// superset of the proxies whose shapes are, since a shape lies in its held box.
+    fn within(&self, p: Vec3, radius: f32, mut f: impl FnMut(ProxyKey, Shape)) {
+        let shape = |k: ProxyKey| self.store.shape[crate::pair::slot(k) as usize];
+        self.octree
+            .within_distance(p, radius, |k, _| f(k, shape(k)));
+        self.dynamic
+            .within_distance(p, radius, |k, _| f(k, shape(k)));
+        self.statics
+            .within_distance(p, radius, |k, _| f(k, shape(k)));
     }
 }

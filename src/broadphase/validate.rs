@@ -75,8 +75,16 @@ impl BroadPhase {
         }
         assert_eq!(live.iter().sum::<usize>(), st.len(), "live count");
         assert_eq!(self.octree.len(), live[0], "octree holds unknown spheres");
-        assert_eq!(self.dynamic.len(), live[1], "dynamic BVH holds unknown bodies");
-        assert_eq!(self.statics.len(), live[2], "static BVH holds unknown bodies");
+        assert_eq!(
+            self.dynamic.len(),
+            live[1],
+            "dynamic BVH holds unknown bodies"
+        );
+        assert_eq!(
+            self.statics.len(),
+            live[2],
+            "static BVH holds unknown bodies"
+        );
         self.octree.validate();
         self.dynamic.validate();
         self.statics.validate();

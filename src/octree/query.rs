@@ -235,10 +235,6 @@ impl Octree {
     /// entered exactly at `best` is still visited. Nodes come in walk order, not by distance.
     /// Nothing for a non-finite origin or direction, a NaN or negative `max_t`, or a NaN or
     /// negative `inflate`; no allocation.
-    #[allow(
-        dead_code,
-        reason = "a candidate traversal for `BroadPhase`, which re-tests exact shapes itself"
-    )]
     pub(crate) fn ray_candidates(
         &self,
         origin: Vec3,
@@ -276,10 +272,6 @@ impl Octree {
     /// within `radius` of `p` ([`geom::point_aabb_distance`] `<= radius`, so touching counts),
     /// once each, in no particular order. Nothing for a non-finite `p` or a NaN or negative
     /// `radius`; no allocation.
-    #[allow(
-        dead_code,
-        reason = "a candidate traversal for `BroadPhase`, which re-tests exact shapes itself"
-    )]
     pub(crate) fn within_distance(&self, p: Vec3, radius: f32, mut f: impl FnMut(ProxyKey, &Aabb)) {
         if !p.is_finite() || radius.is_nan() || radius < 0.0 {
             return;
