@@ -175,14 +175,14 @@ fn queries_equal_brute_force_on_moving_worlds() {
             shapes.push((key, s));
         }
         for step in 0..12 {
-            for i in 0..shapes.len() {
+            for (key, shape) in shapes.iter_mut() {
                 if rng.chance(0.5) {
-                    let s = moved(&mut rng, shapes[i].1);
+                    let s = moved(&mut rng, *shape);
                     match s {
-                        S::Sphere(c, r) => bp.update_sphere(shapes[i].0, c, r).unwrap(),
-                        S::Body(b, _) => bp.update_body(shapes[i].0, b).unwrap(),
+                        S::Sphere(c, r) => bp.update_sphere(*key, c, r).unwrap(),
+                        S::Body(b, _) => bp.update_body(*key, b).unwrap(),
                     }
-                    shapes[i].1 = s;
+                    *shape = s;
                 }
             }
             if rng.chance(0.3) && !shapes.is_empty() {
