@@ -71,6 +71,16 @@
 //! - `profiler`: `rapier` with rapier's timing counters, for the comparisons that time it.
 //! - `fixtures`: benchmark and test support (`broadleaf::fixtures`: scenes, a small physics
 //!   loop, rapier worlds); not part of the broadphase.
+//! - `serde`: [`BroadPhase`] implements serde's `Serialize` and `Deserialize`, for snapshots
+//!   in any serde format. A snapshot holds the [`Config`], the step clock, every slot's
+//!   version with each live proxy's shape and [`CollisionGroups`], the free and quarantined
+//!   slots in order, and the previous step's pairs; the octree, the BVHs, fat boxes and
+//!   candidates are derived state, rebuilt on load (the first step after it runs a full
+//!   pass). A restored broadphase continues bit-identically: the same later operations give
+//!   the same keys and the same `pairs`, `added` and `removed`. A snapshot is checked as
+//!   input: a damaged one gives a deserialisation error naming what is wrong, or, if it is
+//!   still consistent (say, an edited coordinate), a broadphase whose invariants hold; never a
+//!   panic.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 

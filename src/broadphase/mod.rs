@@ -12,6 +12,8 @@
 
 mod query;
 mod radix;
+#[cfg(feature = "serde")]
+mod snapshot;
 mod step;
 mod store;
 mod validate;

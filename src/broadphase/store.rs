@@ -164,6 +164,23 @@ impl Store {
         }
     }
 
+    /// The free slots in reuse order (the last is taken first), and the quarantined ones in
+    /// the order they become free.
+    #[cfg(feature = "serde")]
+    pub(super) fn free_lists(&self) -> (&[u32], &[u32]) {
+        (&self.free, &self.quarantine)
+    }
+
+    /// Sets the free and quarantined lists and the live count of a store whose per-slot
+    /// arrays were filled directly (a restored snapshot); the caller has checked them
+    /// against the versions.
+    #[cfg(feature = "serde")]
+    pub(super) fn set_free_lists(&mut self, free: Vec<u32>, quarantine: Vec<u32>, live: usize) {
+        self.free = free;
+        self.quarantine = quarantine;
+        self.live = live;
+    }
+
     /// Heap bytes held (capacity, not length).
     pub(super) fn heap_bytes(&self) -> usize {
         let cap = |n: usize, one: usize| n * one;
