@@ -66,7 +66,7 @@ use cell::level_of;
 use glam::Vec3;
 use nodes::Nodes;
 use placement::Grid;
-use slotmap::SlotMap;
+use slotmap::{Key as _, SlotMap};
 
 /// The deepest octree accepted by `Octree::new`: levels `0..=MAX_DEPTH`. At depth 10 a cell's
 /// Morton code (10 bits per axis) still fits a `u32`, and so does the index of every node
@@ -90,8 +90,10 @@ pub enum Placement {
     Loose,
 }
 
-/// Per-sphere data, indexed by dense id (insertion order, so `update` streams). The pair pass
-/// reads `aabb`, `qmin`/`qmax` and `walk_key`; queries follow the node lists.
+/// Per-sphere data, indexed by id: the slot index of the sphere's key, so a caller that
+/// updates its spheres in key order streams through it, and a removal leaves a hole (`node ==
+/// NONE`) instead of moving another sphere. The pair pass reads `aabb`, `qmin`/`qmax` and
+/// `walk_key`; queries follow the node lists.
 #[derive(Clone, Copy, Debug)]
 struct Obj {
     /// `center ± radius`, the box every pair test uses. 24 bytes.
@@ -109,6 +111,19 @@ struct Obj {
     walk_key: u64,
 }
 const _: () = assert!(core::mem::size_of::<Obj>() == 56);
+
+impl Obj {
+    /// An id no sphere holds.
+    const HOLE: Obj = Obj {
+        aabb: Aabb::EMPTY,
+        qmin: [0; 3],
+        qmax: [0; 3],
+        node: NONE,
+        next: NONE,
+        prev: NONE,
+        walk_key: 0,
+    };
+}
 
 /// Per-depth occupancy and the cost of the last pair pass, from [`Octree::stats`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -156,15 +171,14 @@ impl Passes {
 pub struct Octree {
     /// Bounds, depth, placement and the integer grid.
     grid: Grid,
-    /// Hot data by dense id.
+    /// Hot data by id (see [`Obj`]).
     objs: Vec<Obj>,
-    /// Centre and radius by dense id, exactly as given.
+    /// Centre and radius by id, exactly as given.
     spheres: Vec<(Vec3, f32)>,
-    /// Dense id → key.
+    /// Id → key, the null key for a hole: a key is live iff `keys[its slot index]` is it.
     keys: Vec<ProxyKey>,
-    /// Key slot index → dense id, `NONE` if no sphere has a key with that slot index; a key
-    /// is live iff `keys[ids[slot]]` is that key (see [`Octree::id_of`]).
-    ids: Vec<u32>,
+    /// Live spheres.
+    live: usize,
     /// Mints keys for [`Octree::insert`].
     minted: SlotMap<ProxyKey, ()>,
     nodes: Nodes,
@@ -197,7 +211,7 @@ impl Octree {
             objs: Vec::new(),
             spheres: Vec::new(),
             keys: Vec::new(),
-            ids: Vec::new(),
+            live: 0,
             minted: SlotMap::with_key(),
             nodes: Nodes::new(cell::node_count(depth)),
             per_level: [0; MAX_DEPTH as usize + 1],
@@ -211,7 +225,7 @@ impl Octree {
     /// negative radius (tree unchanged); a sphere outside the bounds is accepted.
     pub fn insert(&mut self, center: Vec3, radius: f32) -> Result<ProxyKey, Error> {
         geom::check_sphere(center, radius)?;
-        if self.objs.len() >= (u32::MAX - 1) as usize {
+        if self.live >= (u32::MAX - 1) as usize {
             return Err(Error::Full);
         }
         let key = self.minted.insert(());
@@ -240,8 +254,8 @@ impl Octree {
         if self.id_of(key).is_some() {
             return self.update_checked(key, center, radius);
         }
-        if self.objs.len() >= (u32::MAX - 1) as usize {
-            return Err(Error::Full);
+        if key.is_null() || crate::pair::slot(key) >= u32::MAX - 1 {
+            return Err(Error::UnknownProxy);
         }
         self.push(key, center, radius);
         Ok(())
@@ -253,7 +267,6 @@ impl Octree {
         self.objs.capacity() * core::mem::size_of::<Obj>()
             + self.spheres.capacity() * 16
             + self.keys.capacity() * 8
-            + self.ids.capacity() * 4
             + self.nodes.heap_bytes()
             + self.passes.heap_bytes()
     }
@@ -300,31 +313,30 @@ impl Octree {
         let id = self.id_of(key).ok_or(Error::UnknownProxy)?;
         self.unlink(id);
         let i = id as usize;
-        let old = self.objs[i];
-        self.per_level[level_of(old.node) as usize] -= 1;
+        self.per_level[level_of(self.objs[i].node) as usize] -= 1;
         self.overflow -= u32::from(self.is_outside(id));
-        self.ids[crate::pair::slot(key) as usize] = NONE;
         self.minted.remove(key);
-        let last = self.objs.len() - 1;
-        if i != last {
-            self.relocate(last as u32, id);
+        self.objs[i] = Obj::HOLE;
+        self.keys[i] = ProxyKey::default();
+        self.live -= 1;
+        while self.objs.last().is_some_and(|o| o.node == NONE) {
+            self.objs.pop();
+            self.spheres.pop();
+            self.keys.pop();
         }
-        self.objs.pop();
-        self.spheres.pop();
-        self.keys.pop();
         Ok(())
     }
 
     /// Number of spheres.
     #[must_use]
     pub fn len(&self) -> usize {
-        self.objs.len()
+        self.live
     }
 
     /// True if the tree holds no sphere.
     #[must_use]
     pub fn is_empty(&self) -> bool {
-        self.objs.is_empty()
+        self.live == 0
     }
 
     /// True if `key` names a live sphere of this tree.
@@ -389,10 +401,12 @@ impl Octree {
         self.for_each_pair(|a, b| out.push(Pair::new(a, b)));
     }
 
-    /// Calls `f` with every sphere's key and box (`center ± radius`), in dense-id order.
+    /// Calls `f` with every sphere's key and box (`center ± radius`), in key slot order.
     pub fn for_each(&self, mut f: impl FnMut(ProxyKey, Aabb)) {
         for (key, obj) in self.keys.iter().zip(&self.objs) {
-            f(*key, obj.aabb);
+            if obj.node != NONE {
+                f(*key, obj.aabb);
+            }
         }
     }
 
@@ -407,44 +421,38 @@ impl Octree {
         }
     }
 
-    /// The dense id of the live sphere `key` names, if any.
+    /// The id of the live sphere `key` names, if any.
     #[inline]
     fn id_of(&self, key: ProxyKey) -> Option<u32> {
-        let id = *self.ids.get(crate::pair::slot(key) as usize)?;
-        (id != NONE && self.keys[id as usize] == key).then_some(id)
+        let id = crate::pair::slot(key);
+        (self.keys.get(id as usize) == Some(&key) && !key.is_null()).then_some(id)
     }
 
-    /// Records that `key` names dense id `id`.
-    fn set_id(&mut self, key: ProxyKey, id: u32) {
-        let s = crate::pair::slot(key) as usize;
-        if self.ids.len() <= s {
-            self.ids.resize(s + 1, NONE);
-        }
-        self.ids[s] = id;
-    }
-
-    /// Appends a sphere that passed the checks under `key`.
+    /// Adds a sphere that passed the checks under `key` (not live here) at its id.
     fn push(&mut self, key: ProxyKey, center: Vec3, radius: f32) {
         let at = self.grid.locate(center, radius);
-        let id = self.objs.len() as u32;
-        self.objs.push(Obj {
+        let id = crate::pair::slot(key);
+        let i = id as usize;
+        if self.objs.len() <= i {
+            self.objs.resize(i + 1, Obj::HOLE);
+            self.spheres.resize(i + 1, (Vec3::ZERO, 0.0));
+            self.keys.resize(i + 1, ProxyKey::default());
+        }
+        self.objs[i] = Obj {
             aabb: at.aabb,
             qmin: at.qmin,
             qmax: at.qmax,
-            node: NONE,
-            next: NONE,
-            prev: NONE,
-            walk_key: 0,
-        });
-        self.spheres.push((center, radius));
-        self.keys.push(key);
-        self.set_id(key, id);
+            ..Obj::HOLE
+        };
+        self.spheres[i] = (center, radius);
+        self.keys[i] = key;
+        self.live += 1;
         self.per_level[level_of(at.node) as usize] += 1;
         self.overflow += u32::from(at.outside);
         self.link(id, at.node);
     }
 
-    /// True if the sphere with dense id `id` is counted in `overflow` (only root spheres can
+    /// True if the sphere with id `id` is counted in `overflow` (only root spheres can
     /// be).
     fn is_outside(&self, id: u32) -> bool {
         let o = &self.objs[id as usize];
@@ -452,25 +460,6 @@ impl Octree {
             let (c, r) = self.spheres[id as usize];
             self.grid.is_outside(&o.aabb, c, r)
         }
-    }
-
-    /// Moves the unlinked-or-linked object `from` into dense slot `to` (whose own object was
-    /// already unlinked), fixing its list neighbours, its node's head and the key map.
-    fn relocate(&mut self, from: u32, to: u32) {
-        let o = self.objs[from as usize];
-        if o.prev == NONE {
-            self.nodes.set_head(o.node, to);
-        } else {
-            self.objs[o.prev as usize].next = to;
-        }
-        if o.next != NONE {
-            self.objs[o.next as usize].prev = to;
-        }
-        self.objs[to as usize] = o;
-        self.spheres[to as usize] = self.spheres[from as usize];
-        let key = self.keys[from as usize];
-        self.keys[to as usize] = key;
-        self.set_id(key, to);
     }
 
     /// Pushes object `id` at the front of `node`'s list.

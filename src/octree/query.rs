@@ -18,7 +18,7 @@ impl Octree {
     /// Depth-first over occupied nodes from the root: `enter(cell)` decides whether to visit a
     /// node's spheres (`visit(id)`) and children; the root is always entered.
     fn traverse(&self, enter: impl FnMut(&Cell) -> bool, mut visit: impl FnMut(u32)) {
-        if self.objs.is_empty() {
+        if self.is_empty() {
             return;
         }
         self.nodes.walk(Cell::ROOT, enter, |_, slot| {
@@ -331,7 +331,7 @@ impl Octree {
     #[must_use]
     pub fn nearest(&self, point: Vec3, k: usize) -> Vec<(ProxyKey, f32)> {
         let mut out = Vec::new();
-        let n = self.objs.len();
+        let n = self.live;
         if k == 0 || n == 0 || !point.is_finite() {
             return out;
         }
@@ -362,7 +362,7 @@ impl Octree {
     /// their children: the cell itself in strict mode, its loose bounds (the cell grown by half
     /// its size) in loose mode. Overflow spheres live in the root.
     pub fn for_each_occupied_cell(&self, mut f: impl FnMut(u32, Aabb)) {
-        if self.objs.is_empty() {
+        if self.is_empty() {
             return;
         }
         self.nodes.walk(

@@ -1,5 +1,6 @@
 //! The whole-tree invariant check.
 
+use slotmap::Key as _;
 use super::cell::{Cell, level_of};
 use super::{MAX_DEPTH, NONE, Octree};
 
@@ -21,12 +22,20 @@ impl Octree {
             "spheres and objects differ in length"
         );
         assert_eq!(self.keys.len(), n, "keys and objects differ in length");
-        let mapped = self.ids.iter().filter(|&&id| id != super::NONE).count();
-        assert_eq!(mapped, n, "key map and objects differ in length");
+        let live = self.objs.iter().filter(|o| o.node != NONE).count();
+        assert_eq!(live, self.live, "live count");
+        assert!(
+            self.objs.last().is_none_or(|o| o.node != NONE),
+            "a hole at the end"
+        );
         let mut per_level = [0u32; MAX_DEPTH as usize + 1];
         let mut overflow = 0;
         for (id, o) in self.objs.iter().enumerate() {
             let key = self.keys[id];
+            if o.node == NONE {
+                assert!(key.is_null(), "a hole at id {id} keeps a key");
+                continue;
+            }
             assert_eq!(
                 self.id_of(key),
                 Some(id as u32),
@@ -64,7 +73,7 @@ impl Octree {
     /// Walks every occupied node from the root through the child masks, checking each child
     /// bit and each node list.
     fn check_lists(&self) {
-        let n = self.objs.len();
+        let n = self.live;
         let mut reached = 0usize;
         let occupied = |child: &Cell| {
             assert!(
@@ -79,7 +88,10 @@ impl Octree {
             let mut prev = NONE;
             let mut i = self.nodes.head_at(slot);
             while i != NONE {
-                assert!((i as usize) < n, "node {node} links to dead id {i}");
+                assert!(
+                    self.objs.get(i as usize).is_some_and(|o| o.node != NONE),
+                    "node {node} links to dead id {i}"
+                );
                 let o = &self.objs[i as usize];
                 assert_eq!(
                     o.node, node,
@@ -115,7 +127,7 @@ mod tests {
     fn validate_catches_a_misplaced_sphere() {
         let mut t = Octree::new(Aabb::new(Vec3::splat(-1.0), Vec3::ONE), 3).unwrap();
         t.insert(Vec3::splat(0.5), 0.01).unwrap();
-        t.objs[0].node = 0;
+        t.objs[1].node = 0;
         t.validate();
     }
 

@@ -8,7 +8,7 @@
 //! into a contiguous walk-ordered array. A pass then never chases a list: each node is a run of
 //! that array.
 
-use super::Octree;
+use super::{NONE, Octree};
 use super::placement::walk_key_bits;
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
@@ -286,6 +286,7 @@ impl Octree {
                 self.objs
                     .iter()
                     .enumerate()
+                    .filter(|(_, o)| o.node != NONE)
                     .map(|(id, o)| (o.walk_key << 32) | id as u64),
             );
             radix_sort(items, items_tmp, counts, 32, key_bits);
@@ -302,6 +303,7 @@ impl Octree {
                 self.objs
                     .iter()
                     .enumerate()
+                    .filter(|(_, o)| o.node != NONE)
                     .map(|(id, o)| (o.walk_key, id as u32)),
             );
             wide.sort_unstable();
@@ -321,18 +323,21 @@ impl Octree {
         node_key: &mut Vec<u64>,
         keys: &mut Vec<ProxyKey>,
     ) {
-        let n = self.objs.len();
+        let n = self.live;
         node_key.clear();
         node_key.extend(order.clone().map(|(key, _)| key));
-        rank.resize(n, 0);
+        rank.resize(self.objs.len(), 0);
         for (pos, (_, id)) in order.enumerate() {
             rank[id as usize] = pos as u32;
         }
-        // `rank` is a permutation of `0..n`: every entry below is overwritten, so the
+        // `rank` maps the live ids onto `0..n`: every entry below is overwritten, so the
         // buffers only change length when the sphere count does.
         hot.resize(n, Hot::EMPTY);
         keys.resize(n, ProxyKey::default());
         for ((o, &key), &pos) in self.objs.iter().zip(&self.keys).zip(rank.iter()) {
+            if o.node == NONE {
+                continue;
+            }
             hot[pos as usize] = Hot {
                 bx: SimdBox::new(&o.aabb),
                 qmin: o.qmin,
