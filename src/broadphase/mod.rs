@@ -517,7 +517,7 @@ impl BroadPhase {
     #[inline]
     pub fn update_sphere(&mut self, key: ProxyKey, center: Vec3, radius: f32) -> Result<(), Error> {
         let slot = self.check_sphere_update(key, center, radius)?;
-        self.set_shape(key, slot, Shape::Sphere { center, radius });
+        self.set_sphere(key, slot, center, radius);
         Ok(())
     }
 
@@ -526,7 +526,7 @@ impl BroadPhase {
     pub fn update_body(&mut self, key: ProxyKey, aabb: Aabb) -> Result<(), Error> {
         let slot = self.check_body_update(key, &aabb)?;
         let kind = self.body_kind(slot);
-        self.set_shape(key, slot, Shape::Body { aabb, kind });
+        self.set_body(key, slot, &aabb, kind);
         Ok(())
     }
 
@@ -541,7 +541,7 @@ impl BroadPhase {
         }
         for &(key, center, radius) in updates {
             let slot = crate::pair::slot(key);
-            self.set_shape(key, slot, Shape::Sphere { center, radius });
+            self.set_sphere(key, slot, center, radius);
         }
         Ok(())
     }
@@ -558,7 +558,7 @@ impl BroadPhase {
         for &(key, aabb) in updates {
             let slot = crate::pair::slot(key);
             let kind = self.body_kind(slot);
-            self.set_shape(key, slot, Shape::Body { aabb, kind });
+            self.set_body(key, slot, &aabb, kind);
         }
         Ok(())
     }
@@ -593,13 +593,69 @@ impl BroadPhase {
         }
     }
 
-    /// Applies a checked update of the live proxy `key` in `slot`: the new exact box, and in
-    /// its structure either the exact box (full pass regime) or, if the exact box left the old
-    /// fat box, a new fat box.
+    /// Applies a checked update of the live sphere `key` in `slot`: the new exact box, and in
+    /// the octree either the exact sphere (full pass regime) or, if the exact box left the old
+    /// fat box, a new fat sphere. Centre and radius arrive as values, not as a `Shape` built by
+    /// the caller: reading such a temporary back as one wide load right after its field-wise
+    /// stores stalls on store forwarding.
     #[inline]
-    fn set_shape(&mut self, key: ProxyKey, slot: u32, shape: Shape) {
+    fn set_sphere(&mut self, key: ProxyKey, slot: u32, center: Vec3, radius: f32) {
         let s = slot as usize;
-        let exact = self.exact_box(&shape);
+        let r = (radius + self.config.margin).min(f32::MAX);
+        let exact = SimdBox::from_center_radius(center, r);
+        self.note_motion(s, &exact);
+        // Field by field: a whole new `Shape` is built on the stack and copied with wide loads
+        // that stall on the store forwarding of its narrow stores.
+        match &mut self.store.shape[s] {
+            Shape::Sphere {
+                center: c,
+                radius: r,
+            } => (*c, *r) = (center, radius),
+            other => *other = Shape::Sphere { center, radius },
+        }
+        self.store.exact[s] = exact;
+        if self.cached {
+            self.refresh_fat(slot, &exact);
+        } else {
+            // The octree holds the exact sphere; the next step is a full pass, which reads no
+            // escape marks.
+            self.store.held[s] = exact;
+            let placed = self.octree.update_checked(key, center, r);
+            debug_assert!(placed.is_ok(), "a live sphere missing from the octree");
+            self.mark(slot, flag::MOVED);
+        }
+    }
+
+    /// [`BroadPhase::set_sphere`] for a body of `kind` with its new box.
+    #[inline]
+    fn set_body(&mut self, key: ProxyKey, slot: u32, aabb: &Aabb, kind: BodyKind) {
+        let s = slot as usize;
+        let m = self.config.margin;
+        let exact = if m == 0.0 {
+            SimdBox::new(aabb)
+        } else {
+            SimdBox::new(&finite_grown(aabb, m))
+        };
+        self.note_motion(s, &exact);
+        match &mut self.store.shape[s] {
+            Shape::Body { aabb: a, .. } => *a = *aabb,
+            other => *other = Shape::Body { aabb: *aabb, kind },
+        }
+        self.store.exact[s] = exact;
+        if self.cached {
+            self.refresh_fat(slot, &exact);
+        } else {
+            self.store.held[s] = exact;
+            let placed = self.tree_mut(kind).update_checked(key, &exact.aabb());
+            debug_assert!(placed.is_ok(), "a live body missing from its BVH");
+            self.mark(slot, flag::MOVED);
+        }
+    }
+
+    /// Records how far slot `s` moved per step since its last update (its new exact box is
+    /// `exact`), for its fat margin and the pass estimate.
+    #[inline]
+    fn note_motion(&mut self, s: usize, exact: &SimdBox) {
         let old = self.store.exact[s];
         let moved = ((exact.min + exact.max) - (old.min + old.max))
             .abs()
@@ -612,22 +668,13 @@ impl BroadPhase {
             self.fast_movers += 1;
         }
         self.store.stamp[s] = self.now;
-        self.store.shape[s] = shape;
-        self.store.exact[s] = exact;
-        if !self.cached {
-            // The structure holds the exact box; the next step is a full pass, which reads no
-            // escape marks.
-            self.store.held[s] = exact;
-            let placed = match shape {
-                Shape::Sphere { center, radius } => {
-                    let r = (radius + self.config.margin).min(f32::MAX);
-                    self.octree.update_checked(key, center, r)
-                }
-                Shape::Body { kind, .. } => self.tree_mut(kind).update_checked(key, &exact.aabb()),
-            };
-            debug_assert!(placed.is_ok(), "a live proxy missing from its structure");
-            self.mark(slot, flag::MOVED);
-        } else if self.store.held[s].contains(&exact) {
+    }
+
+    /// In the incremental regime: keeps the fat box if it still holds `exact`, else gives the
+    /// slot a new one, which its structure holds from now on.
+    #[inline]
+    fn refresh_fat(&mut self, slot: u32, exact: &SimdBox) {
+        if self.store.held[slot as usize].contains(exact) {
             self.mark(slot, flag::MOVED);
         } else {
             self.hold(slot, true);

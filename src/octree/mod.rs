@@ -280,7 +280,9 @@ impl Octree {
     }
 
     /// [`Octree::update`] for a sphere its caller has already checked (`check_sphere`).
-    #[inline]
+    /// Always inlined: the centre then stays in registers (passed to a call it goes through
+    /// memory, and storing it again right after reading it back stalls).
+    #[inline(always)]
     pub(crate) fn update_checked(
         &mut self,
         key: ProxyKey,
@@ -290,21 +292,29 @@ impl Octree {
         let id = self.id_of(key).ok_or(Error::UnknownProxy)?;
         let at = self.grid.locate(center, radius);
         let i = id as usize;
-        let was_outside = self.is_outside(id);
+        let old_node = self.objs[i].node;
+        if old_node == 0 || at.outside {
+            let was_outside = self.is_outside(id);
+            self.overflow = self.overflow - u32::from(was_outside) + u32::from(at.outside);
+        }
         self.spheres[i] = (center, radius);
-        let old = self.objs[i];
-        self.overflow = self.overflow - u32::from(was_outside) + u32::from(at.outside);
         let o = &mut self.objs[i];
         o.aabb = at.aabb;
         o.qmin = at.qmin;
         o.qmax = at.qmax;
-        if old.node != at.node {
-            self.per_level[level_of(old.node) as usize] -= 1;
-            self.per_level[level_of(at.node) as usize] += 1;
-            self.unlink(id);
-            self.link(id, at.node);
+        if old_node != at.node {
+            self.relink(id, old_node, at.node);
         }
         Ok(())
+    }
+
+    /// Moves sphere `id` from node `from` to node `to`.
+    #[inline(never)]
+    fn relink(&mut self, id: u32, from: u32, to: u32) {
+        self.per_level[level_of(from) as usize] -= 1;
+        self.per_level[level_of(to) as usize] += 1;
+        self.unlink(id);
+        self.link(id, to);
     }
 
     /// Removes a sphere; its key is never valid again. `Err(UnknownProxy)` for a stale or

@@ -215,7 +215,7 @@ impl Grid {
 
     /// Where a sphere goes: its box, the box's grid range, its node, and whether it is kept in
     /// the root for not fitting.
-    #[inline]
+    #[inline(always)]
     pub(super) fn locate(&self, center: Vec3, radius: f32) -> Located {
         let aabb = Aabb::from_center_radius(center, radius);
         let qmin = self.quantize(aabb.min);
