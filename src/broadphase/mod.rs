@@ -617,11 +617,9 @@ impl BroadPhase {
         if self.cached {
             self.refresh_fat(slot, &exact);
         } else {
-            // The octree holds the exact sphere; the next step is a full pass, which reads no
-            // escape marks.
-            self.store.held[s] = exact;
-            let placed = self.octree.update_checked(key, center, r);
-            debug_assert!(placed.is_ok(), "a live sphere missing from the octree");
+            // The octree holds the exact sphere (`held` is kept only while fat boxes are); the
+            // next step is a full pass, which reads no escape marks.
+            self.octree.update_live(key, center, r);
             self.mark(slot, flag::MOVED);
         }
     }
@@ -645,7 +643,6 @@ impl BroadPhase {
         if self.cached {
             self.refresh_fat(slot, &exact);
         } else {
-            self.store.held[s] = exact;
             let placed = self.tree_mut(kind).update_checked(key, &exact.aabb());
             debug_assert!(placed.is_ok(), "a live body missing from its BVH");
             self.mark(slot, flag::MOVED);

@@ -49,8 +49,9 @@ pub(super) struct Store {
     pub(super) shape: Vec<Shape>,
     /// The box pairs are computed on: the shape's box grown by `Config::margin`. 32 bytes.
     pub(super) exact: Vec<SimdBox>,
-    /// The box its structure (octree or BVH) holds for it: the exact box, or a fat box
-    /// around it while the incremental pass runs. 32 bytes.
+    /// The box its structure (octree or BVH) holds for it while the incremental pass runs: a
+    /// fat box around the exact one (outside that regime the structure holds the exact box and
+    /// this is stale). 32 bytes.
     pub(super) held: Vec<SimdBox>,
     /// Collision groups. 8 bytes.
     pub(super) groups: Vec<CollisionGroups>,

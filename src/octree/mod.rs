@@ -290,6 +290,21 @@ impl Octree {
         radius: f32,
     ) -> Result<(), Error> {
         let id = self.id_of(key).ok_or(Error::UnknownProxy)?;
+        self.update_id(id, center, radius);
+        Ok(())
+    }
+
+    /// [`Octree::update_checked`] of a key its caller knows is live here (the `BroadPhase`,
+    /// which holds every live sphere here under its key): no key check, one cache line fewer
+    /// for a caller that updates in no particular order.
+    #[inline(always)]
+    pub(crate) fn update_live(&mut self, key: ProxyKey, center: Vec3, radius: f32) {
+        debug_assert!(self.id_of(key).is_some(), "update_live of a key not live here");
+        self.update_id(crate::pair::slot(key), center, radius);
+    }
+
+    #[inline(always)]
+    fn update_id(&mut self, id: u32, center: Vec3, radius: f32) {
         let at = self.grid.locate(center, radius);
         let i = id as usize;
         let old_node = self.objs[i].node;
@@ -305,7 +320,6 @@ impl Octree {
         if old_node != at.node {
             self.relink(id, old_node, at.node);
         }
-        Ok(())
     }
 
     /// Moves sphere `id` from node `from` to node `to`.
