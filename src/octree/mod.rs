@@ -299,7 +299,10 @@ impl Octree {
     /// for a caller that updates in no particular order.
     #[inline(always)]
     pub(crate) fn update_live(&mut self, key: ProxyKey, center: Vec3, radius: f32) {
-        debug_assert!(self.id_of(key).is_some(), "update_live of a key not live here");
+        debug_assert!(
+            self.id_of(key).is_some(),
+            "update_live of a key not live here"
+        );
         self.update_id(crate::pair::slot(key), center, radius);
     }
 
@@ -416,6 +419,44 @@ impl Octree {
             Placement::Strict => self.strict_pairs(&mut p.walk, &mut p.strict, f),
             Placement::Loose => self.loose_pairs(&mut p.walk, &mut p.loose, f),
         };
+        self.passes = p;
+    }
+
+    /// The pairs of [`Octree::for_each_pair`], found in chunks over rayon's current pool:
+    /// each buffer of `out` is cleared, then gets `map(a, b)` of the pairs one chunk found,
+    /// where that is `Some` (each pair goes to one buffer, once; which one is unspecified).
+    /// `alongside` runs concurrently, with shared access to the tree (for queries). A strict
+    /// tree's pass runs as one task, into `out[0]`.
+    #[cfg(feature = "parallel")]
+    pub(crate) fn for_each_pair_chunked<M, A>(
+        &mut self,
+        out: &mut [Vec<u64>],
+        map: &M,
+        alongside: A,
+    ) where
+        M: Fn(ProxyKey, ProxyKey) -> Option<u64> + Sync,
+        A: FnOnce(&Octree) + Send,
+    {
+        let mut p = core::mem::take(&mut self.passes);
+        let tree = &*self;
+        let pass = || match tree.grid.placement {
+            Placement::Strict => {
+                for o in out.iter_mut() {
+                    o.clear();
+                }
+                let Some(o) = out.first_mut() else {
+                    return PassCost::default();
+                };
+                tree.strict_pairs(&mut p.walk, &mut p.strict, |a, b| {
+                    if let Some(x) = map(a, b) {
+                        o.push(x);
+                    }
+                })
+            }
+            Placement::Loose => tree.loose_pairs_chunked(&mut p.walk, &mut p.loose, out, map),
+        };
+        let (cost, ()) = rayon::join(pass, || alongside(tree));
+        self.last_pass = cost;
         self.passes = p;
     }
 

@@ -1,8 +1,8 @@
 //! The whole-tree invariant check.
 
-use slotmap::Key as _;
 use super::cell::{Cell, level_of};
 use super::{MAX_DEPTH, NONE, Octree};
+use slotmap::Key as _;
 
 impl Octree {
     /// Checks every invariant and panics with a message naming the first one broken: each

@@ -8,8 +8,8 @@
 //! into a contiguous walk-ordered array. A pass then never chases a list: each node is a run of
 //! that array.
 
-use super::{NONE, Octree};
 use super::placement::walk_key_bits;
+use super::{NONE, Octree};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
 use crate::sweep::{self, Ordered};
@@ -86,6 +86,59 @@ pub(super) struct Scratch {
     pub(super) node_key: Vec<u64>,
     pub(super) keys: Vec<ProxyKey>,
     pub(super) sweeps: Sweeps,
+    /// The parallel sort's buffers (see [`Octree::sort_into_walk_order_par`]).
+    #[cfg(feature = "parallel")]
+    par: ParSort,
+}
+
+/// The most parts a parallel walk-order sort splits the spheres into: part indices are bytes.
+#[cfg(feature = "parallel")]
+pub(super) const MAX_PARTS: usize = 64;
+
+/// Buffers of the parallel walk-order sort, reused by every pass; they never shrink.
+#[cfg(feature = "parallel")]
+#[derive(Clone, Debug, Default)]
+struct ParSort {
+    /// Walk keys sampled from the spheres, sorted, to pick the parts' first keys from.
+    sample: Vec<u64>,
+    /// The first walk key of every part but the first, increasing.
+    splitters: Vec<u64>,
+    /// By sphere id: its part, `u8::MAX` for a hole.
+    part_of: Vec<u8>,
+    /// Per part: its sorting buffers.
+    parts: Vec<PartSort>,
+    /// The parts' first walk positions, and the sphere count last.
+    bounds: Vec<u32>,
+}
+
+/// One part's buffers: its spheres' ids in id order, `(walk key << 32) | index into ids`,
+/// the radix sort's scratch, and each id's position in the part's walk order.
+#[cfg(feature = "parallel")]
+#[derive(Clone, Debug, Default)]
+struct PartSort {
+    ids: Vec<u32>,
+    items: Vec<u64>,
+    tmp: Vec<u64>,
+    counts: Vec<u32>,
+    rank: Vec<u32>,
+}
+
+#[cfg(feature = "parallel")]
+impl ParSort {
+    fn heap_bytes(&self) -> usize {
+        self.sample.capacity() * 8
+            + self.splitters.capacity() * 8
+            + self.part_of.capacity()
+            + self.bounds.capacity() * 4
+            + self
+                .parts
+                .iter()
+                .map(|p| {
+                    (p.ids.capacity() + p.counts.capacity() + p.rank.capacity()) * 4
+                        + (p.items.capacity() + p.tmp.capacity()) * 8
+                })
+                .sum::<usize>()
+    }
 }
 
 impl Scratch {
@@ -99,6 +152,17 @@ impl Scratch {
             + v(self.hot.capacity(), size_of_val(&Hot::EMPTY))
             + v(self.node_key.capacity() + self.keys.capacity(), 8)
             + v(self.sweeps.a.capacity() + self.sweeps.b.capacity(), 8)
+            + self.par_heap_bytes()
+    }
+
+    #[cfg(feature = "parallel")]
+    fn par_heap_bytes(&self) -> usize {
+        self.par.heap_bytes()
+    }
+
+    #[cfg(not(feature = "parallel"))]
+    fn par_heap_bytes(&self) -> usize {
+        0
     }
 }
 
@@ -345,6 +409,197 @@ impl Octree {
                 pos,
             };
             keys[pos as usize] = key;
+        }
+    }
+}
+
+/// Walk keys sampled per part to pick the parts' first keys from: enough that the parts'
+/// sizes stay within a few percent of each other.
+#[cfg(feature = "parallel")]
+const SAMPLES_PER_PART: usize = 64;
+/// Sphere ids per task of the parallel sort's first pass (which part each sphere is in).
+#[cfg(feature = "parallel")]
+const ID_CHUNK: usize = 8192;
+
+#[cfg(feature = "parallel")]
+impl Octree {
+    /// [`Octree::sort_into_walk_order`] split over rayon's current pool: the walk keys are cut
+    /// into at most `parts` ranges of about equal sphere counts (quantiles of a sample), each
+    /// a run of the walk order, and each range is gathered, sorted and copied out by its own
+    /// task. Keys and ids are unique together, so the walk order is the serial sort's, whatever
+    /// the cut. Trees too deep for 32-bit keys, and `parts < 2`, sort serially.
+    pub(super) fn sort_into_walk_order_par(&self, s: &mut Scratch, parts: usize) {
+        use rayon::prelude::*;
+        let key_bits = walk_key_bits(self.grid.depth);
+        let parts = parts.min(MAX_PARTS);
+        if key_bits > 32 || parts < 2 {
+            self.sort_into_walk_order(s);
+            return;
+        }
+        let Scratch {
+            hot,
+            node_key,
+            keys,
+            par,
+            ..
+        } = s;
+        let objs = &self.objs;
+        let stride = (objs.len() / (parts * SAMPLES_PER_PART)).max(1);
+        par.sample.clear();
+        par.sample.extend(
+            objs.iter()
+                .step_by(stride)
+                .filter(|o| o.node != NONE)
+                .map(|o| o.walk_key),
+        );
+        if par.sample.is_empty() {
+            self.sort_into_walk_order(s);
+            return;
+        }
+        par.sample.sort_unstable();
+        par.splitters.clear();
+        for p in 1..parts {
+            let k = par.sample[par.sample.len() * p / parts];
+            if par.splitters.last().is_none_or(|&last| last < k) {
+                par.splitters.push(k);
+            }
+        }
+        // Which part each sphere is in (the number of splitters at most its key), and the
+        // parts' sizes.
+        let splitters = &par.splitters;
+        par.part_of.resize(objs.len(), u8::MAX);
+        let counts = par
+            .part_of
+            .par_chunks_mut(ID_CHUNK)
+            .zip(objs.par_chunks(ID_CHUNK))
+            .map(|(part_of, objs)| {
+                let mut counts = [0u32; MAX_PARTS];
+                for (q, o) in part_of.iter_mut().zip(objs) {
+                    *q = if o.node == NONE {
+                        u8::MAX
+                    } else {
+                        let p = splitters.partition_point(|&x| x <= o.walk_key);
+                        counts[p] += 1;
+                        p as u8
+                    };
+                }
+                counts
+            })
+            .reduce(
+                || [0; MAX_PARTS],
+                |a, b| core::array::from_fn(|i| a[i] + b[i]),
+            );
+        let np = splitters.len() + 1;
+        par.bounds.clear();
+        par.bounds.push(0);
+        for c in &counts[..np] {
+            par.bounds.push(par.bounds.last().copied().unwrap_or(0) + c);
+        }
+        let n = self.live;
+        debug_assert_eq!(par.bounds[np] as usize, n);
+        hot.resize(n, Hot::EMPTY);
+        node_key.resize(n, 0);
+        keys.resize(n, ProxyKey::default());
+        if par.parts.len() < np {
+            par.parts.resize_with(np, PartSort::default);
+        }
+        let job = Parts {
+            tree: self,
+            part_of: &par.part_of,
+            bounds: &par.bounds,
+            key_bits,
+        };
+        job.fill(0, &mut par.parts[..np], hot, node_key, keys);
+    }
+}
+
+/// What every part of a parallel walk-order sort reads.
+#[cfg(feature = "parallel")]
+struct Parts<'a> {
+    tree: &'a Octree,
+    part_of: &'a [u8],
+    bounds: &'a [u32],
+    key_bits: u32,
+}
+
+#[cfg(feature = "parallel")]
+impl Parts<'_> {
+    /// Fills the walk-ordered copies of parts `first..first + parts.len()`, whose positions
+    /// `hot`, `node_key` and `keys` are, halving the parts between two tasks until one is left.
+    fn fill(
+        &self,
+        first: usize,
+        parts: &mut [PartSort],
+        hot: &mut [Hot],
+        node_key: &mut [u64],
+        keys: &mut [ProxyKey],
+    ) {
+        if let [part] = parts {
+            self.fill_one(first, part, hot, node_key, keys);
+            return;
+        }
+        let mid = parts.len() / 2;
+        let at = (self.bounds[first + mid] - self.bounds[first]) as usize;
+        let (pa, pb) = parts.split_at_mut(mid);
+        let (ha, hb) = hot.split_at_mut(at);
+        let (na, nb) = node_key.split_at_mut(at);
+        let (ka, kb) = keys.split_at_mut(at);
+        rayon::join(
+            || self.fill(first, pa, ha, na, ka),
+            || self.fill(first + mid, pb, hb, nb, kb),
+        );
+    }
+
+    /// Part `p`: its ids in id order (a branch-free pass over the part bytes), sorted by walk
+    /// key, then copied out by the serial sort's scattered stores in id order.
+    fn fill_one(
+        &self,
+        p: usize,
+        part: &mut PartSort,
+        hot: &mut [Hot],
+        node_key: &mut [u64],
+        keys: &mut [ProxyKey],
+    ) {
+        let (tree, m) = (self.tree, hot.len());
+        let base = self.bounds[p];
+        // One slot of slack: every id is stored, and the length advances past those of `p`.
+        part.ids.clear();
+        part.ids.resize(m + 1, 0);
+        let mut len = 0;
+        for (id, &q) in self.part_of.iter().enumerate() {
+            part.ids[len] = id as u32;
+            len += usize::from(usize::from(q) == p);
+        }
+        debug_assert_eq!(len, m);
+        part.ids.truncate(m);
+        part.items.clear();
+        part.items.extend(
+            part.ids
+                .iter()
+                .enumerate()
+                .map(|(i, &id)| (tree.objs[id as usize].walk_key << 32) | i as u64),
+        );
+        radix_sort(
+            &mut part.items,
+            &mut part.tmp,
+            &mut part.counts,
+            32,
+            self.key_bits,
+        );
+        part.rank.resize(m, 0);
+        for (j, (&x, nk)) in part.items.iter().zip(node_key.iter_mut()).enumerate() {
+            *nk = x >> 32;
+            part.rank[x as u32 as usize] = j as u32;
+        }
+        for (&id, &j) in part.ids.iter().zip(&part.rank) {
+            let o = &tree.objs[id as usize];
+            hot[j as usize] = Hot {
+                bx: SimdBox::new(&o.aabb),
+                qmin: o.qmin,
+                qmax: o.qmax,
+                pos: base + j,
+            };
+            keys[j as usize] = tree.keys[id as usize];
         }
     }
 }
