@@ -98,13 +98,17 @@ const MAX_TASKS: usize = 64;
 #[cfg(feature = "parallel")]
 #[derive(Clone, Debug, Default)]
 pub(super) struct Parallel {
-    /// Pairs found, packed: one buffer per chunk of the octree's pass, then the bodies'.
-    found: Vec<Vec<u64>>,
-    /// The pair sort's buffers.
-    sort: radix::ParSort,
+    /// The first keys of the pair sort's parts (see [`radix::split_points`]).
+    splitters: Vec<u64>,
+    /// Pairs found, packed, per producer and per part of the sort: one producer per chunk of
+    /// the octree's pass, then the bodies' task.
+    found: Vec<Vec<Vec<u64>>>,
+    /// The pair sort's second buffers (one per part) and its parts' bounds.
+    sort_tmp: Vec<Vec<u64>>,
+    sort_bounds: Vec<usize>,
     /// Per part of the event diff: its `added` and `removed`.
     diff: Vec<[Vec<u64>; 2]>,
-    /// The parts' first positions in the current and the previous pair lists.
+    /// The diff's parts' first positions in the current and the previous pair lists.
     cur_at: Vec<usize>,
     prev_at: Vec<usize>,
 }
@@ -113,16 +117,15 @@ pub(super) struct Parallel {
 impl Parallel {
     /// Heap bytes held (capacities).
     pub(super) fn heap_bytes(&self) -> usize {
-        self.sort.heap_bytes()
-            + (self.found.iter().map(Vec::capacity).sum::<usize>()
-                + self
-                    .diff
-                    .iter()
-                    .map(|[a, r]| a.capacity() + r.capacity())
-                    .sum::<usize>()
-                + self.cur_at.capacity()
-                + self.prev_at.capacity())
-                * 8
+        let lists = |v: &[Vec<u64>]| v.iter().map(Vec::capacity).sum::<usize>();
+        (self.splitters.capacity()
+            + self.found.iter().map(|f| lists(f)).sum::<usize>()
+            + lists(&self.sort_tmp)
+            + self.sort_bounds.capacity()
+            + self.diff.iter().map(|d| lists(d)).sum::<usize>()
+            + self.cur_at.capacity()
+            + self.prev_at.capacity())
+            * 8
     }
 }
 
@@ -386,40 +389,50 @@ impl BroadPhase {
 
     /// [`BroadPhase::structure_pairs`] and the sort, over rayon's current pool in `tasks`
     /// tasks per split phase: the octree's pass in chunks, beside one task for the BVH
-    /// passes and the sphere × body queries (each into its own buffer), then the parallel
-    /// radix sort of all of them into `fresh`. `fresh` ends as the serial path leaves it.
+    /// passes and the sphere × body queries. Each producer cuts its pairs into the sort's
+    /// parts as it finds them (at the last step's quantiles), and each part is then sorted
+    /// into `fresh` by its own task. `fresh` ends as the serial path leaves it.
     #[cfg(feature = "parallel")]
     fn sorted_pairs_par(&mut self, tasks: usize, bits: u32) {
-        let (store, groups) = (&self.store, self.any_groups);
-        let map = |a: ProxyKey, b: ProxyKey| {
-            let (a, b) = (crate::pair::slot(a), crate::pair::slot(b));
-            (!groups || store.groups[a as usize].allows(store.groups[b as usize]))
-                .then(|| pack(a, b))
-        };
         let par = &mut self.par;
+        let slots = self.store.slots() as u64;
+        radix::split_points(&self.prev_packed, tasks, slots, &mut par.splitters);
+        let parts = par.splitters.len() + 1;
         if par.found.len() < tasks + 1 {
             par.found.resize_with(tasks + 1, Vec::new);
         }
+        for found in &mut par.found[..tasks + 1] {
+            if found.len() < parts {
+                found.resize_with(parts, Vec::new);
+            }
+            for part in &mut found[..parts] {
+                part.clear();
+            }
+        }
+        let (store, groups, splitters) = (&self.store, self.any_groups, &par.splitters[..]);
+        let emit = |found: &mut Vec<Vec<u64>>, a: ProxyKey, b: ProxyKey| {
+            let (a, b) = (crate::pair::slot(a), crate::pair::slot(b));
+            if !groups || store.groups[a as usize].allows(store.groups[b as usize]) {
+                let p = pack(a, b);
+                found[radix::part_of(splitters, p)].push(p);
+            }
+        };
         let (chunks, rest) = par.found[..tasks + 1].split_at_mut(tasks);
         let bodies = &mut rest[0];
-        bodies.clear();
         let (dynamic, statics) = (&mut self.dynamic, &self.statics);
-        self.octree.for_each_pair_chunked(chunks, &map, |octree| {
-            let mut push = |a, b| {
-                if let Some(p) = map(a, b) {
-                    bodies.push(p);
-                }
-            };
+        self.octree.for_each_pair_chunked(chunks, &emit, |octree| {
+            let mut push = |a, b| emit(bodies, a, b);
             dynamic.for_each_pair(&mut push);
             dynamic.for_each_pair_with(statics, &mut push);
             sphere_body_pairs(octree, dynamic, statics, &mut push);
         });
-        radix::sort_u64_par(
+        radix::sort_parts(
             &par.found[..tasks + 1],
+            parts,
             &mut self.fresh,
-            &mut par.sort,
+            &mut par.sort_tmp,
+            &mut par.sort_bounds,
             bits,
-            tasks,
         );
     }
 

@@ -171,25 +171,22 @@ impl Octree {
 
     /// [`Octree::loose_pairs`] split over rayon's current pool: the walk-order sort in up to
     /// `out.len()` parts, then the runs in `out.len()` chunks of about equal sphere counts,
-    /// each passed by its own task with its own pass state and scratch. Chunk `c` clears
-    /// `out[c]`, then pushes `map(a, b)` of each pair it finds where that is `Some`. Every pair
-    /// is found from one run, as in the serial pass, so once; the tests and nodes counted are
-    /// the serial pass's.
+    /// each passed by its own task with its own pass state and scratch. Chunk `c` calls
+    /// `emit(&mut out[c], a, b)` for each pair it finds. Every pair is found from one run, as
+    /// in the serial pass, so once; the tests and nodes counted are the serial pass's.
     #[cfg(feature = "parallel")]
-    pub(super) fn loose_pairs_chunked<M>(
+    pub(super) fn loose_pairs_chunked<S, E>(
         &self,
         ws: &mut walk::Scratch,
         s: &mut Scratch,
-        out: &mut [Vec<u64>],
-        map: &M,
+        out: &mut [S],
+        emit: &E,
     ) -> PassCost
     where
-        M: Fn(ProxyKey, ProxyKey) -> Option<u64> + Sync,
+        S: Send,
+        E: Fn(&mut S, ProxyKey, ProxyKey) + Sync,
     {
         use rayon::prelude::*;
-        for o in out.iter_mut() {
-            o.clear();
-        }
         let k = out.len();
         if self.objs.is_empty() || k == 0 {
             return PassCost::default();
@@ -232,11 +229,7 @@ impl Octree {
                     t: Tester {
                         keys,
                         tests: 0,
-                        emit: |a, b| {
-                            if let Some(p) = map(a, b) {
-                                out.push(p);
-                            }
-                        },
+                        emit: |a, b| emit(out, a, b),
                     },
                     sweeps,
                     dense,
@@ -588,10 +581,9 @@ mod tests {
                     .build()
                     .unwrap();
                 for chunks in [1, 2, 5, 64] {
-                    let mut out = vec![vec![u64::MAX]; chunks];
-                    pool.install(|| {
-                        t.for_each_pair_chunked(&mut out, &|a, b| Some(pack(a, b)), |_| ())
-                    });
+                    let mut out = vec![Vec::new(); chunks];
+                    let emit = |o: &mut Vec<u64>, a, b| o.push(pack(a, b));
+                    pool.install(|| t.for_each_pair_chunked(&mut out, &emit, |_| ()));
                     let mut got: Vec<u64> = out.concat();
                     got.sort_unstable();
                     assert_eq!(got, want, "n {n} threads {threads} chunks {chunks}");

@@ -423,37 +423,24 @@ impl Octree {
     }
 
     /// The pairs of [`Octree::for_each_pair`], found in chunks over rayon's current pool:
-    /// each buffer of `out` is cleared, then gets `map(a, b)` of the pairs one chunk found,
-    /// where that is `Some` (each pair goes to one buffer, once; which one is unspecified).
-    /// `alongside` runs concurrently, with shared access to the tree (for queries). A strict
-    /// tree's pass runs as one task, into `out[0]`.
+    /// chunk `c` calls `emit(&mut out[c], a, b)` for each pair it finds (each pair is found by
+    /// one chunk, once; which one is unspecified). `alongside` runs concurrently, with shared
+    /// access to the tree (for queries). A strict tree's pass runs as one task, into `out[0]`.
     #[cfg(feature = "parallel")]
-    pub(crate) fn for_each_pair_chunked<M, A>(
-        &mut self,
-        out: &mut [Vec<u64>],
-        map: &M,
-        alongside: A,
-    ) where
-        M: Fn(ProxyKey, ProxyKey) -> Option<u64> + Sync,
+    pub(crate) fn for_each_pair_chunked<S, E, A>(&mut self, out: &mut [S], emit: &E, alongside: A)
+    where
+        S: Send,
+        E: Fn(&mut S, ProxyKey, ProxyKey) + Sync,
         A: FnOnce(&Octree) + Send,
     {
         let mut p = core::mem::take(&mut self.passes);
         let tree = &*self;
         let pass = || match tree.grid.placement {
-            Placement::Strict => {
-                for o in out.iter_mut() {
-                    o.clear();
-                }
-                let Some(o) = out.first_mut() else {
-                    return PassCost::default();
-                };
-                tree.strict_pairs(&mut p.walk, &mut p.strict, |a, b| {
-                    if let Some(x) = map(a, b) {
-                        o.push(x);
-                    }
-                })
-            }
-            Placement::Loose => tree.loose_pairs_chunked(&mut p.walk, &mut p.loose, out, map),
+            Placement::Strict => match out.first_mut() {
+                Some(o) => tree.strict_pairs(&mut p.walk, &mut p.strict, |a, b| emit(o, a, b)),
+                None => PassCost::default(),
+            },
+            Placement::Loose => tree.loose_pairs_chunked(&mut p.walk, &mut p.loose, out, emit),
         };
         let (cost, ()) = rayon::join(pass, || alongside(tree));
         self.last_pass = cost;

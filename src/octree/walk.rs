@@ -91,9 +91,10 @@ pub(super) struct Scratch {
     par: ParSort,
 }
 
-/// The most parts a parallel walk-order sort splits the spheres into: part indices are bytes.
+/// The most parts a parallel walk-order sort splits the spheres into: its lists number the
+/// parts squared.
 #[cfg(feature = "parallel")]
-pub(super) const MAX_PARTS: usize = 64;
+const MAX_PARTS: usize = 32;
 
 /// Buffers of the parallel walk-order sort, reused by every pass; they never shrink.
 #[cfg(feature = "parallel")]
@@ -103,8 +104,9 @@ struct ParSort {
     sample: Vec<u64>,
     /// The first walk key of every part but the first, increasing.
     splitters: Vec<u64>,
-    /// By sphere id: its part, `u8::MAX` for a hole.
-    part_of: Vec<u8>,
+    /// Per range of ids and part: `(walk key << 32) | id` of the range's spheres in the part,
+    /// in id order; range `c`'s part `p` at `c · parts + p`.
+    buckets: Vec<Vec<u64>>,
     /// Per part: its sorting buffers.
     parts: Vec<PartSort>,
     /// The parts' first walk positions, and the sphere count last.
@@ -128,7 +130,7 @@ impl ParSort {
     fn heap_bytes(&self) -> usize {
         self.sample.capacity() * 8
             + self.splitters.capacity() * 8
-            + self.part_of.capacity()
+            + self.buckets.iter().map(|b| b.capacity() * 8).sum::<usize>()
             + self.bounds.capacity() * 4
             + self
                 .parts
@@ -417,9 +419,6 @@ impl Octree {
 /// sizes stay within a few percent of each other.
 #[cfg(feature = "parallel")]
 const SAMPLES_PER_PART: usize = 64;
-/// Sphere ids per task of the parallel sort's first pass (which part each sphere is in).
-#[cfg(feature = "parallel")]
-const ID_CHUNK: usize = 8192;
 
 #[cfg(feature = "parallel")]
 impl Octree {
@@ -464,36 +463,34 @@ impl Octree {
                 par.splitters.push(k);
             }
         }
-        // Which part each sphere is in (the number of splitters at most its key), and the
-        // parts' sizes.
+        // Each range of ids lists its spheres by part (the number of splitters at most the
+        // walk key), in id order.
+        let np = par.splitters.len() + 1;
         let splitters = &par.splitters;
-        par.part_of.resize(objs.len(), u8::MAX);
-        let counts = par
-            .part_of
-            .par_chunks_mut(ID_CHUNK)
-            .zip(objs.par_chunks(ID_CHUNK))
-            .map(|(part_of, objs)| {
-                let mut counts = [0u32; MAX_PARTS];
-                for (q, o) in part_of.iter_mut().zip(objs) {
-                    *q = if o.node == NONE {
-                        u8::MAX
-                    } else {
+        if par.buckets.len() < np * np {
+            par.buckets.resize_with(np * np, Vec::new);
+        }
+        for b in &mut par.buckets[..np * np] {
+            b.clear();
+        }
+        let range = objs.len().div_ceil(np);
+        par.buckets[..np * np]
+            .par_chunks_mut(np)
+            .zip(objs.par_chunks(range))
+            .enumerate()
+            .for_each(|(c, (buckets, objs))| {
+                for (i, o) in objs.iter().enumerate() {
+                    if o.node != NONE {
                         let p = splitters.partition_point(|&x| x <= o.walk_key);
-                        counts[p] += 1;
-                        p as u8
-                    };
+                        buckets[p].push((o.walk_key << 32) | (c * range + i) as u64);
+                    }
                 }
-                counts
-            })
-            .reduce(
-                || [0; MAX_PARTS],
-                |a, b| core::array::from_fn(|i| a[i] + b[i]),
-            );
-        let np = splitters.len() + 1;
+            });
         par.bounds.clear();
         par.bounds.push(0);
-        for c in &counts[..np] {
-            par.bounds.push(par.bounds.last().copied().unwrap_or(0) + c);
+        for p in 0..np {
+            let len: usize = (0..np).map(|c| par.buckets[c * np + p].len()).sum();
+            par.bounds.push(par.bounds[p] + len as u32);
         }
         let n = self.live;
         debug_assert_eq!(par.bounds[np] as usize, n);
@@ -505,7 +502,7 @@ impl Octree {
         }
         let job = Parts {
             tree: self,
-            part_of: &par.part_of,
+            buckets: &par.buckets[..np * np],
             bounds: &par.bounds,
             key_bits,
         };
@@ -517,7 +514,7 @@ impl Octree {
 #[cfg(feature = "parallel")]
 struct Parts<'a> {
     tree: &'a Octree,
-    part_of: &'a [u8],
+    buckets: &'a [Vec<u64>],
     bounds: &'a [u32],
     key_bits: u32,
 }
@@ -550,8 +547,8 @@ impl Parts<'_> {
         );
     }
 
-    /// Part `p`: its ids in id order (a branch-free pass over the part bytes), sorted by walk
-    /// key, then copied out by the serial sort's scattered stores in id order.
+    /// Part `p`: its ids in id order (the ranges' lists in range order), sorted by walk key,
+    /// then copied out by the serial sort's scattered stores in id order.
     fn fill_one(
         &self,
         p: usize,
@@ -562,23 +559,17 @@ impl Parts<'_> {
     ) {
         let (tree, m) = (self.tree, hot.len());
         let base = self.bounds[p];
-        // One slot of slack: every id is stored, and the length advances past those of `p`.
+        let np = self.bounds.len() - 1;
         part.ids.clear();
-        part.ids.resize(m + 1, 0);
-        let mut len = 0;
-        for (id, &q) in self.part_of.iter().enumerate() {
-            part.ids[len] = id as u32;
-            len += usize::from(usize::from(q) == p);
-        }
-        debug_assert_eq!(len, m);
-        part.ids.truncate(m);
         part.items.clear();
-        part.items.extend(
-            part.ids
-                .iter()
-                .enumerate()
-                .map(|(i, &id)| (tree.objs[id as usize].walk_key << 32) | i as u64),
-        );
+        for listed in self.buckets.iter().skip(p).step_by(np) {
+            for &x in listed {
+                let i = part.ids.len() as u64;
+                part.ids.push(x as u32);
+                part.items.push((x >> 32 << 32) | i);
+            }
+        }
+        debug_assert_eq!(part.ids.len(), m);
         radix_sort(
             &mut part.items,
             &mut part.tmp,
