@@ -104,8 +104,8 @@ struct ParSort {
     sample: Vec<u64>,
     /// The first walk key of every part but the first, increasing.
     splitters: Vec<u64>,
-    /// Per range of ids and part: `(walk key << 32) | id` of the range's spheres in the part,
-    /// in id order; range `c`'s part `p` at `c · parts + p`.
+    /// Per range of ids and part: `(walk key << 32) | id` of the range's spheres in the part;
+    /// range `c`'s part `p` at `c · parts + p`.
     buckets: Vec<Vec<u64>>,
     /// Per part: its sorting buffers.
     parts: Vec<PartSort>,
@@ -113,16 +113,13 @@ struct ParSort {
     bounds: Vec<u32>,
 }
 
-/// One part's buffers: its spheres' ids in id order, `(walk key << 32) | index into ids`,
-/// the radix sort's scratch, and each id's position in the part's walk order.
+/// One part's buffers: its `(walk key << 32) | id`, and the radix sort's scratch.
 #[cfg(feature = "parallel")]
 #[derive(Clone, Debug, Default)]
 struct PartSort {
-    ids: Vec<u32>,
     items: Vec<u64>,
     tmp: Vec<u64>,
     counts: Vec<u32>,
-    rank: Vec<u32>,
 }
 
 #[cfg(feature = "parallel")]
@@ -135,10 +132,7 @@ impl ParSort {
             + self
                 .parts
                 .iter()
-                .map(|p| {
-                    (p.ids.capacity() + p.counts.capacity() + p.rank.capacity()) * 4
-                        + (p.items.capacity() + p.tmp.capacity()) * 8
-                })
+                .map(|p| p.counts.capacity() * 4 + (p.items.capacity() + p.tmp.capacity()) * 8)
                 .sum::<usize>()
     }
 }
@@ -464,7 +458,7 @@ impl Octree {
             }
         }
         // Each range of ids lists its spheres by part (the number of splitters at most the
-        // walk key), in id order.
+        // walk key) as `(walk key << 32) | id`: a part then sorts only its own lists.
         let np = par.splitters.len() + 1;
         let splitters = &par.splitters;
         if par.buckets.len() < np * np {
@@ -513,8 +507,8 @@ impl Octree {
 /// What every part of a parallel walk-order sort reads.
 #[cfg(feature = "parallel")]
 struct Parts<'a> {
-    tree: &'a Octree,
     buckets: &'a [Vec<u64>],
+    tree: &'a Octree,
     bounds: &'a [u32],
     key_bits: u32,
 }
@@ -547,8 +541,11 @@ impl Parts<'_> {
         );
     }
 
-    /// Part `p`: its ids in id order (the ranges' lists in range order), sorted by walk key,
-    /// then copied out by the serial sort's scattered stores in id order.
+    /// Part `p`: its spheres as the ranges listed them, sorted by `(walk key, id)`, then
+    /// gathered into the part's own stretch of the copies in walk order. (The serial sort
+    /// stores to scattered places instead, which stalls less than loading from them; the
+    /// gather writes in order and leaves the scattered loads independent of each other, which
+    /// a part's share of the spheres, spread over the whole id range, needs.)
     fn fill_one(
         &self,
         p: usize,
@@ -557,19 +554,13 @@ impl Parts<'_> {
         node_key: &mut [u64],
         keys: &mut [ProxyKey],
     ) {
-        let (tree, m) = (self.tree, hot.len());
-        let base = self.bounds[p];
         let np = self.bounds.len() - 1;
-        part.ids.clear();
+        let base = self.bounds[p];
         part.items.clear();
         for listed in self.buckets.iter().skip(p).step_by(np) {
-            for &x in listed {
-                let i = part.ids.len() as u64;
-                part.ids.push(x as u32);
-                part.items.push((x >> 32 << 32) | i);
-            }
+            part.items.extend_from_slice(listed);
         }
-        debug_assert_eq!(part.ids.len(), m);
+        debug_assert_eq!(part.items.len(), hot.len());
         radix_sort(
             &mut part.items,
             &mut part.tmp,
@@ -577,20 +568,24 @@ impl Parts<'_> {
             32,
             self.key_bits,
         );
-        part.rank.resize(m, 0);
-        for (j, (&x, nk)) in part.items.iter().zip(node_key.iter_mut()).enumerate() {
+        let tree = self.tree;
+        for (j, ((&x, nk), (h, k))) in part
+            .items
+            .iter()
+            .zip(node_key.iter_mut())
+            .zip(hot.iter_mut().zip(keys.iter_mut()))
+            .enumerate()
+        {
+            let id = x as u32 as usize;
+            let o = &tree.objs[id];
             *nk = x >> 32;
-            part.rank[x as u32 as usize] = j as u32;
-        }
-        for (&id, &j) in part.ids.iter().zip(&part.rank) {
-            let o = &tree.objs[id as usize];
-            hot[j as usize] = Hot {
+            *h = Hot {
                 bx: SimdBox::new(&o.aabb),
                 qmin: o.qmin,
                 qmax: o.qmax,
-                pos: base + j,
+                pos: base + j as u32,
             };
-            keys[j as usize] = tree.keys[id as usize];
+            *k = tree.keys[id];
         }
     }
 }
