@@ -101,9 +101,22 @@ fn steady_gas(placement: Placement) {
     steady_gas_with(placement, 0.0, 1.0);
 }
 
-/// `speed` scales the gas's velocities.
+/// `speed` scales the gas's velocities. The guarantee is for one thread: with feature
+/// `parallel` the test runs in a one-thread pool (more threads allow a bounded number of
+/// allocations, checked in tests/parallel.rs).
 fn steady_gas_with(placement: Placement, skin: f32, speed: f32) {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    #[cfg(feature = "parallel")]
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a thread pool")
+        .install(|| steady_gas_on_this_thread(placement, skin, speed));
+    #[cfg(not(feature = "parallel"))]
+    steady_gas_on_this_thread(placement, skin, speed);
+}
+
+fn steady_gas_on_this_thread(placement: Placement, skin: f32, speed: f32) {
     let mut gas = Gas::new(10_000, 7);
     for v in &mut gas.velocities {
         *v *= speed;

@@ -11,11 +11,14 @@
 
 mod common;
 
+use broadleaf::fixtures::scene::{Feed, Frame, Gas, Scene};
 use broadleaf::octree::Placement;
 use broadleaf::{BroadPhase, CollisionGroups, Config, Pair, Passes, ProxyKey, Vec3};
 use common::{KeyPair, Model, ModelShape, Rng};
 use slotmap::Key;
+use std::alloc::{GlobalAlloc, Layout, System};
 use std::collections::{BTreeSet, HashMap};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// The broadphase's `PARALLEL_MIN_SPHERES`: the worlds below never have fewer spheres.
 const THRESHOLD: usize = 10_000;
@@ -235,6 +238,8 @@ fn run(world: World) -> u64 {
 
 /// Runs `world` at every thread count; all digests must be equal.
 fn same_at_every_thread_count(world: World) {
+    // Not beside the allocation count, which counts every thread's allocations.
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let digests: Vec<u64> = THREADS
         .iter()
         .map(|&t| {
@@ -285,4 +290,99 @@ fn full_passes_only_are_the_same_at_every_thread_count() {
         passes: Passes::Full,
         margin: 0.0,
     });
+}
+
+/// Forwards to the system allocator and counts allocations.
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: every method forwards to `System` with the caller's arguments unchanged, so
+// `System`'s guarantees carry over; the counter is a plain atomic and never affects memory.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: forwarded as is (see the impl's comment).
+        unsafe { System.alloc(layout) }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: forwarded as is.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: forwarded as is.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: forwarded as is.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// The counter is process-wide: the test that reads it runs alone.
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Allocations per step of a `gas` world above the threshold, after a warm-up, stepped in a
+/// pool of `threads` (from inside it) or, with `None`, from outside the global pool.
+fn allocations_per_step(threads: Option<usize>) -> Vec<usize> {
+    let run = || {
+        let mut gas = Gas::new(2 * THRESHOLD, 7);
+        let mut bp = BroadPhase::new(Config {
+            bounds: gas.bounds(),
+            ..Config::default()
+        });
+        let (mut feed, mut frame, mut spawns) = (Feed::new(false), Frame::default(), Vec::new());
+        gas.spawns(&mut spawns);
+        feed.spawn(&mut bp, &spawns).expect("finite scene");
+        for _ in 0..40 {
+            gas.advance(&mut frame);
+            feed.apply(&mut bp, &frame).expect("valid frame");
+            bp.step();
+        }
+        let mut counts = Vec::with_capacity(200);
+        for _ in 0..200 {
+            gas.advance(&mut frame);
+            let before = ALLOCATIONS.load(Ordering::Relaxed);
+            feed.apply(&mut bp, &frame).expect("valid frame");
+            bp.step();
+            counts.push(ALLOCATIONS.load(Ordering::Relaxed) - before);
+        }
+        counts
+    };
+    match threads {
+        Some(t) => rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build()
+            .expect("a thread pool")
+            .install(run),
+        None => run(),
+    }
+}
+
+/// One thread allocates nothing per step in steady state; more threads, stepped from inside
+/// their pool, next to nothing (a per-task list reaching a new peak grows ahead of it); from
+/// outside the pool, about one allocation per 63 steps more (rayon queues the step's job, and
+/// its queue takes a new block of 63 jobs now and then).
+#[test]
+fn steady_steps_allocate_next_to_nothing_at_any_thread_count() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let total = |t| allocations_per_step(t).iter().sum::<usize>();
+    assert_eq!(total(Some(1)), 0, "one thread");
+    for t in [2, 3] {
+        let n = total(Some(t));
+        assert!(n <= 4, "{t} threads: {n} allocations in 200 steps");
+    }
+    let n = total(None);
+    assert!(
+        n <= 200 / 63 + 1 + 4,
+        "outside the pool: {n} allocations in 200 steps"
+    );
 }

@@ -147,6 +147,15 @@ fn unpack(p: u64) -> (usize, usize) {
     (((p >> 32) as u32 & !(1 << 31)) as usize, p as u32 as usize)
 }
 
+/// Grows `v` to half again its length once it is within a quarter of its capacity: a list
+/// whose length swings from step to step stops growing after its first few swings.
+fn ahead<T>(v: &mut Vec<T>) {
+    let want = v.len() + v.len() / 2;
+    if v.capacity() < v.len() + v.len() / 4 {
+        v.reserve(want - v.len());
+    }
+}
+
 /// What a step will do.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Plan {
@@ -267,12 +276,6 @@ impl BroadPhase {
     /// Grows the lists whose length swings from step to step ahead of their peaks, so that a
     /// world in steady state stops allocating after its first few swings.
     fn keep_headroom(&mut self) {
-        fn ahead<T>(v: &mut Vec<T>) {
-            let want = v.len() + v.len() / 2;
-            if v.capacity() < v.len() + v.len() / 4 {
-                v.reserve(want - v.len());
-            }
-        }
         ahead(&mut self.cand);
         ahead(&mut self.next);
         ahead(&mut self.fresh);
@@ -296,6 +299,19 @@ impl BroadPhase {
     /// proxy is first given a fat box and the pairs found are the new candidate list; without,
     /// the structures first hold the exact boxes again if they held fat ones.
     fn full(&mut self, fat: bool) {
+        match self.tasks() {
+            // Run on the pool's threads as one job: a caller outside the pool hands the pass
+            // over once, instead of once per split phase (each hand-over wakes a worker and
+            // then the caller, and queues a job, whose queue allocates now and then).
+            #[cfg(feature = "parallel")]
+            tasks @ 2.. => rayon::scope(|_| self.full_in(fat, tasks)),
+            _ => self.full_in(fat, 1),
+        }
+    }
+
+    /// [`BroadPhase::full`] with its split phases in `tasks` tasks each (1: serial).
+    #[inline(always)]
+    fn full_in(&mut self, fat: bool, tasks: usize) {
         core::mem::swap(&mut self.prev_packed, &mut self.packed);
         if self.cached || fat {
             for s in 0..self.store.slots() as u32 {
@@ -306,7 +322,6 @@ impl BroadPhase {
         }
         self.refit(true);
         let bits = 32 + bits_of(self.store.slots() as u64);
-        let tasks = self.tasks();
         match tasks {
             #[cfg(feature = "parallel")]
             2.. => self.sorted_pairs_par(tasks, bits),
@@ -443,6 +458,10 @@ impl BroadPhase {
             &mut par.sort_bounds,
             bits,
         );
+        for list in par.found[..tasks + 1].iter_mut().flatten() {
+            ahead(list);
+        }
+        par.sort_tmp.iter_mut().for_each(ahead);
     }
 
     /// The incremental pass (see the module docs).
@@ -563,9 +582,11 @@ impl BroadPhase {
             });
         self.added_packed.clear();
         self.removed_packed.clear();
-        for [added, removed] in &par.diff[..parts] {
+        for [added, removed] in &mut par.diff[..parts] {
             self.added_packed.extend_from_slice(added);
             self.removed_packed.extend_from_slice(removed);
+            ahead(added);
+            ahead(removed);
         }
         let store = &self.store;
         let to_pair = |&p: &u64| {

@@ -487,6 +487,7 @@ impl Octree {
                         buckets[p].push((o.walk_key << 32) | (c * range + i) as u64);
                     }
                 }
+                buckets.iter_mut().for_each(ahead);
             });
         par.bounds.clear();
         par.bounds.push(0);
@@ -509,6 +510,17 @@ impl Octree {
             key_bits,
         };
         job.fill(0, &mut par.parts[..np], hot, node_key, keys);
+    }
+}
+
+/// Grows `v` to half again its length once it is within a quarter of its capacity: the
+/// parallel sort's lists swing from step to step as the parts' bounds move, and stop growing
+/// after their first few swings.
+#[cfg(feature = "parallel")]
+fn ahead<T>(v: &mut Vec<T>) {
+    let want = v.len() + v.len() / 2;
+    if v.capacity() < v.len() + v.len() / 4 {
+        v.reserve(want - v.len());
     }
 }
 
@@ -568,6 +580,8 @@ impl Parts<'_> {
         for listed in self.buckets.iter().skip(p).step_by(np) {
             part.items.extend_from_slice(listed);
         }
+        ahead(&mut part.items);
+        ahead(&mut part.tmp);
         debug_assert_eq!(part.items.len(), hot.len());
         radix_sort(
             &mut part.items,
