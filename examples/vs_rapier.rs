@@ -39,6 +39,10 @@
 //! yields rapier's pairs of the last measured frame. Those are compared with broadleaf's pairs
 //! of that frame and with brute force (`exact ⊆ ours ⊆ rapier`, static×static left out).
 //!
+//! With feature `parallel`, broadleaf's steps run on rayon's global pool (`RAYON_NUM_THREADS`
+//! threads, default one per core; worlds below the parallel threshold step serially); the
+//! header says how many threads it had. rapier runs on one thread (no `parallel` feature).
+//!
 //! Times are medians over the measured steps after the warm-up, in ns per object (every live
 //! object, static ones included) per step. The last line is exactly
 //! `ratio=<speed-up> missed=<n> extra=<n>`; for `--scene all` the ratio is the worst (smallest)
@@ -416,6 +420,15 @@ fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
     }
 }
 
+/// The threads broadleaf's steps may run on: the global rayon pool's with feature `parallel`
+/// (a world below the parallel threshold still steps on one), else 1.
+fn broadleaf_threads() -> usize {
+    #[cfg(feature = "parallel")]
+    return rayon::current_num_threads();
+    #[cfg(not(feature = "parallel"))]
+    1
+}
+
 fn main() {
     let args = parse_args().unwrap_or_else(|e| {
         eprintln!("{e}\n{USAGE}");
@@ -461,6 +474,15 @@ fn main() {
             "engines alternating per step"
         } else {
             "each engine's steps back to back"
+        }
+    );
+    println!(
+        "threads: broadleaf {} ({}), rapier 1",
+        broadleaf_threads(),
+        if cfg!(feature = "parallel") {
+            "feature parallel, rayon's global pool: RAYON_NUM_THREADS"
+        } else {
+            "serial build: feature parallel off"
         }
     );
     println!();

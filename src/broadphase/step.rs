@@ -19,6 +19,17 @@
 //! world wakes up or settles. Collision groups are tested where a pair is first found (in the
 //! structures' passes and the escaped proxies' queries), so a filtered pair is never a
 //! candidate, never sorted and never diffed.
+//!
+//! **Threads** (feature `parallel`). With more than one thread in rayon's current pool and at
+//! least [`PARALLEL_MIN_SPHERES`] spheres, the full pass runs as one job on the pool, split in
+//! [`TASKS_PER_THREAD`] tasks per thread at each phase: the octree sorts its walk order in
+//! key-range parts and passes its runs in chunks (each with its own pass state), beside one
+//! task for the BVH passes and the sphere × body queries; every producer cuts its pairs into
+//! the parts of the pair sort as it finds them (at the quantiles of the last step's pairs),
+//! each part is sorted by its own task, and the event diff is split the same way. Each pair is
+//! found by one producer, once, and every part covers a key range, so the lists are the
+//! serial pass's at any thread count. What stays serial: the updates (the caller's), the
+//! refits, a BVH pass split no further than one task, and the incremental pass.
 
 #[cfg(feature = "parallel")]
 use super::radix;
