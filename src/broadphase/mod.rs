@@ -177,14 +177,14 @@ impl Config {
         Ok(())
     }
 
-    /// The configuration of both BVHs: fuller leaves than the standalone default, since the
-    /// pair passes are the hot path and a leaf's all-pairs loop is cheaper than the node pairs
-    /// it replaces.
+    /// The configuration of both BVHs: much fuller leaves than the standalone default, since
+    /// the pair passes are the hot path and a leaf pair's bit-mask kernel (up to 64 boxes a
+    /// side) is cheaper than the node pairs it replaces.
     fn bvh_config(&self) -> BvhConfig {
         BvhConfig {
             rebuild_threshold: self.rebuild_threshold,
-            max_leaf_size: 16,
-            traversal_cost: 8.0,
+            max_leaf_size: BVH_LEAF_SIZE,
+            traversal_cost: BVH_TRAVERSAL_COST,
             ..BvhConfig::default()
         }
     }
@@ -846,6 +846,12 @@ impl BroadPhase {
         }
     }
 }
+
+/// The broadphase's BVHs' largest leaf, in boxes (`BvhConfig::max_leaf_size`).
+const BVH_LEAF_SIZE: u32 = 32;
+/// The broadphase's BVHs' node visit cost, in box tests (`BvhConfig::traversal_cost`): high
+/// enough that SAH fills leaves up to [`BVH_LEAF_SIZE`].
+const BVH_TRAVERSAL_COST: f32 = 16.0;
 
 /// The most live proxies: the structures index their entries with `u32`.
 const MAX_PROXIES: usize = (u32::MAX - 2) as usize;
