@@ -25,7 +25,7 @@ impl Octree {
             let mut i = self.nodes.head_at(slot);
             while i != NONE {
                 visit(i);
-                i = self.objs[i as usize].next;
+                i = self.links[i as usize].next;
             }
         });
     }
@@ -56,7 +56,7 @@ impl Octree {
             let mut i = self.nodes.head(node);
             while i != NONE {
                 visit(i);
-                i = self.objs[i as usize].next;
+                i = self.links[i as usize].next;
             }
         };
         if self.per_level[0] > 0 {
@@ -104,7 +104,7 @@ impl Octree {
             return;
         }
         self.candidates(&Aabb::from_center_radius(center, radius), |id| {
-            let (c, r) = self.spheres[id as usize];
+            let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
             if (c - center).length_squared() <= (r + radius) * (r + radius) {
                 f(self.keys[id as usize]);
             }
@@ -133,7 +133,7 @@ impl Octree {
                     .is_some()
             },
             |id| {
-                let (c, r) = self.spheres[id as usize];
+                let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
                 if let Some(t) = geom::ray_sphere(origin, dir, c, r, limit()) {
                     let key = self.keys[id as usize];
                     let better = best
@@ -190,7 +190,7 @@ impl Octree {
                     .is_some()
             },
             |id| {
-                let (c, r) = self.spheres[id as usize];
+                let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
                 if let Some(t) = hit(c, r) {
                     f(self.keys[id as usize], t);
                 }
@@ -306,7 +306,7 @@ impl Octree {
         let inflate = radius + geom::cast_pad(center, radius, dir, max_t);
         let mut best: Option<(ProxyKey, f32)> = None;
         self.ray_ids(center, dir, max_t, inflate, |id, limit| {
-            let (c, r) = self.spheres[id as usize];
+            let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
             if let Some(t) = geom::sphere_cast_sphere(center, radius, dir, limit, c, r) {
                 let key = self.keys[id as usize];
                 if best.is_none_or(|(bk, bt)| (t, key) < (bt, bk)) {
@@ -343,7 +343,7 @@ impl Octree {
             let mut within = 0;
             let reach = radius + geom::distance_pad(point, radius);
             self.near_ids(point, reach, |id| {
-                let (c, r) = self.spheres[id as usize];
+                let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
                 let d = geom::point_sphere_distance(point, c, r);
                 within += usize::from(d <= radius);
                 out.push((self.keys[id as usize], d));

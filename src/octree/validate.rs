@@ -17,9 +17,9 @@ impl Octree {
     pub fn validate(&self) {
         let n = self.objs.len();
         assert_eq!(
-            self.spheres.len(),
+            self.links.len(),
             n,
-            "spheres and objects differ in length"
+            "links and objects differ in length"
         );
         assert_eq!(self.keys.len(), n, "keys and objects differ in length");
         let live = self.objs.iter().filter(|o| o.node != NONE).count();
@@ -41,7 +41,7 @@ impl Octree {
                 Some(id as u32),
                 "key map disagrees at id {id}"
             );
-            let (c, r) = self.spheres[id];
+            let (c, r) = (o.center, o.radius);
             let at = self.grid.locate(c, r);
             assert_eq!(
                 o.aabb, at.aabb,
@@ -98,14 +98,15 @@ impl Octree {
                     "id {i} is listed in node {node} but names {}",
                     o.node
                 );
-                assert_eq!(o.prev, prev, "broken back link at id {i}");
+                let link = self.links[i as usize];
+                assert_eq!(link.prev, prev, "broken back link at id {i}");
                 reached += 1;
                 assert!(
                     reached <= n,
                     "node lists hold more entries than spheres (a cycle?)"
                 );
                 prev = i;
-                i = o.next;
+                i = link.next;
             }
             assert!(
                 cell.level < self.grid.depth || self.nodes.mask(node) == 0,
