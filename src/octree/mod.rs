@@ -316,7 +316,10 @@ impl Octree {
     /// for a caller that updates in no particular order.
     #[inline(always)]
     pub(crate) fn update_live(&mut self, key: ProxyKey, center: Vec3, radius: f32) {
-        debug_assert!(self.id_of(key).is_some(), "update_live of a key not live here");
+        debug_assert!(
+            self.id_of(key).is_some(),
+            "update_live of a key not live here"
+        );
         self.update_id(crate::pair::slot(key), center, radius);
     }
 

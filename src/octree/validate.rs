@@ -1,8 +1,8 @@
 //! The whole-tree invariant check.
 
-use slotmap::Key as _;
 use super::cell::{Cell, level_of};
 use super::{MAX_DEPTH, NONE, Octree};
+use slotmap::Key as _;
 
 impl Octree {
     /// Checks every invariant and panics with a message naming the first one broken: each
@@ -16,11 +16,7 @@ impl Octree {
     /// overflow and key-map counts agree. O(n + occupied nodes); for tests and debugging.
     pub fn validate(&self) {
         let n = self.objs.len();
-        assert_eq!(
-            self.links.len(),
-            n,
-            "links and objects differ in length"
-        );
+        assert_eq!(self.links.len(), n, "links and objects differ in length");
         assert_eq!(self.keys.len(), n, "keys and objects differ in length");
         let live = self.objs.iter().filter(|o| o.node != NONE).count();
         assert_eq!(live, self.live, "live count");

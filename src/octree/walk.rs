@@ -8,8 +8,8 @@
 //! into a contiguous walk-ordered array. A pass then never chases a list: each node is a run of
 //! that array.
 
-use super::{NONE, Octree};
 use super::placement::walk_key_bits;
+use super::{NONE, Octree};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
 use crate::sweep::{self, Ordered};
