@@ -643,7 +643,7 @@ impl BroadPhase {
         if self.cached {
             self.refresh_fat(slot, &exact);
         } else {
-            let placed = self.tree_mut(kind).update_checked(key, &exact.aabb());
+            let placed = self.tree_mut(kind).update_box(key, &exact);
             debug_assert!(placed.is_ok(), "a live body missing from its BVH");
             self.mark(slot, flag::MOVED);
         }
@@ -694,7 +694,7 @@ impl BroadPhase {
                 if kind == BodyKind::Dynamic && fat {
                     self.dynamic_escapes += 1;
                 }
-                self.tree_mut(kind).update_checked(key, &held.aabb.aabb())
+                self.tree_mut(kind).update_box(key, &held.aabb)
             }
         };
         debug_assert!(placed.is_ok(), "a live proxy missing from its structure");
