@@ -486,7 +486,9 @@ impl BroadPhase {
             .ok_or(Error::Full)?;
         let key = self.store.key(slot);
         let held = self.held_shape(slot, self.cached);
-        self.store.held[slot as usize] = held.aabb;
+        if self.cached {
+            self.store.set_held(slot as usize, held.aabb);
+        }
         match shape {
             Shape::Sphere { center, .. } => self.octree.insert_checked(key, center, held.radius),
             Shape::Body { kind, .. } => {
@@ -685,7 +687,7 @@ impl BroadPhase {
     fn hold(&mut self, slot: u32, fat: bool) {
         let s = slot as usize;
         let held = self.held_shape(slot, fat);
-        self.store.held[s] = held.aabb;
+        self.store.set_held(s, held.aabb);
         let key = self.store.key(slot);
         // The key is live: the structures hold every live proxy under its key.
         let placed = match self.store.shape[s] {
