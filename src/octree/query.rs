@@ -12,7 +12,14 @@ use glam::Vec3;
 
 /// Queries whose reaching cells over the occupied levels are at most this many read those
 /// cells' lists directly; larger ones walk the occupied subtrees.
-const DIRECT_CELLS: u64 = 96;
+const DIRECT_CELLS: u64 = 256;
+
+/// A ray is cut into pieces no longer than the deepest occupied level's cells; one longer than
+/// this many pieces walks the occupied subtrees instead.
+const MAX_RAY_PIECES: f32 = 65_536.0;
+
+/// Relative widening of a ray piece's box against the rounding of its end points.
+const RAY_PIECE_SLACK: f32 = 1e-5;
 
 impl Octree {
     /// Depth-first over occupied nodes from the root: `enter(cell)` decides whether to visit a
@@ -37,7 +44,12 @@ impl Octree {
     /// level: no walk down from the root, whose upper levels cost a visit each while holding
     /// few spheres. A large one walks the occupied subtrees instead, whose masks skip empty
     /// regions.
-    fn candidates(&self, aabb: &Aabb, mut visit: impl FnMut(u32)) {
+    fn candidates(&self, aabb: &Aabb, visit: impl FnMut(u32)) {
+        self.candidates_from(aabb, true, visit);
+    }
+
+    /// [`Octree::candidates`], the root's list left out unless `root`.
+    fn candidates_from(&self, aabb: &Aabb, root: bool, mut visit: impl FnMut(u32)) {
         let (qlo, qhi) = (self.grid.quantize(aabb.min), self.grid.quantize(aabb.max));
         let mut cells = 0u64;
         for level in 1..=self.grid.depth {
@@ -49,7 +61,14 @@ impl Octree {
             }
         }
         if cells > DIRECT_CELLS {
-            self.traverse(|cell| self.grid.reaches(cell, qlo, qhi), visit);
+            self.traverse(
+                |cell| self.grid.reaches(cell, qlo, qhi),
+                |id| {
+                    if root || self.objs[id as usize].node != 0 {
+                        visit(id);
+                    }
+                },
+            );
             return;
         }
         let mut list = |node: u32| {
@@ -59,7 +78,7 @@ impl Octree {
                 i = self.links[i as usize].next;
             }
         };
-        if self.per_level[0] > 0 {
+        if root && self.per_level[0] > 0 {
             list(0);
         }
         for level in 1..=self.grid.depth {
@@ -212,6 +231,88 @@ impl Octree {
         inflate: f32,
         mut visit: impl FnMut(u32, f32) -> f32,
     ) {
+        let mut best = max_t;
+        // The root's spheres (overflow, and strict straddlers of its planes) once, up front.
+        let mut i = self.nodes.head(0);
+        while i != NONE {
+            best = best.min(visit(i, best));
+            i = self.links[i as usize].next;
+        }
+        let Some(deepest) = (1..=self.grid.depth)
+            .rev()
+            .find(|&l| self.per_level[l as usize] > 0)
+        else {
+            return;
+        };
+        // Spheres below the root lie in the bounds grown by half their extent (a loose
+        // level-1 cell reaches a quarter of it past the bounds).
+        let extent = self.grid.bounds.extent();
+        let region = self.grid.bounds.grown(extent.max_element() * 0.5 + inflate);
+        let inv = geom::inverse_dir(dir);
+        let Some(t0) = region.ray_entry(origin, inv, best) else {
+            return;
+        };
+        let t1 = region.ray_exit(origin, inv, best);
+        let cell = extent.min_element() / (1u32 << deepest) as f32;
+        let dt = cell / dir.abs().max_element();
+        let pieces = (t1 - t0) / dt;
+        if !(dt > 0.0 && pieces.is_finite() && pieces <= MAX_RAY_PIECES) {
+            self.ray_ids_walk(origin, dir, best, inflate, |id, b| {
+                if self.objs[id as usize].node == 0 {
+                    b
+                } else {
+                    visit(id, b)
+                }
+            });
+            return;
+        }
+        // Pieces in order of `t`, each a box around its stretch of the segment grown by
+        // `inflate` and a slack fixed for the whole ray (so that each axis' piece intervals
+        // only move forward: the pieces whose ranges meet a sphere's range are consecutive,
+        // and a sphere is visited in the first of them only).
+        let (a, b) = (origin + dir * t0, origin + dir * t1);
+        let slack = RAY_PIECE_SLACK * a.abs().max(b.abs()).max_element().max(1.0) + inflate;
+        let q = |t_lo: f32, t_hi: f32| {
+            let (p, r) = (origin + dir * t_lo, origin + dir * t_hi);
+            Aabb::new(p.min(r) - Vec3::splat(slack), p.max(r) + Vec3::splat(slack))
+        };
+        let meets = |o: &super::Obj, lo: [u16; 3], hi: [u16; 3]| {
+            (0..3).all(|a| o.qmin[a] <= hi[a] && lo[a] <= o.qmax[a])
+        };
+        let mut prev: Option<([u16; 3], [u16; 3])> = None;
+        let mut k = 0u32;
+        loop {
+            let ta = t0 + dt * k as f32;
+            if ta > t1.min(best) {
+                break;
+            }
+            let tb = (t0 + dt * (k + 1) as f32).min(t1);
+            let piece = q(ta, tb);
+            let range = (self.grid.quantize(piece.min), self.grid.quantize(piece.max));
+            self.candidates_from(&piece, false, |id| {
+                let o = &self.objs[id as usize];
+                let new = meets(o, range.0, range.1) && prev.is_none_or(|(lo, hi)| !meets(o, lo, hi));
+                if new {
+                    best = best.min(visit(id, best));
+                }
+            });
+            if tb >= t1 {
+                break;
+            }
+            prev = Some(range);
+            k += 1;
+        }
+    }
+
+    /// [`Octree::ray_ids`] by a walk over the occupied subtrees, for rays too long for pieces.
+    fn ray_ids_walk(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        max_t: f32,
+        inflate: f32,
+        mut visit: impl FnMut(u32, f32) -> f32,
+    ) {
         let inv = geom::inverse_dir(dir);
         let slack = self.grid.slack();
         let best = core::cell::Cell::new(max_t);
@@ -261,11 +362,8 @@ impl Octree {
     /// box is within `radius`, since that box lies in the grown reach box and the distance
     /// does not decrease as a box shrinks.
     fn near_ids(&self, p: Vec3, radius: f32, visit: impl FnMut(u32)) {
-        let slack = self.grid.slack();
-        self.traverse(
-            |cell| geom::point_aabb_distance(p, &self.grid.reach_box(cell).grown(slack)) <= radius,
-            visit,
-        );
+        // A box within `radius` of `p` overlaps the cube `p ± radius`.
+        self.candidates(&Aabb::from_center_radius(p, radius), visit);
     }
 
     /// Calls `f(key, aabb)` for every sphere whose stored box `aabb` (`center ± radius`) is
