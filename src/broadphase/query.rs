@@ -166,12 +166,12 @@ impl BroadPhase {
         out
     }
 
-    /// Calls `f(key, shape)` for every proxy whose held box is within `radius` of `p`: a
-    /// superset of the proxies whose shapes are, since a shape lies in its held box.
+    /// Calls `f(key, shape)` for every proxy whose held box is within `radius` of `p` (spheres:
+    /// whose held box meets the cube `p ± radius`): a superset of the proxies whose shapes
+    /// are, since a shape lies in its held box.
     fn within(&self, p: Vec3, radius: f32, mut f: impl FnMut(ProxyKey, Shape)) {
         let shape = |k: ProxyKey| self.store.shape[crate::pair::slot(k) as usize];
-        self.octree
-            .within_distance(p, radius, |k, _| f(k, shape(k)));
+        self.octree.near(p, radius, |k| f(k, shape(k)));
         self.dynamic
             .within_distance(p, radius, |k, _| f(k, shape(k)));
         self.statics

@@ -366,18 +366,17 @@ impl Octree {
         self.candidates(&Aabb::from_center_radius(p, radius), visit);
     }
 
-    /// Calls `f(key, aabb)` for every sphere whose stored box `aabb` (`center ± radius`) is
-    /// within `radius` of `p` ([`geom::point_aabb_distance`] `<= radius`, so touching counts),
-    /// once each, in no particular order. Nothing for a non-finite `p` or a NaN or negative
-    /// `radius`; no allocation.
-    pub(crate) fn within_distance(&self, p: Vec3, radius: f32, mut f: impl FnMut(ProxyKey, &Aabb)) {
+    /// Calls `f(key)` for every sphere whose stored box overlaps the cube `p ± radius`, once
+    /// each: a superset of those within `radius` of `p`, for callers that measure exact
+    /// distances themselves. Nothing for a non-finite `p` or a NaN or negative `radius`.
+    pub(crate) fn near(&self, p: Vec3, radius: f32, mut f: impl FnMut(ProxyKey)) {
         if !p.is_finite() || radius.is_nan() || radius < 0.0 {
             return;
         }
+        let cube = Aabb::from_center_radius(p, radius);
         self.near_ids(p, radius, |id| {
-            let aabb = &self.objs[id as usize].aabb;
-            if geom::point_aabb_distance(p, aabb) <= radius {
-                f(self.keys[id as usize], aabb);
+            if self.objs[id as usize].aabb.overlaps(&cube) {
+                f(self.keys[id as usize]);
             }
         });
     }
@@ -663,7 +662,7 @@ mod tests {
     }
 
     #[test]
-    fn within_distance_visits_every_near_box_exactly_once() {
+    fn near_visits_every_near_box_once_and_only_boxes_meeting_the_cube() {
         for (seed, placement) in [(4, Placement::Strict), (5, Placement::Loose)] {
             let (tree, shapes) = world(seed, placement);
             let mut rng = Rng::new(seed + 100);
@@ -675,21 +674,18 @@ mod tests {
                     _ => rng.range(0.0, 5.0),
                 };
                 let mut seen = BTreeMap::new();
-                tree.within_distance(p, radius, |key, aabb| {
-                    assert_eq!(Some(*aabb), tree.aabb(key));
-                    *seen.entry(key).or_insert(0) += 1;
-                });
+                tree.near(p, radius, |key| *seen.entry(key).or_insert(0) += 1);
                 assert!(seen.values().all(|&n| n == 1), "a sphere visited twice");
                 for &(key, c, r) in &shapes {
                     let (lo, hi) = own_box(c, r);
-                    let near = geom::point_aabb_distance(p, &Aabb::new(lo, hi)) <= radius;
-                    assert_eq!(seen.contains_key(&key), near, "query {q} key {key:?}");
-                    let d = box_distance(p, lo, hi);
-                    let r = f64::from(radius);
-                    if near {
-                        assert!(d <= r + 1e-4, "query {q}: a box at {d} > {r} visited");
-                    } else {
-                        assert!(d >= r - 1e-4, "query {q}: a box at {d} <= {r} skipped");
+                    // The test's own distance: every box within the radius is visited.
+                    if box_distance(p, lo, hi) <= f64::from(radius) - 1e-4 {
+                        assert!(seen.contains_key(&key), "query {q}: a near box skipped");
+                    }
+                    // Only boxes that meet the cube `p ± radius`, by the test's own compare.
+                    let meets = (0..3).all(|a| lo[a] <= p[a] + radius && p[a] - radius <= hi[a]);
+                    if seen.contains_key(&key) {
+                        assert!(meets, "query {q}: a box off the cube visited");
                     }
                 }
             }
@@ -720,7 +716,7 @@ mod tests {
             (Vec3::ZERO, -1.0),
             (Vec3::ZERO, nan),
         ] {
-            tree.within_distance(p, radius, |_, _| n += 1);
+            tree.near(p, radius, |_| n += 1);
         }
         assert_eq!(n, 0);
     }
