@@ -328,6 +328,9 @@ pub struct BroadPhase {
     /// The running work estimate of the incremental regime (see [`step`]).
     costs: step::Costs,
     stats: StepStats,
+    /// The parallel full pass's buffers.
+    #[cfg(feature = "parallel")]
+    par: step::Parallel,
 }
 
 impl BroadPhase {
@@ -402,6 +405,8 @@ impl BroadPhase {
             now: 0,
             costs: step::Costs::default(),
             stats: StepStats::default(),
+            #[cfg(feature = "parallel")]
+            par: step::Parallel::default(),
         }
     }
 
@@ -460,6 +465,17 @@ impl BroadPhase {
                 self.pairs.capacity() + self.added.capacity() + self.removed.capacity(),
                 core::mem::size_of::<Pair>(),
             )
+            + self.par_heap_bytes()
+    }
+
+    #[cfg(feature = "parallel")]
+    fn par_heap_bytes(&self) -> usize {
+        self.par.heap_bytes()
+    }
+
+    #[cfg(not(feature = "parallel"))]
+    fn par_heap_bytes(&self) -> usize {
+        0
     }
 
     /// Adds a sphere; it pairs from the next [`BroadPhase::step`] on. `Err` on a non-finite

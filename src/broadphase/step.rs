@@ -20,6 +20,8 @@
 //! structures' passes and the escaped proxies' queries), so a filtered pair is never a
 //! candidate, never sorted and never diffed.
 
+#[cfg(feature = "parallel")]
+use super::radix;
 use super::radix::{bits_of, sort_u64};
 use super::*;
 
@@ -76,6 +78,55 @@ pub(super) fn jitter(slot: u32) -> f32 {
 #[inline]
 pub(super) fn outgrows_min_margin(speed: f32, size: f32) -> bool {
     speed * LOOKAHEAD_STEPS > size * MIN_MARGIN
+}
+
+/// A full pass splits over rayon's current pool only in a world of at least this many proxies
+/// (and with more than one thread): below it, handing out the tasks costs about what the
+/// second thread saves (measured on `gas`).
+#[cfg(feature = "parallel")]
+const PARALLEL_MIN_PROXIES: usize = 10_000;
+/// Tasks per thread in each split phase of a parallel pass, so that a thread that finishes its
+/// share early takes over part of a slower one's.
+#[cfg(feature = "parallel")]
+const TASKS_PER_THREAD: usize = 4;
+/// The most tasks of one phase (the sorts number their parts with bytes).
+#[cfg(feature = "parallel")]
+const MAX_TASKS: usize = 64;
+
+/// Buffers of the parallel full pass (feature `parallel`), reused by every pass; they never
+/// shrink.
+#[cfg(feature = "parallel")]
+#[derive(Clone, Debug, Default)]
+pub(super) struct Parallel {
+    /// The first keys of the pair sort's parts (see [`radix::split_points`]).
+    splitters: Vec<u64>,
+    /// Pairs found, packed, per producer and per part of the sort: one producer per chunk of
+    /// the octree's pass, then the bodies' task.
+    found: Vec<Vec<Vec<u64>>>,
+    /// The pair sort's second buffers (one per part) and its parts' bounds.
+    sort_tmp: Vec<Vec<u64>>,
+    sort_bounds: Vec<usize>,
+    /// Per part of the event diff: its `added` and `removed`.
+    diff: Vec<[Vec<u64>; 2]>,
+    /// The diff's parts' first positions in the current and the previous pair lists.
+    cur_at: Vec<usize>,
+    prev_at: Vec<usize>,
+}
+
+#[cfg(feature = "parallel")]
+impl Parallel {
+    /// Heap bytes held (capacities).
+    pub(super) fn heap_bytes(&self) -> usize {
+        let lists = |v: &[Vec<u64>]| v.iter().map(Vec::capacity).sum::<usize>();
+        (self.splitters.capacity()
+            + self.found.iter().map(|f| lists(f)).sum::<usize>()
+            + lists(&self.sort_tmp)
+            + self.sort_bounds.capacity()
+            + self.diff.iter().map(|d| lists(d)).sum::<usize>()
+            + self.cur_at.capacity()
+            + self.prev_at.capacity())
+            * 8
+    }
 }
 
 /// The packed pair of two distinct slots: the smaller in the high half.
@@ -248,10 +299,17 @@ impl BroadPhase {
             }
         }
         self.refit(true);
-        self.fresh.clear();
-        self.structure_pairs();
         let bits = 32 + bits_of(self.store.slots() as u64);
-        sort_u64(&mut self.fresh, &mut self.sort_buf, bits);
+        let tasks = self.tasks();
+        match tasks {
+            #[cfg(feature = "parallel")]
+            2.. => self.sorted_pairs_par(tasks, bits),
+            _ => {
+                self.fresh.clear();
+                self.structure_pairs();
+                sort_u64(&mut self.fresh, &mut self.sort_buf, bits);
+            }
+        }
         self.packed.clear();
         if fat {
             self.cand.clear();
@@ -273,7 +331,29 @@ impl BroadPhase {
             self.cand.clear();
             self.cached = false;
         }
-        self.emit();
+        match tasks {
+            #[cfg(feature = "parallel")]
+            2.. => self.emit_par(tasks),
+            _ => self.emit(),
+        }
+    }
+
+    /// How many tasks each split phase of a full pass hands to rayon's current pool: 1 (the
+    /// serial pass) without the feature `parallel`, on one thread, or in a small world.
+    #[cfg(feature = "parallel")]
+    fn tasks(&self) -> usize {
+        let threads = rayon::current_num_threads();
+        if threads < 2 || self.store.len() < PARALLEL_MIN_PROXIES {
+            1
+        } else {
+            (threads * TASKS_PER_THREAD).min(MAX_TASKS)
+        }
+    }
+
+    #[cfg(not(feature = "parallel"))]
+    #[inline(always)]
+    fn tasks(&self) -> usize {
+        1
     }
 
     /// Refits the trees whose held boxes changed: the static one always, the dynamic one
@@ -304,25 +384,56 @@ impl BroadPhase {
         self.octree.for_each_pair(&mut push);
         self.dynamic.for_each_pair(&mut push);
         self.dynamic.for_each_pair_with(&self.statics, &mut push);
-        // Sphere × body: the smaller side queries the other side's structure.
-        let bodies = self.dynamic.len() + self.statics.len();
-        if bodies == 0 || self.octree.is_empty() {
-            return;
+        sphere_body_pairs(&self.octree, &self.dynamic, &self.statics, &mut push);
+    }
+
+    /// [`BroadPhase::structure_pairs`] and the sort, over rayon's current pool in `tasks`
+    /// tasks per split phase: the octree's pass in chunks, beside one task for the BVH
+    /// passes and the sphere × body queries. Each producer cuts its pairs into the sort's
+    /// parts as it finds them (at the last step's quantiles), and each part is then sorted
+    /// into `fresh` by its own task. `fresh` ends as the serial path leaves it.
+    #[cfg(feature = "parallel")]
+    fn sorted_pairs_par(&mut self, tasks: usize, bits: u32) {
+        let par = &mut self.par;
+        let slots = self.store.slots() as u64;
+        radix::split_points(&self.prev_packed, tasks, slots, &mut par.splitters);
+        let parts = par.splitters.len() + 1;
+        if par.found.len() < tasks + 1 {
+            par.found.resize_with(tasks + 1, Vec::new);
         }
-        let octree = &self.octree;
-        if bodies <= octree.len() {
-            for tree in [&self.dynamic, &self.statics] {
-                tree.for_each(|body, aabb| {
-                    octree.query_aabb_unchecked(&aabb, |sphere| push(body, sphere));
-                });
+        for found in &mut par.found[..tasks + 1] {
+            if found.len() < parts {
+                found.resize_with(parts, Vec::new);
             }
-        } else {
-            let (dynamic, statics) = (&self.dynamic, &self.statics);
-            octree.for_each(|sphere, aabb| {
-                dynamic.query_aabb_unchecked(&aabb, |body| push(sphere, body));
-                statics.query_aabb_unchecked(&aabb, |body| push(sphere, body));
-            });
+            for part in &mut found[..parts] {
+                part.clear();
+            }
         }
+        let (store, groups, splitters) = (&self.store, self.any_groups, &par.splitters[..]);
+        let emit = |found: &mut Vec<Vec<u64>>, a: ProxyKey, b: ProxyKey| {
+            let (a, b) = (crate::pair::slot(a), crate::pair::slot(b));
+            if !groups || store.groups[a as usize].allows(store.groups[b as usize]) {
+                let p = pack(a, b);
+                found[radix::part_of(splitters, p)].push(p);
+            }
+        };
+        let (chunks, rest) = par.found[..tasks + 1].split_at_mut(tasks);
+        let bodies = &mut rest[0];
+        let (dynamic, statics) = (&mut self.dynamic, &self.statics);
+        self.octree.for_each_pair_chunked(chunks, &emit, |octree| {
+            let mut push = |a, b| emit(bodies, a, b);
+            dynamic.for_each_pair(&mut push);
+            dynamic.for_each_pair_with(statics, &mut push);
+            sphere_body_pairs(octree, dynamic, statics, &mut push);
+        });
+        radix::sort_parts(
+            &par.found[..tasks + 1],
+            parts,
+            &mut self.fresh,
+            &mut par.sort_tmp,
+            &mut par.sort_bounds,
+            bits,
+        );
     }
 
     /// The incremental pass (see the module docs).
@@ -405,6 +516,67 @@ impl BroadPhase {
         self.stats.candidates_tested = tested;
     }
 
+    /// [`BroadPhase::emit`] over rayon's current pool: the current list is cut into `tasks`
+    /// stretches of equal length, the previous one at the same keys, each pair of stretches
+    /// diffed by its own task; the parts' events are then joined in order, and the key lists
+    /// mapped in parallel. The lists are the serial ones.
+    #[cfg(feature = "parallel")]
+    fn emit_par(&mut self, tasks: usize) {
+        use rayon::prelude::*;
+        let (prev, cur, par) = (&self.prev_packed, &self.packed, &mut self.par);
+        let parts = tasks.min(cur.len()).max(1);
+        par.cur_at.clear();
+        par.prev_at.clear();
+        for p in 0..parts {
+            let at = cur.len() * p / parts;
+            par.cur_at.push(at);
+            par.prev_at.push(if p == 0 {
+                0
+            } else {
+                prev.partition_point(|&x| x < cur[at])
+            });
+        }
+        par.cur_at.push(cur.len());
+        par.prev_at.push(prev.len());
+        if par.diff.len() < parts {
+            par.diff.resize_with(parts, Default::default);
+        }
+        let (cur_at, prev_at) = (&par.cur_at, &par.prev_at);
+        par.diff[..parts]
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(p, [added, removed])| {
+                crate::pair::diff(
+                    &prev[prev_at[p]..prev_at[p + 1]],
+                    &cur[cur_at[p]..cur_at[p + 1]],
+                    added,
+                    removed,
+                );
+            });
+        self.added_packed.clear();
+        self.removed_packed.clear();
+        for [added, removed] in &par.diff[..parts] {
+            self.added_packed.extend_from_slice(added);
+            self.removed_packed.extend_from_slice(removed);
+        }
+        let store = &self.store;
+        let to_pair = |&p: &u64| {
+            let (a, b) = unpack(p);
+            Pair {
+                a: store.key(a as u32),
+                b: store.key(b as u32),
+            }
+        };
+        self.pairs.clear();
+        self.pairs.par_extend(self.packed.par_iter().map(to_pair));
+        self.added.clear();
+        self.added
+            .par_extend(self.added_packed.par_iter().map(to_pair));
+        self.removed.clear();
+        self.removed
+            .par_extend(self.removed_packed.par_iter().map(to_pair));
+    }
+
     /// `added` / `removed` from the packed lists, and the three key lists.
     fn emit(&mut self) {
         crate::pair::diff(
@@ -427,5 +599,31 @@ impl BroadPhase {
         self.added.extend(self.added_packed.iter().map(to_pair));
         self.removed.clear();
         self.removed.extend(self.removed_packed.iter().map(to_pair));
+    }
+}
+
+/// Calls `push(a, b)` for every sphere of `octree` and body of `dynamic` or `statics` whose
+/// held boxes overlap: the smaller side queries the other side's structure.
+fn sphere_body_pairs(
+    octree: &Octree,
+    dynamic: &Bvh,
+    statics: &Bvh,
+    push: &mut impl FnMut(ProxyKey, ProxyKey),
+) {
+    let bodies = dynamic.len() + statics.len();
+    if bodies == 0 || octree.is_empty() {
+        return;
+    }
+    if bodies <= octree.len() {
+        for tree in [dynamic, statics] {
+            tree.for_each(|body, aabb| {
+                octree.query_aabb_unchecked(&aabb, |sphere| push(body, sphere));
+            });
+        }
+    } else {
+        octree.for_each(|sphere, aabb| {
+            dynamic.query_aabb_unchecked(&aabb, |body| push(sphere, body));
+            statics.query_aabb_unchecked(&aabb, |body| push(sphere, body));
+        });
     }
 }

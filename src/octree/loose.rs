@@ -76,6 +76,17 @@ pub(super) struct Scratch {
     /// The neighbours of a crowded run that reach its union box, as positions in the
     /// sorted spheres.
     dense: Vec<u32>,
+    /// Per task of a chunked pass: its own scratch.
+    #[cfg(feature = "parallel")]
+    chunks: Vec<Chunk>,
+}
+
+/// The scratch of one task of a chunked pass ([`Octree::loose_pairs_chunked`]).
+#[cfg(feature = "parallel")]
+#[derive(Clone, Debug, Default)]
+struct Chunk {
+    sweeps: Sweeps,
+    dense: Vec<u32>,
 }
 
 /// The state of one loose pass over the sorted spheres.
@@ -156,6 +167,96 @@ impl Octree {
             tests,
             nodes_visited: visited,
         }
+    }
+
+    /// [`Octree::loose_pairs`] split over rayon's current pool: the walk-order sort in up to
+    /// `out.len()` parts, then the runs in `out.len()` chunks of about equal sphere counts,
+    /// each passed by its own task with its own pass state and scratch. Chunk `c` calls
+    /// `emit(&mut out[c], a, b)` for each pair it finds. Every pair is found from one run, as
+    /// in the serial pass, so once; the tests and nodes counted are the serial pass's.
+    #[cfg(feature = "parallel")]
+    pub(super) fn loose_pairs_chunked<S, E>(
+        &self,
+        ws: &mut walk::Scratch,
+        s: &mut Scratch,
+        out: &mut [S],
+        emit: &E,
+    ) -> PassCost
+    where
+        S: Send,
+        E: Fn(&mut S, ProxyKey, ProxyKey) + Sync,
+    {
+        use rayon::prelude::*;
+        let k = out.len();
+        if self.objs.is_empty() || k == 0 {
+            return PassCost::default();
+        }
+        self.sort_into_walk_order_par(ws, k);
+        let (hot, keys) = (&ws.hot[..], &ws.keys[..]);
+        let deeper = self.occupied_below();
+        let d = self.grid.depth as usize;
+        let cross = (0..=d).any(|l| deeper[l] && self.per_level[l] > 0);
+        s.index_runs(self, &ws.node_key, cross);
+        if s.chunks.len() < k {
+            s.chunks.resize_with(k, Chunk::default);
+        }
+        let Scratch {
+            run_key,
+            run_start,
+            run_of,
+            chunks,
+            ..
+        } = &mut *s;
+        let (run_key, run_start, run_of) = (&run_key[..], &run_start[..], &run_of[..]);
+        let runs = run_key.len() - 1;
+        let n = hot.len();
+        // Chunk `c` takes the runs that start in `[n·c/k, n·(c+1)/k)`.
+        let first_run =
+            |c: usize| run_start[..runs].partition_point(|&st| (st as usize) < n * c / k);
+        let cost = chunks[..k]
+            .par_iter_mut()
+            .zip(out.par_iter_mut())
+            .enumerate()
+            .map(|(c, (chunk, out))| {
+                let (lo, hi) = (first_run(c), first_run(c + 1));
+                let Chunk { sweeps, dense } = chunk;
+                let mut pass = Pass {
+                    tree: self,
+                    hot,
+                    run_key,
+                    run_start,
+                    run_of,
+                    t: Tester {
+                        keys,
+                        tests: 0,
+                        emit: |a, b| emit(out, a, b),
+                    },
+                    sweeps,
+                    dense,
+                    first: [0; ROWS.len()],
+                    past: [0; ROWS.len()],
+                    at_level: u32::MAX,
+                    offsets: [0; ROWS.len()],
+                    near: [0; NEAR_CAP],
+                };
+                if lo < hi {
+                    pass.start_at(lo);
+                }
+                let mut visited = (hi - lo) as u32;
+                for r in lo..hi {
+                    visited += pass.node(r, &deeper);
+                }
+                PassCost {
+                    tests: pass.t.tests,
+                    nodes_visited: visited,
+                }
+            })
+            .reduce(PassCost::default, |a, b| PassCost {
+                tests: a.tests + b.tests,
+                nodes_visited: a.nodes_visited + b.nodes_visited,
+            });
+        s.clear_runs(cross);
+        cost
     }
 
     /// `deeper[L]`: some sphere lives below level `L`.
@@ -246,6 +347,22 @@ fn seek(keys: &[u64], p: &mut usize, target: u64) {
 }
 
 impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
+    /// Points the forward rows' seek pointers at or before where the first seeks of a pass
+    /// that starts at run `r` will stop (the pointers only move forward): the first run at
+    /// or after the lowest key a forward row of `r`'s cell can have, one below the row's
+    /// offset added to `r`'s key. Later runs look for larger keys.
+    #[cfg(feature = "parallel")]
+    fn start_at(&mut self, r: usize) {
+        let key = self.run_key[r];
+        let (level, _) = LooseKey(key).cell(self.tree.grid.depth);
+        for (k, [dy, dz]) in ROWS.into_iter().enumerate() {
+            let off = LooseKey::offset(level, [0, dy, dz]);
+            let low = key.wrapping_add(off).saturating_sub(1).max(key);
+            let at = self.run_key.partition_point(|&x| x < low);
+            (self.first[k], self.past[k]) = (at, at);
+        }
+    }
+
     /// Every pair of run `r` with itself, its forward neighbours and (where `deeper` says some
     /// sphere lives below its level) its neighbours' subtrees. Returns the subtree nodes
     /// visited.
@@ -411,5 +528,74 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
             }
         }
         visited
+    }
+}
+
+#[cfg(all(test, feature = "parallel"))]
+mod tests {
+    use super::super::Placement;
+    use super::*;
+    use crate::geom::Aabb;
+    use crate::rng::Rng;
+    use glam::Vec3;
+
+    /// The chunked pass finds the serial pass's pairs, each once, with the same test and node
+    /// counts, for any number of chunks (more chunks than runs, too) and threads, in a tree
+    /// with several occupied levels, crowded nodes and spheres outside the bounds.
+    #[test]
+    fn chunked_pass_finds_the_serial_pairs_once() {
+        let bounds = Aabb::new(Vec3::splat(-40.0), Vec3::splat(40.0));
+        let mut rng = Rng::new(7);
+        for (n, depth) in [(1, 3), (40, 2), (3000, 5), (20_000, 6)] {
+            let mut t = Octree::with_placement(bounds, depth, Placement::Loose).unwrap();
+            for i in 0..n {
+                let c = Vec3::new(
+                    rng.range(-45.0, 45.0),
+                    rng.range(-45.0, 45.0),
+                    rng.range(-45.0, 45.0),
+                );
+                // A crowd in one corner, a few big spheres, the rest small.
+                let c = if i % 9 == 0 {
+                    c * 0.05 + Vec3::splat(20.0)
+                } else {
+                    c
+                };
+                let r = if i % 50 == 0 {
+                    rng.range(2.0, 9.0)
+                } else {
+                    rng.range(0.1, 1.0)
+                };
+                t.insert(c, r).unwrap();
+            }
+            let pack = |a: ProxyKey, b: ProxyKey| {
+                let (a, b) = (crate::pair::slot(a), crate::pair::slot(b));
+                (u64::from(a.min(b)) << 32) | u64::from(a.max(b))
+            };
+            let mut want = Vec::new();
+            t.for_each_pair(|a, b| want.push(pack(a, b)));
+            want.sort_unstable();
+            let serial = t.stats();
+            for threads in [1, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                for chunks in [1, 2, 5, 64] {
+                    let mut out = vec![Vec::new(); chunks];
+                    let emit = |o: &mut Vec<u64>, a, b| o.push(pack(a, b));
+                    pool.install(|| t.for_each_pair_chunked(&mut out, &emit, |_| ()));
+                    let mut got: Vec<u64> = out.concat();
+                    got.sort_unstable();
+                    assert_eq!(got, want, "n {n} threads {threads} chunks {chunks}");
+                    let st = t.stats();
+                    assert_eq!(
+                        (st.aabb_tests, st.nodes_visited),
+                        (serial.aabb_tests, serial.nodes_visited),
+                        "n {n} chunks {chunks}"
+                    );
+                }
+            }
+            t.validate();
+        }
     }
 }

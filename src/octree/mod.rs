@@ -442,6 +442,31 @@ impl Octree {
         self.passes = p;
     }
 
+    /// The pairs of [`Octree::for_each_pair`], found in chunks over rayon's current pool:
+    /// chunk `c` calls `emit(&mut out[c], a, b)` for each pair it finds (each pair is found by
+    /// one chunk, once; which one is unspecified). `alongside` runs concurrently, with shared
+    /// access to the tree (for queries). A strict tree's pass runs as one task, into `out[0]`.
+    #[cfg(feature = "parallel")]
+    pub(crate) fn for_each_pair_chunked<S, E, A>(&mut self, out: &mut [S], emit: &E, alongside: A)
+    where
+        S: Send,
+        E: Fn(&mut S, ProxyKey, ProxyKey) + Sync,
+        A: FnOnce(&Octree) + Send,
+    {
+        let mut p = core::mem::take(&mut self.passes);
+        let tree = &*self;
+        let pass = || match tree.grid.placement {
+            Placement::Strict => match out.first_mut() {
+                Some(o) => tree.strict_pairs(&mut p.walk, &mut p.strict, |a, b| emit(o, a, b)),
+                None => PassCost::default(),
+            },
+            Placement::Loose => tree.loose_pairs_chunked(&mut p.walk, &mut p.loose, out, emit),
+        };
+        let (cost, ()) = rayon::join(pass, || alongside(tree));
+        self.last_pass = cost;
+        self.passes = p;
+    }
+
     /// Appends every overlapping pair, canonical (`a < b`) but **unsorted**, to `out`
     /// (which is not cleared); sort with [`crate::pair::sort_dedup`] if order matters.
     pub fn pairs_into(&mut self, out: &mut Vec<Pair>) {

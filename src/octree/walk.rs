@@ -86,6 +86,55 @@ pub(super) struct Scratch {
     pub(super) node_key: Vec<u64>,
     pub(super) keys: Vec<ProxyKey>,
     pub(super) sweeps: Sweeps,
+    /// The parallel sort's buffers (see [`Octree::sort_into_walk_order_par`]).
+    #[cfg(feature = "parallel")]
+    par: ParSort,
+}
+
+/// The most parts a parallel walk-order sort splits the spheres into: its lists number the
+/// parts squared.
+#[cfg(feature = "parallel")]
+const MAX_PARTS: usize = 32;
+
+/// Buffers of the parallel walk-order sort, reused by every pass; they never shrink.
+#[cfg(feature = "parallel")]
+#[derive(Clone, Debug, Default)]
+struct ParSort {
+    /// Walk keys sampled from the spheres, sorted, to pick the parts' first keys from.
+    sample: Vec<u64>,
+    /// The first walk key of every part but the first, increasing.
+    splitters: Vec<u64>,
+    /// Per range of ids and part: `(walk key << 32) | id` of the range's spheres in the part;
+    /// range `c`'s part `p` at `c · parts + p`.
+    buckets: Vec<Vec<u64>>,
+    /// Per part: its sorting buffers.
+    parts: Vec<PartSort>,
+    /// The parts' first walk positions, and the sphere count last.
+    bounds: Vec<u32>,
+}
+
+/// One part's buffers: its `(walk key << 32) | id`, and the radix sort's scratch.
+#[cfg(feature = "parallel")]
+#[derive(Clone, Debug, Default)]
+struct PartSort {
+    items: Vec<u64>,
+    tmp: Vec<u64>,
+    counts: Vec<u32>,
+}
+
+#[cfg(feature = "parallel")]
+impl ParSort {
+    fn heap_bytes(&self) -> usize {
+        self.sample.capacity() * 8
+            + self.splitters.capacity() * 8
+            + self.buckets.iter().map(|b| b.capacity() * 8).sum::<usize>()
+            + self.bounds.capacity() * 4
+            + self
+                .parts
+                .iter()
+                .map(|p| p.counts.capacity() * 4 + (p.items.capacity() + p.tmp.capacity()) * 8)
+                .sum::<usize>()
+    }
 }
 
 impl Scratch {
@@ -99,6 +148,17 @@ impl Scratch {
             + v(self.hot.capacity(), size_of_val(&Hot::EMPTY))
             + v(self.node_key.capacity() + self.keys.capacity(), 8)
             + v(self.sweeps.a.capacity() + self.sweeps.b.capacity(), 8)
+            + self.par_heap_bytes()
+    }
+
+    #[cfg(feature = "parallel")]
+    fn par_heap_bytes(&self) -> usize {
+        self.par.heap_bytes()
+    }
+
+    #[cfg(not(feature = "parallel"))]
+    fn par_heap_bytes(&self) -> usize {
+        0
     }
 }
 
@@ -345,6 +405,187 @@ impl Octree {
                 pos,
             };
             keys[pos as usize] = key;
+        }
+    }
+}
+
+/// Walk keys sampled per part to pick the parts' first keys from: enough that the parts'
+/// sizes stay within a few percent of each other.
+#[cfg(feature = "parallel")]
+const SAMPLES_PER_PART: usize = 64;
+
+#[cfg(feature = "parallel")]
+impl Octree {
+    /// [`Octree::sort_into_walk_order`] split over rayon's current pool: the walk keys are cut
+    /// into at most `parts` ranges of about equal sphere counts (quantiles of a sample), each
+    /// a run of the walk order, and each range is gathered, sorted and copied out by its own
+    /// task. Keys and ids are unique together, so the walk order is the serial sort's, whatever
+    /// the cut. Trees too deep for 32-bit keys, and `parts < 2`, sort serially.
+    pub(super) fn sort_into_walk_order_par(&self, s: &mut Scratch, parts: usize) {
+        use rayon::prelude::*;
+        let key_bits = walk_key_bits(self.grid.depth);
+        let parts = parts.min(MAX_PARTS);
+        if key_bits > 32 || parts < 2 {
+            self.sort_into_walk_order(s);
+            return;
+        }
+        let Scratch {
+            hot,
+            node_key,
+            keys,
+            par,
+            ..
+        } = s;
+        let objs = &self.objs;
+        let stride = (objs.len() / (parts * SAMPLES_PER_PART)).max(1);
+        par.sample.clear();
+        par.sample.extend(
+            objs.iter()
+                .step_by(stride)
+                .filter(|o| o.node != NONE)
+                .map(|o| o.walk_key),
+        );
+        if par.sample.is_empty() {
+            self.sort_into_walk_order(s);
+            return;
+        }
+        par.sample.sort_unstable();
+        par.splitters.clear();
+        for p in 1..parts {
+            let k = par.sample[par.sample.len() * p / parts];
+            if par.splitters.last().is_none_or(|&last| last < k) {
+                par.splitters.push(k);
+            }
+        }
+        // Each range of ids lists its spheres by part (the number of splitters at most the
+        // walk key) as `(walk key << 32) | id`: a part then sorts only its own lists.
+        let np = par.splitters.len() + 1;
+        let splitters = &par.splitters;
+        if par.buckets.len() < np * np {
+            par.buckets.resize_with(np * np, Vec::new);
+        }
+        for b in &mut par.buckets[..np * np] {
+            b.clear();
+        }
+        let range = objs.len().div_ceil(np);
+        par.buckets[..np * np]
+            .par_chunks_mut(np)
+            .zip(objs.par_chunks(range))
+            .enumerate()
+            .for_each(|(c, (buckets, objs))| {
+                for (i, o) in objs.iter().enumerate() {
+                    if o.node != NONE {
+                        let p = splitters.partition_point(|&x| x <= o.walk_key);
+                        buckets[p].push((o.walk_key << 32) | (c * range + i) as u64);
+                    }
+                }
+            });
+        par.bounds.clear();
+        par.bounds.push(0);
+        for p in 0..np {
+            let len: usize = (0..np).map(|c| par.buckets[c * np + p].len()).sum();
+            par.bounds.push(par.bounds[p] + len as u32);
+        }
+        let n = self.live;
+        debug_assert_eq!(par.bounds[np] as usize, n);
+        hot.resize(n, Hot::EMPTY);
+        node_key.resize(n, 0);
+        keys.resize(n, ProxyKey::default());
+        if par.parts.len() < np {
+            par.parts.resize_with(np, PartSort::default);
+        }
+        let job = Parts {
+            tree: self,
+            buckets: &par.buckets[..np * np],
+            bounds: &par.bounds,
+            key_bits,
+        };
+        job.fill(0, &mut par.parts[..np], hot, node_key, keys);
+    }
+}
+
+/// What every part of a parallel walk-order sort reads.
+#[cfg(feature = "parallel")]
+struct Parts<'a> {
+    buckets: &'a [Vec<u64>],
+    tree: &'a Octree,
+    bounds: &'a [u32],
+    key_bits: u32,
+}
+
+#[cfg(feature = "parallel")]
+impl Parts<'_> {
+    /// Fills the walk-ordered copies of parts `first..first + parts.len()`, whose positions
+    /// `hot`, `node_key` and `keys` are, halving the parts between two tasks until one is left.
+    fn fill(
+        &self,
+        first: usize,
+        parts: &mut [PartSort],
+        hot: &mut [Hot],
+        node_key: &mut [u64],
+        keys: &mut [ProxyKey],
+    ) {
+        if let [part] = parts {
+            self.fill_one(first, part, hot, node_key, keys);
+            return;
+        }
+        let mid = parts.len() / 2;
+        let at = (self.bounds[first + mid] - self.bounds[first]) as usize;
+        let (pa, pb) = parts.split_at_mut(mid);
+        let (ha, hb) = hot.split_at_mut(at);
+        let (na, nb) = node_key.split_at_mut(at);
+        let (ka, kb) = keys.split_at_mut(at);
+        rayon::join(
+            || self.fill(first, pa, ha, na, ka),
+            || self.fill(first + mid, pb, hb, nb, kb),
+        );
+    }
+
+    /// Part `p`: its spheres as the ranges listed them, sorted by `(walk key, id)`, then
+    /// gathered into the part's own stretch of the copies in walk order. (The serial sort
+    /// stores to scattered places instead, which stalls less than loading from them; the
+    /// gather writes in order and leaves the scattered loads independent of each other, which
+    /// a part's share of the spheres, spread over the whole id range, needs.)
+    fn fill_one(
+        &self,
+        p: usize,
+        part: &mut PartSort,
+        hot: &mut [Hot],
+        node_key: &mut [u64],
+        keys: &mut [ProxyKey],
+    ) {
+        let np = self.bounds.len() - 1;
+        let base = self.bounds[p];
+        part.items.clear();
+        for listed in self.buckets.iter().skip(p).step_by(np) {
+            part.items.extend_from_slice(listed);
+        }
+        debug_assert_eq!(part.items.len(), hot.len());
+        radix_sort(
+            &mut part.items,
+            &mut part.tmp,
+            &mut part.counts,
+            32,
+            self.key_bits,
+        );
+        let tree = self.tree;
+        for (j, ((&x, nk), (h, k))) in part
+            .items
+            .iter()
+            .zip(node_key.iter_mut())
+            .zip(hot.iter_mut().zip(keys.iter_mut()))
+            .enumerate()
+        {
+            let id = x as u32 as usize;
+            let o = &tree.objs[id];
+            *nk = x >> 32;
+            *h = Hot {
+                bx: SimdBox::new(&o.aabb),
+                qmin: o.qmin,
+                qmax: o.qmax,
+                pos: base + j as u32,
+            };
+            *k = tree.keys[id];
         }
     }
 }

@@ -1,0 +1,285 @@
+//! Feature `parallel`: a step gives the same lists at any thread count. Random worlds of
+//! spheres and dynamic and static bodies (random collision groups) move, rest, churn and grow
+//! under rayon pools of 1, 2, 3 and 8 threads; every run's digest of each step's `pairs`,
+//! `added` and `removed` and of the keys its inserts returned must be the one-thread run's,
+//! and every step's lists must be the brute force of the model in `common`, filtered by the
+//! groups rule.
+//!
+//! The worlds stay above the broadphase's parallel threshold (`PARALLEL_MIN_PROXIES`, 10 000
+//! proxies) in every step that runs a full pass, so the split passes are the ones checked.
+
+mod common;
+
+use broadleaf::octree::Placement;
+use broadleaf::{BroadPhase, CollisionGroups, Config, Pair, Passes, ProxyKey, Vec3};
+use common::{KeyPair, Model, ModelShape, Rng};
+use slotmap::Key;
+use std::collections::{BTreeSet, HashMap};
+
+/// The broadphase's `PARALLEL_MIN_PROXIES`: the worlds below never have fewer proxies.
+const THRESHOLD: usize = 10_000;
+
+/// Thread counts every world runs at.
+const THREADS: [usize; 4] = [1, 2, 3, 8];
+
+/// FNV-1a over the keys' FFI bits.
+struct Fnv(u64);
+
+impl Fnv {
+    fn write(&mut self, x: u64) {
+        for byte in x.to_le_bytes() {
+            self.0 ^= u64::from(byte);
+            self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+
+    fn key(&mut self, k: ProxyKey) {
+        self.write(k.data().as_ffi());
+    }
+
+    fn pairs(&mut self, tag: u64, pairs: &[Pair]) {
+        self.write(tag);
+        self.write(pairs.len() as u64);
+        for p in pairs {
+            self.key(p.a);
+            self.key(p.b);
+        }
+    }
+}
+
+/// How a world is built and configured.
+#[derive(Clone, Copy, Debug)]
+struct World {
+    seed: u64,
+    /// Proxies at the start.
+    start: usize,
+    placement: Placement,
+    passes: Passes,
+    margin: f32,
+}
+
+/// The model's proxies with their groups, and the pairs of the last step.
+struct Checked {
+    model: Model,
+    groups: HashMap<ProxyKey, CollisionGroups>,
+    prev: BTreeSet<KeyPair>,
+    digest: Fnv,
+}
+
+/// The half side of the cube the proxies live in; `Config::bounds` is a little smaller, so
+/// some spheres lie outside the octree's bounds.
+const HALF: f32 = 60.0;
+
+impl Checked {
+    /// A random shape: mostly spheres of radii 0.2–2.5 (several octree levels), some
+    /// dynamic and some static boxes of half extents 0.2–3.
+    fn random_shape(rng: &mut Rng) -> ModelShape {
+        let center = rng.offset(HALF);
+        let roll = rng.unit();
+        if roll < 0.8 {
+            ModelShape::Sphere {
+                center,
+                radius: if rng.chance(0.1) {
+                    rng.range(1.0, 2.5)
+                } else {
+                    rng.range(0.2, 0.8)
+                },
+            }
+        } else {
+            let half = Vec3::new(
+                rng.range(0.2, 3.0),
+                rng.range(0.2, 3.0),
+                rng.range(0.2, 3.0),
+            );
+            ModelShape::body(center, half, roll > 0.95)
+        }
+    }
+
+    /// Random groups for one proxy in four: memberships and filters over three bits, so that
+    /// some pairs are filtered and most are not.
+    fn random_groups(rng: &mut Rng) -> Option<CollisionGroups> {
+        rng.chance(0.25).then(|| CollisionGroups {
+            memberships: 1 << rng.below(3),
+            filter: (rng.next_u64() as u32 & 0b111) | 1,
+        })
+    }
+
+    fn insert(&mut self, bp: &mut BroadPhase, rng: &mut Rng) {
+        let key = self.model.insert(bp, Self::random_shape(rng));
+        self.digest.key(key);
+        if let Some(g) = Self::random_groups(rng) {
+            bp.set_groups(key, g).expect("a live key");
+            self.groups.insert(key, g);
+        }
+    }
+
+    fn group(&self, k: ProxyKey) -> CollisionGroups {
+        self.groups.get(&k).copied().unwrap_or_default()
+    }
+
+    /// Steps `bp`, checks its lists against the model's brute force (filtered by groups) and
+    /// feeds them to the digest.
+    fn step(&mut self, bp: &mut BroadPhase, context: &str) {
+        let want: Vec<KeyPair> = self
+            .model
+            .pairs_sweep()
+            .into_iter()
+            .filter(|&(a, b)| self.group(a).allows(self.group(b)))
+            .collect();
+        let now: BTreeSet<KeyPair> = want.iter().copied().collect();
+        let added: Vec<KeyPair> = now.difference(&self.prev).copied().collect();
+        let removed: Vec<KeyPair> = self.prev.difference(&now).copied().collect();
+        let out = bp.step();
+        self.model.assert_list(context, "pairs", out.pairs, &want);
+        self.model.assert_list(context, "added", out.added, &added);
+        self.model
+            .assert_list(context, "removed", out.removed, &removed);
+        self.digest.pairs(1, out.pairs);
+        self.digest.pairs(2, out.added);
+        self.digest.pairs(3, out.removed);
+        self.prev = now;
+        bp.validate();
+    }
+}
+
+/// Runs `world` on the current rayon pool through four phases and returns its digest.
+fn run(world: World) -> u64 {
+    let mut rng = Rng::new(world.seed);
+    let mut bp = BroadPhase::new(Config {
+        bounds: broadleaf::Aabb::new(Vec3::splat(-0.9 * HALF), Vec3::splat(0.9 * HALF)),
+        octree_depth: 6,
+        octree_placement: world.placement,
+        passes: world.passes,
+        margin: world.margin,
+        ..Config::default()
+    });
+    let mut c = Checked {
+        model: Model::new(world.margin),
+        groups: HashMap::new(),
+        prev: BTreeSet::new(),
+        digest: Fnv(0xcbf2_9ce4_8422_2325),
+    };
+    c.model.quadratic = false;
+    for _ in 0..world.start {
+        c.insert(&mut bp, &mut rng);
+    }
+    let moves = |c: &mut Checked, bp: &mut BroadPhase, rng: &mut Rng, p: f32, reach: f32| {
+        for key in c.model.keys() {
+            if rng.chance(p) {
+                let s = c.model.shapes[&key];
+                let moved = if rng.chance(0.01) {
+                    s.teleported(rng.offset(HALF))
+                } else {
+                    s.moved(rng.offset(reach))
+                };
+                c.model.update(bp, key, moved);
+            }
+        }
+    };
+    let mut steps = 0;
+    let mut step = |c: &mut Checked, bp: &mut BroadPhase, phase: &str| {
+        assert!(
+            bp.len() >= THRESHOLD,
+            "the world shrank below the threshold"
+        );
+        c.step(bp, &format!("{world:?} step {steps} ({phase})"));
+        steps += 1;
+    };
+    step(&mut c, &mut bp, "first");
+    // Everything moves: full passes.
+    for _ in 0..6 {
+        moves(&mut c, &mut bp, &mut rng, 1.0, 0.3);
+        step(&mut c, &mut bp, "move");
+    }
+    // Almost everything rests: the incremental regime, entered by a full pass over fat boxes.
+    for _ in 0..6 {
+        moves(&mut c, &mut bp, &mut rng, 0.01, 0.3);
+        step(&mut c, &mut bp, "rest");
+    }
+    // Churn: removes, inserts, new groups and a fifth moving.
+    for _ in 0..6 {
+        let keys = c.model.keys();
+        for _ in 0..keys.len() / 40 {
+            let key = keys[rng.below(keys.len())];
+            if c.model.shapes.contains_key(&key) {
+                c.model.remove(&mut bp, key);
+                c.groups.remove(&key);
+            }
+        }
+        for _ in 0..keys.len() / 40 {
+            c.insert(&mut bp, &mut rng);
+        }
+        for &key in keys.iter().step_by(97) {
+            if c.model.shapes.contains_key(&key) {
+                let g = Checked::random_groups(&mut rng).unwrap_or_default();
+                bp.set_groups(key, g).expect("a live key");
+                c.groups.insert(key, g);
+            }
+        }
+        moves(&mut c, &mut bp, &mut rng, 0.2, 0.5);
+        step(&mut c, &mut bp, "churn");
+    }
+    // Growth: a twentieth more proxies each step, everything moving.
+    for _ in 0..5 {
+        for _ in 0..bp.len() / 20 {
+            c.insert(&mut bp, &mut rng);
+        }
+        moves(&mut c, &mut bp, &mut rng, 1.0, 0.3);
+        step(&mut c, &mut bp, "grow");
+    }
+    c.digest.0
+}
+
+/// Runs `world` at every thread count; all digests must be equal.
+fn same_at_every_thread_count(world: World) {
+    let digests: Vec<u64> = THREADS
+        .iter()
+        .map(|&t| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(t)
+                .build()
+                .expect("a thread pool");
+            pool.install(|| run(world))
+        })
+        .collect();
+    for (t, d) in THREADS.iter().zip(&digests) {
+        assert_eq!(
+            *d, digests[0],
+            "{world:?}: {t} threads gave digest {d:#x}, one thread {:#x}",
+            digests[0]
+        );
+    }
+}
+
+#[test]
+fn loose_world_is_the_same_at_every_thread_count() {
+    same_at_every_thread_count(World {
+        seed: 1,
+        start: THRESHOLD + 500,
+        placement: Placement::Loose,
+        passes: Passes::Adaptive,
+        margin: 0.0,
+    });
+}
+
+#[test]
+fn strict_world_with_a_margin_is_the_same_at_every_thread_count() {
+    same_at_every_thread_count(World {
+        seed: 2,
+        start: THRESHOLD + 500,
+        placement: Placement::Strict,
+        passes: Passes::Adaptive,
+        margin: 0.05,
+    });
+}
+
+#[test]
+fn full_passes_only_are_the_same_at_every_thread_count() {
+    same_at_every_thread_count(World {
+        seed: 3,
+        start: THRESHOLD + 500,
+        placement: Placement::Loose,
+        passes: Passes::Full,
+        margin: 0.0,
+    });
+}
