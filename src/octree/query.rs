@@ -291,7 +291,8 @@ impl Octree {
             let range = (self.grid.quantize(piece.min), self.grid.quantize(piece.max));
             self.candidates_from(&piece, false, |id| {
                 let o = &self.objs[id as usize];
-                let new = meets(o, range.0, range.1) && prev.is_none_or(|(lo, hi)| !meets(o, lo, hi));
+                let new =
+                    meets(o, range.0, range.1) && prev.is_none_or(|(lo, hi)| !meets(o, lo, hi));
                 if new {
                     best = best.min(visit(id, best));
                 }
