@@ -27,23 +27,15 @@ pub(super) fn sort_u64(keys: &mut Vec<u64>, scratch: &mut Vec<u64>, bits: u32) {
     }
 }
 
-/// Keys taken from a sorted list per part when [`split_points`] cuts the key range by it.
-#[cfg(feature = "parallel")]
-const PER_PART: usize = 64;
-
 /// Writes to `splitters` the first keys of parts `1..parts` of a cut of the key range into
 /// `parts` parts (fewer where keys repeat), increasing: the quantiles of `sorted`, a sorted
-/// list like the one about to be sorted (the last step's), or, when it is too short to tell,
-/// equal ranges of the high halves `0..high`.
+/// list like the one about to be sorted, of at least `parts` keys.
 #[cfg(feature = "parallel")]
-pub(super) fn split_points(sorted: &[u64], parts: usize, high: u64, splitters: &mut Vec<u64>) {
+pub(super) fn split_points(sorted: &[u64], parts: usize, splitters: &mut Vec<u64>) {
+    debug_assert!(sorted.len() >= parts || parts == 1);
     splitters.clear();
     for p in 1..parts {
-        let k = if sorted.len() >= parts * PER_PART {
-            sorted[sorted.len() * p / parts]
-        } else {
-            (high * p as u64 / parts as u64) << 32
-        };
+        let k = sorted[sorted.len() * p / parts];
         if splitters.last().is_none_or(|&last| last < k) {
             splitters.push(k);
         }
@@ -211,8 +203,8 @@ mod tests {
     }
 
     /// The parallel sort gives the serial one's output however the keys are spread over the
-    /// producers (empty ones too), for cuts by a sorted list and by the fallback ranges, any
-    /// part count and thread count.
+    /// producers (empty ones too), for cuts at the quantiles of the keys themselves and of
+    /// other keys, any part count and thread count.
     #[cfg(feature = "parallel")]
     #[test]
     fn sorting_in_parts_gives_the_sorted_union() {
@@ -233,9 +225,17 @@ mod tests {
                 let mut all: Vec<u64> = (0..n).map(|_| next() & ((1u64 << bits) - 1)).collect();
                 all.sort_unstable();
                 all.dedup();
-                let high = 1u64 << (bits - 32);
-                for (parts, by) in [(1, &all[..]), (2, &all[..]), (7, &all[..]), (64, &[][..])] {
-                    split_points(by, parts, high, &mut splitters);
+                let other: Vec<u64> = (0..64).map(|i| i << (bits - 6)).collect();
+                for (parts, by) in [
+                    (1, &all[..]),
+                    (2, &all[..]),
+                    (7, &all[..]),
+                    (64, &other[..]),
+                ] {
+                    if by.len() < parts {
+                        continue;
+                    }
+                    split_points(by, parts, &mut splitters);
                     let np = splitters.len() + 1;
                     let mut buckets = vec![vec![Vec::new(); np]; producers];
                     for &k in &all {

@@ -80,16 +80,22 @@ pub(super) fn outgrows_min_margin(speed: f32, size: f32) -> bool {
     speed * LOOKAHEAD_STEPS > size * MIN_MARGIN
 }
 
-/// A full pass splits over rayon's current pool only in a world of at least this many proxies
-/// (and with more than one thread): below it, handing out the tasks costs about what the
-/// second thread saves (measured on `gas`).
+/// A full pass splits over rayon's current pool only with at least this many spheres (and
+/// more than one thread): the octree's pass is the work that splits (the BVH passes run as
+/// one task beside it), and below this many spheres handing out its chunks costs about what
+/// the second thread saves (measured on `gas`).
 #[cfg(feature = "parallel")]
-const PARALLEL_MIN_PROXIES: usize = 10_000;
+const PARALLEL_MIN_SPHERES: usize = 10_000;
+/// Pairs per part of the parallel pair sort and event diff, at least: a part's fixed costs
+/// (the sort's counters, handing out the task) outweigh the split below it.
+#[cfg(feature = "parallel")]
+const MIN_PART_PAIRS: usize = 4096;
 /// Tasks per thread in each split phase of a parallel pass, so that a thread that finishes its
 /// share early takes over part of a slower one's.
 #[cfg(feature = "parallel")]
 const TASKS_PER_THREAD: usize = 4;
-/// The most tasks of one phase (the sorts number their parts with bytes).
+/// The most tasks of one phase: the pair sort keeps a list per producer and part, so their
+/// number grows with its square.
 #[cfg(feature = "parallel")]
 const MAX_TASKS: usize = 64;
 
@@ -331,19 +337,19 @@ impl BroadPhase {
             self.cand.clear();
             self.cached = false;
         }
-        match tasks {
+        match tasks.min(self.packed.len() / MIN_PART_PAIRS) {
             #[cfg(feature = "parallel")]
-            2.. => self.emit_par(tasks),
+            parts @ 2.. => self.emit_par(parts),
             _ => self.emit(),
         }
     }
 
     /// How many tasks each split phase of a full pass hands to rayon's current pool: 1 (the
-    /// serial pass) without the feature `parallel`, on one thread, or in a small world.
+    /// serial pass) without the feature `parallel`, on one thread, or with few spheres.
     #[cfg(feature = "parallel")]
     fn tasks(&self) -> usize {
         let threads = rayon::current_num_threads();
-        if threads < 2 || self.store.len() < PARALLEL_MIN_PROXIES {
+        if threads < 2 || self.octree.len() < PARALLEL_MIN_SPHERES {
             1
         } else {
             (threads * TASKS_PER_THREAD).min(MAX_TASKS)
@@ -390,13 +396,14 @@ impl BroadPhase {
     /// [`BroadPhase::structure_pairs`] and the sort, over rayon's current pool in `tasks`
     /// tasks per split phase: the octree's pass in chunks, beside one task for the BVH
     /// passes and the sphere × body queries. Each producer cuts its pairs into the sort's
-    /// parts as it finds them (at the last step's quantiles), and each part is then sorted
-    /// into `fresh` by its own task. `fresh` ends as the serial path leaves it.
+    /// parts as it finds them (at the quantiles of the last step's pairs, which the new ones
+    /// resemble; one part if there were few), and each part is then sorted into `fresh` by its
+    /// own task. `fresh` ends as the serial path leaves it.
     #[cfg(feature = "parallel")]
     fn sorted_pairs_par(&mut self, tasks: usize, bits: u32) {
         let par = &mut self.par;
-        let slots = self.store.slots() as u64;
-        radix::split_points(&self.prev_packed, tasks, slots, &mut par.splitters);
+        let parts = tasks.min(self.prev_packed.len() / MIN_PART_PAIRS).max(1);
+        radix::split_points(&self.prev_packed, parts, &mut par.splitters);
         let parts = par.splitters.len() + 1;
         if par.found.len() < tasks + 1 {
             par.found.resize_with(tasks + 1, Vec::new);
@@ -516,15 +523,14 @@ impl BroadPhase {
         self.stats.candidates_tested = tested;
     }
 
-    /// [`BroadPhase::emit`] over rayon's current pool: the current list is cut into `tasks`
-    /// stretches of equal length, the previous one at the same keys, each pair of stretches
-    /// diffed by its own task; the parts' events are then joined in order, and the key lists
-    /// mapped in parallel. The lists are the serial ones.
+    /// [`BroadPhase::emit`] over rayon's current pool: the current list is cut into `parts`
+    /// stretches of equal length (`parts` at most its length), the previous one at the same
+    /// keys, each pair of stretches diffed by its own task; the parts' events are then joined
+    /// in order, and the key lists mapped in parallel. The lists are the serial ones.
     #[cfg(feature = "parallel")]
-    fn emit_par(&mut self, tasks: usize) {
+    fn emit_par(&mut self, parts: usize) {
         use rayon::prelude::*;
         let (prev, cur, par) = (&self.prev_packed, &self.packed, &mut self.par);
-        let parts = tasks.min(cur.len()).max(1);
         par.cur_at.clear();
         par.prev_at.clear();
         for p in 0..parts {

@@ -79,6 +79,9 @@ pub(super) struct Scratch {
     /// Per task of a chunked pass: its own scratch.
     #[cfg(feature = "parallel")]
     chunks: Vec<Chunk>,
+    /// The first run of each chunk of a chunked pass, and the run count last.
+    #[cfg(feature = "parallel")]
+    chunk_runs: Vec<u32>,
 }
 
 /// The scratch of one task of a chunked pass ([`Octree::loose_pairs_chunked`]).
@@ -196,7 +199,7 @@ impl Octree {
         let deeper = self.occupied_below();
         let d = self.grid.depth as usize;
         let cross = (0..=d).any(|l| deeper[l] && self.per_level[l] > 0);
-        s.index_runs(self, &ws.node_key, cross);
+        s.index_runs_par(self, &ws.node_key, cross, k);
         if s.chunks.len() < k {
             s.chunks.resize_with(k, Chunk::default);
         }
@@ -205,14 +208,11 @@ impl Octree {
             run_start,
             run_of,
             chunks,
+            chunk_runs,
             ..
         } = &mut *s;
         let (run_key, run_start, run_of) = (&run_key[..], &run_start[..], &run_of[..]);
-        let runs = run_key.len() - 1;
-        let n = hot.len();
-        // Chunk `c` takes the runs that start in `[n·c/k, n·(c+1)/k)`.
-        let first_run =
-            |c: usize| run_start[..runs].partition_point(|&st| (st as usize) < n * c / k);
+        let first_run = |c: usize| chunk_runs[c] as usize;
         let cost = chunks[..k]
             .par_iter_mut()
             .zip(out.par_iter_mut())
@@ -306,12 +306,129 @@ impl Scratch {
         self.run_start.push(node_key.len() as u32);
     }
 
+    /// [`Scratch::index_runs`] over rayon's current pool: chunk `c` of `k` lists the runs that
+    /// start in `[n·c/k, n·(c+1)/k)` of the `n` sorted spheres into its own stretch of the
+    /// lists, after a first pass counted them; `chunk_runs` gets each chunk's first run and
+    /// the run count last.
+    #[cfg(feature = "parallel")]
+    fn index_runs_par(&mut self, tree: &Octree, node_key: &[u64], cross: bool, k: usize) {
+        use rayon::prelude::*;
+        let heads = tree.nodes.head_len();
+        if cross && self.run_of.len() < heads {
+            self.run_of.resize(heads, [0, 0]);
+        }
+        let job = Runs {
+            tree,
+            node_key,
+            k,
+            cross,
+        };
+        (0..k)
+            .into_par_iter()
+            .map(|c| job.count(c))
+            .collect_into_vec(&mut self.chunk_runs);
+        let mut sum = 0;
+        for r in &mut self.chunk_runs {
+            (*r, sum) = (sum, sum + *r);
+        }
+        self.chunk_runs.push(sum);
+        let runs = sum as usize;
+        self.run_key.resize(runs + 1, 0);
+        self.run_start.resize(runs + 1, 0);
+        self.run_slot.resize(if cross { runs } else { 0 }, 0);
+        job.fill(
+            0..k,
+            &self.chunk_runs,
+            &mut self.run_key[..runs],
+            &mut self.run_start[..runs],
+            &mut self.run_slot,
+        );
+        self.run_key[runs] = u64::MAX;
+        self.run_start[runs] = node_key.len() as u32;
+        if cross {
+            for (r, &slot) in self.run_slot.iter().enumerate() {
+                self.run_of[slot as usize] = [self.run_start[r], self.run_start[r + 1]];
+            }
+        }
+    }
+
     /// Resets the `run_of` entries [`Scratch::index_runs`] set.
     fn clear_runs(&mut self, cross: bool) {
         if cross {
             for &slot in &self.run_slot {
                 self.run_of[slot as usize] = [0, 0];
             }
+        }
+    }
+}
+
+/// What every chunk of [`Scratch::index_runs_par`] reads.
+#[cfg(feature = "parallel")]
+struct Runs<'a> {
+    tree: &'a Octree,
+    node_key: &'a [u64],
+    k: usize,
+    cross: bool,
+}
+
+#[cfg(feature = "parallel")]
+impl Runs<'_> {
+    /// The sphere positions of chunk `c`.
+    fn positions(&self, c: usize) -> core::ops::Range<usize> {
+        let n = self.node_key.len();
+        n * c / self.k..n * (c + 1) / self.k
+    }
+
+    /// True if a run starts at position `i`.
+    #[inline]
+    fn starts(&self, i: usize) -> bool {
+        i == 0 || self.node_key[i] != self.node_key[i - 1]
+    }
+
+    /// The runs that start in chunk `c`.
+    fn count(&self, c: usize) -> u32 {
+        self.positions(c).filter(|&i| self.starts(i)).count() as u32
+    }
+
+    /// Lists the runs of chunks `chunks` (whose first runs `first` gives, relative to the
+    /// lists' stretches passed), halving the chunks between two tasks until one is left.
+    fn fill(
+        &self,
+        chunks: core::ops::Range<usize>,
+        first: &[u32],
+        run_key: &mut [u64],
+        run_start: &mut [u32],
+        run_slot: &mut [u32],
+    ) {
+        if chunks.len() > 1 {
+            let mid = chunks.start + chunks.len() / 2;
+            let at = (first[mid] - first[chunks.start]) as usize;
+            let (ka, kb) = run_key.split_at_mut(at);
+            let (sa, sb) = run_start.split_at_mut(at);
+            let (la, lb) = run_slot.split_at_mut(if self.cross { at } else { 0 });
+            rayon::join(
+                || self.fill(chunks.start..mid, first, ka, sa, la),
+                || self.fill(mid..chunks.end, first, kb, sb, lb),
+            );
+            return;
+        }
+        let mut r = 0;
+        for i in chunks.clone().flat_map(|c| self.positions(c)) {
+            if !self.starts(i) {
+                continue;
+            }
+            let key = self.node_key[i];
+            run_key[r] = key;
+            run_start[r] = i as u32;
+            if self.cross {
+                let (level, xyz) = LooseKey(key).cell(self.tree.grid.depth);
+                run_slot[r] = self
+                    .tree
+                    .nodes
+                    .slot(Cell::at(level, xyz).node())
+                    .expect("an occupied node's page exists") as u32;
+            }
+            r += 1;
         }
     }
 }

@@ -409,6 +409,10 @@ impl Octree {
     }
 }
 
+/// Spheres per part of the parallel walk-order sort, at least: a part's fixed costs (the radix
+/// sort's counters, handing out the task) outweigh the split below it.
+#[cfg(feature = "parallel")]
+const MIN_PART_SPHERES: usize = 4096;
 /// Walk keys sampled per part to pick the parts' first keys from: enough that the parts'
 /// sizes stay within a few percent of each other.
 #[cfg(feature = "parallel")]
@@ -420,11 +424,11 @@ impl Octree {
     /// into at most `parts` ranges of about equal sphere counts (quantiles of a sample), each
     /// a run of the walk order, and each range is gathered, sorted and copied out by its own
     /// task. Keys and ids are unique together, so the walk order is the serial sort's, whatever
-    /// the cut. Trees too deep for 32-bit keys, and `parts < 2`, sort serially.
+    /// the cut. Trees too deep for 32-bit keys, or too small for two parts, sort serially.
     pub(super) fn sort_into_walk_order_par(&self, s: &mut Scratch, parts: usize) {
         use rayon::prelude::*;
         let key_bits = walk_key_bits(self.grid.depth);
-        let parts = parts.min(MAX_PARTS);
+        let parts = parts.min(MAX_PARTS).min(self.live / MIN_PART_SPHERES);
         if key_bits > 32 || parts < 2 {
             self.sort_into_walk_order(s);
             return;
