@@ -83,6 +83,14 @@
 //!   input: a damaged one gives a deserialisation error naming what is wrong, or, if it is
 //!   still consistent (say, an edited coordinate), a broadphase whose invariants hold; never a
 //!   panic.
+//! - `parallel`: [`BroadPhase::step`] splits its full pass over rayon's current thread pool
+//!   (the caller's `ThreadPool::install`, else the global pool, sized by `RAYON_NUM_THREADS`):
+//!   the walk-order sort, the octree's pair pass in chunks of runs beside the BVH passes, the
+//!   pair sort and the event diff, each in parts. Worlds with few spheres, and pools of one
+//!   thread, run the serial pass. The lists are the same, bit for bit, at any thread count.
+//!   Updates stay serial (they are the caller's calls). On one thread a step allocates
+//!   nothing in steady state; with more, rayon may allocate a few times per step for its
+//!   tasks (bounded by the task count, not by the world's size).
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
