@@ -45,14 +45,16 @@ impl Octree {
     /// few spheres. A large one walks the occupied subtrees instead, whose masks skip empty
     /// regions.
     fn candidates(&self, aabb: &Aabb, visit: impl FnMut(u32)) {
-        self.candidates_from(aabb, true, visit);
+        self.candidates_from(aabb, true, false, visit);
     }
 
-    /// [`Octree::candidates`], the root's list left out unless `root`.
-    fn candidates_from(&self, aabb: &Aabb, root: bool, mut visit: impl FnMut(u32)) {
+    /// [`Octree::candidates`], the root's list left out unless `root`; with `small` the
+    /// caller knows the box spans about a deepest occupied cell (a ray piece) and the direct
+    /// lists are read without counting the cells first.
+    fn candidates_from(&self, aabb: &Aabb, root: bool, small: bool, mut visit: impl FnMut(u32)) {
         let (qlo, qhi) = (self.grid.quantize(aabb.min), self.grid.quantize(aabb.max));
         let mut cells = 0u64;
-        for level in 1..=self.grid.depth {
+        for level in (1..=self.grid.depth).filter(|_| !small) {
             if self.per_level[level as usize] > 0 {
                 let (a, b) = self.grid.reaching_cells(level, qlo, qhi);
                 cells += (0..3)
@@ -289,7 +291,7 @@ impl Octree {
             let tb = (t0 + dt * (k + 1) as f32).min(t1);
             let piece = q(ta, tb);
             let range = (self.grid.quantize(piece.min), self.grid.quantize(piece.max));
-            self.candidates_from(&piece, false, |id| {
+            self.candidates_from(&piece, false, true, |id| {
                 let o = &self.objs[id as usize];
                 let new =
                     meets(o, range.0, range.1) && prev.is_none_or(|(lo, hi)| !meets(o, lo, hi));
