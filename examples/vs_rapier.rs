@@ -283,6 +283,19 @@ fn default_n(scene: &str) -> usize {
     }
 }
 
+/// How many threads broadleaf's step may use: rayon's current pool with the feature
+/// `parallel` (set by `RAYON_NUM_THREADS`), else 1.
+fn broadleaf_threads() -> usize {
+    #[cfg(feature = "parallel")]
+    {
+        rayon::current_num_threads()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        1
+    }
+}
+
 impl Args {
     /// The broadphase's configuration for a scene in `bounds`: the defaults but for what the
     /// flags set.
@@ -497,6 +510,7 @@ fn main() {
             "each engine's steps back to back"
         }
     );
+    println!("broadleaf threads: {}", broadleaf_threads());
     println!();
     println!(
         "| scene | N | broadleaf ns/object/step | rapier ns/object/step | speed-up | pairs (broadleaf) | pairs (rapier) | exact pairs | missed | extra |"
