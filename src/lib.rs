@@ -108,6 +108,8 @@ pub mod rapier;
 #[cfg(any(test, feature = "fixtures"))]
 mod rng;
 mod sweep;
+#[cfg(test)]
+mod test_geom;
 
 pub use broadphase::{
     BodyKind, BroadPhase, CollisionGroups, Config, Pass, Passes, Shape, StepPairs, StepStats,
