@@ -42,11 +42,12 @@ pub(super) fn split_points(sorted: &[u64], parts: usize, splitters: &mut Vec<u64
     }
 }
 
-/// The part of `key` in the cut whose first keys are `splitters` (see [`split_points`]).
+/// The part of `key` in the cut whose first keys are `splitters` (see [`split_points`]): the
+/// number of them at most `key`, counted without a branch (there are a few dozen at most).
 #[cfg(feature = "parallel")]
 #[inline]
 pub(super) fn part_of(splitters: &[u64], key: u64) -> usize {
-    splitters.partition_point(|&s| s <= key)
+    splitters.iter().map(|&s| usize::from(s <= key)).sum()
 }
 
 /// Sorts keys that their producers have already cut into `parts` parts into `out`, over

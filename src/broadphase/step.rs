@@ -336,9 +336,11 @@ impl BroadPhase {
             self.cand.clear();
             self.cached = false;
         }
-        match tasks.min(self.packed.len() / MIN_PART_PAIRS) {
+        match tasks {
             #[cfg(feature = "parallel")]
-            parts @ 2.. => self.emit_par(parts),
+            2.. if self.packed.len() >= 2 * MIN_PART_PAIRS => {
+                self.emit_par(tasks.min(self.packed.len() / MIN_PART_PAIRS));
+            }
             _ => self.emit(),
         }
     }

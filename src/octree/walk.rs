@@ -479,7 +479,11 @@ impl Octree {
             .for_each(|(c, (buckets, objs))| {
                 for (i, o) in objs.iter().enumerate() {
                     if o.node != NONE {
-                        let p = splitters.partition_point(|&x| x <= o.walk_key);
+                        // Counted without a branch: there are at most `MAX_PARTS − 1`.
+                        let p: usize = splitters
+                            .iter()
+                            .map(|&x| usize::from(x <= o.walk_key))
+                            .sum();
                         buckets[p].push((o.walk_key << 32) | (c * range + i) as u64);
                     }
                 }
