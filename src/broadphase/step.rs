@@ -88,6 +88,7 @@ pub(super) fn outgrows_min_margin(speed: f32, size: f32) -> bool {
 const PARALLEL_MIN_SPHERES: usize = 10_000;
 /// Pairs per part of the parallel pair sort and event diff, at least: a part's fixed costs
 /// (the sort's counters, handing out the task) outweigh the split below it.
+#[cfg(feature = "parallel")]
 const MIN_PART_PAIRS: usize = 4096;
 /// Tasks per thread in each split phase of a parallel pass, so that a thread that finishes its
 /// share early takes over part of a slower one's.
