@@ -11,8 +11,8 @@
 //! motion fed four ways, each into a fresh `BroadPhase`: one `update_spheres` batch per step,
 //! one `update_sphere` call per sphere, and `Feed::apply` batched and per object; for each
 //! it prints the median ns/object of the moves alone and of the moves plus `step()` (the
-//! batch is built from the scene untimed; `Feed::apply` builds its own, timed). The depth defaults to
-//! `depth_for` (strict) or `depth_for_loose` (loose). Under callgrind,
+//! batch is built from the scene untimed; `Feed::apply` builds its own, timed). The placement defaults
+//! to `Config::default()`'s, the depth to `depth_for` (strict) or `depth_for_loose` (loose). Under callgrind,
 //! `--toggle-collect=*measured*` counts only the measured steps.
 
 use broadleaf::fixtures::scene::{Churn, DT, Feed, Frame, Gas, Scene};
@@ -39,7 +39,7 @@ fn parse() -> Args {
         steps: 30,
         depth: None,
         what: "octree".into(),
-        placement: Placement::Strict,
+        placement: Config::default().octree_placement,
     };
     let argv: Vec<String> = std::env::args().skip(1).collect();
     for kv in argv.chunks(2) {

@@ -3,6 +3,7 @@
 //! ```text
 //! cargo run --release --features profiler --example vs_rapier -- --scene gas --n 100000
 //!     [--steps 30] [--warmup 5] [--placement strict|loose] [--depth D] [--seed 1] [--skin 0]
+//!     [--groups G]
 //! ```
 //!
 //! `--scene` is `gas`, `clustered`, `bodies`, `churn`, `pile`, `idle` or `all` (every scene at
@@ -39,9 +40,13 @@
 //! yields rapier's pairs of the last measured frame. Those are compared with broadleaf's pairs
 //! of that frame and with brute force (`exact ⊆ ours ⊆ rapier`, static×static left out).
 //!
-//! With feature `parallel`, broadleaf's steps run on rayon's global pool (`RAYON_NUM_THREADS`
-//! threads, default one per core; worlds below the parallel threshold step serially); the
-//! header says how many threads it had. rapier runs on one thread (no `parallel` feature).
+//! `--groups G` (default 0: none) spreads every scene's objects over G collision groups
+//! round-robin by scene id, each pairing only within itself (`memberships = filter =
+//! 1 << (id % G)`, `fixtures::scene::round_robin_groups`, G ≤ 32): broadleaf gets them with
+//! `set_groups` as each object is inserted (`Feed::groups`), rapier as the same
+//! `InteractionGroups` (`And` mode) on each collider (`SceneWorld::groups`), and the brute-force
+//! reference is filtered by the same rule (`Feed::retain_allowed`). The scene cell says
+//! `(G groups)`.
 //!
 //! Times are medians over the measured steps after the warm-up, in ns per object (every live
 //! object, static ones included) per step. The last line is exactly
@@ -56,16 +61,25 @@
 //! `intersect_aabb_conservative` re-tested against each collider's exact AABB, so both return
 //! the same set, and `cast_ray` with `solid`). Every 100th query is checked: the same key set
 //! for a box; for a ray the same `t` within 1e-4 and the same collider, or (a tie, as for an
-//! origin inside two overlapping spheres) one of the scene's spheres hit at that `t`. Its own
-//! table; the last line is `queries mismatches=<n>`.
+//! origin inside two overlapping spheres) one of the scene's spheres hit at that `t`. Then
+//! 100 000 sphere casts (radius 0.25 m, origins and directions drawn like the rays') and
+//! 100 000 nearest-object queries (points uniform in the cube): broadleaf's `cast_sphere` and
+//! `nearest(p, 1)` against rapier's `cast_shape` with a `Ball` (`stop_at_penetration`, so a
+//! start touching is `t = 0` as in broadleaf) and `project_point` with `solid` (distance
+//! `|p − projection|`, 0 inside a ball, as broadleaf's distance to the sphere). The sampled
+//! checks follow the ray's rule: the same `t` or distance within 1e-4, and the same collider
+//! or, in a tie, one whose scene sphere gives that value. Its own table; the last line is
+//! `queries mismatches=<n>`.
 
 use broadleaf::fixtures::rapier_world::{SceneWorld, record_pile};
 use broadleaf::fixtures::scene::{Bodies, Churn, Feed, Frame, Gas, Idle, Rng, Scene, Spawn};
 use broadleaf::rapier::Comparison;
 use broadleaf::{Aabb, BroadPhase, Config, Passes, Placement, ProxyKey, Vec3, brute, geom};
 use plotters::prelude::*;
+use rapier3d::math::Pose;
 use rapier3d::parry::bounding_volume::BoundingVolume;
-use rapier3d::parry::query::Ray;
+use rapier3d::parry::query::{Ray, ShapeCastOptions};
+use rapier3d::parry::shape::Ball;
 use std::collections::HashMap;
 use std::hint::black_box;
 use std::process::exit;
@@ -98,13 +112,15 @@ struct Args {
     per_object: bool,
     /// Time scene queries instead of steps.
     queries: bool,
+    /// Round-robin collision groups of every scene (0: none).
+    groups: u32,
 }
 
 const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|idle|all] [--n N] \
                      [--steps 30] [--warmup 5] [--depth D] \
                      [--placement strict|loose] [--skin 0] [--passes adaptive|full|incremental] [--seed 1] \
                      [--sizes N1,N2,...] [--moving P1,P2,...] [--plot PATH.svg] [--interleave] \
-                     [--per-object] [--queries]";
+                     [--per-object] [--queries] [--groups G]";
 
 fn parse_args() -> Result<Args, String> {
     let mut args = Args {
@@ -124,6 +140,7 @@ fn parse_args() -> Result<Args, String> {
         scene_given: false,
         per_object: false,
         queries: false,
+        groups: 0,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -166,6 +183,12 @@ fn parse_args() -> Result<Args, String> {
             "--steps" => args.steps = number(&value)?.max(1),
             "--warmup" => args.warmup = number(&value)?,
             "--seed" => args.seed = number(&value)? as u64,
+            "--groups" => {
+                args.groups = match number(&value)? {
+                    g @ 0..=32 => g as u32,
+                    g => return Err(format!("--groups {g}: at most 32 groups")),
+                };
+            }
             "--sizes" => {
                 args.sizes = value.split(',').map(number).collect::<Result<_, _>>()?;
             }
@@ -260,6 +283,19 @@ fn default_n(scene: &str) -> usize {
     }
 }
 
+/// How many threads broadleaf's step may use: rayon's current pool with the feature
+/// `parallel` (set by `RAYON_NUM_THREADS`), else 1.
+fn broadleaf_threads() -> usize {
+    #[cfg(feature = "parallel")]
+    {
+        rayon::current_num_threads()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        1
+    }
+}
+
 impl Args {
     /// The broadphase's configuration for a scene in `bounds`: the defaults but for what the
     /// flags set.
@@ -286,7 +322,9 @@ impl Ours {
     fn new(bounds: broadleaf::Aabb, args: &Args) -> Self {
         Ours {
             bp: BroadPhase::new(args.config(bounds)),
-            feed: Feed::new(false).per_object(args.per_object),
+            feed: Feed::new(false)
+                .per_object(args.per_object)
+                .groups(args.groups),
         }
     }
 }
@@ -316,7 +354,7 @@ struct Row {
 /// Both engines with `scene`'s objects inserted and one step taken; also the spawns.
 fn spawn_both(scene: &dyn Scene, args: &Args) -> (Ours, SceneWorld, Vec<Spawn>) {
     let mut ours = Ours::new(scene.bounds(), args);
-    let mut theirs = SceneWorld::new();
+    let mut theirs = SceneWorld::new().groups(args.groups);
     let mut spawns = Vec::new();
     scene.spawns(&mut spawns);
     ours.feed
@@ -334,7 +372,10 @@ fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
     let steps = args.warmup + args.steps;
     let mut scene =
         make_scene(name, n, args.seed, steps, moving.unwrap_or(100.0)).expect("known scene");
-    let name = &label(name, moving);
+    let name = &match args.groups {
+        0 => label(name, moving),
+        g => format!("{} ({g} groups)", label(name, moving)),
+    };
     let (mut ours, mut theirs, mut spawns) = spawn_both(&*scene, args);
     // The motion is generated up front, so each engine can run its steps back to back (a
     // real program runs one broadphase, and alternating the two per step makes each pay for
@@ -407,7 +448,9 @@ fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
         .feed
         .brute_proxies(&spawns, ours.bp.config().margin)
         .expect("the feed holds every live scene object");
-    let mut cmp = Comparison::new(&last_pairs, &rapier_pairs, &brute::sweep_pairs(&proxies));
+    let mut exact = brute::sweep_pairs(&proxies);
+    ours.feed.retain_allowed(&spawns, &mut exact);
+    let mut cmp = Comparison::new(&last_pairs, &rapier_pairs, &exact);
     cmp.unmapped = unmapped;
     Row {
         scene: name.to_string(),
@@ -418,15 +461,6 @@ fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
         rapier_ns: median(&mut rapier_ns),
         cmp,
     }
-}
-
-/// The threads broadleaf's steps may run on: the global rayon pool's with feature `parallel`
-/// (a world below the parallel threshold still steps on one), else 1.
-fn broadleaf_threads() -> usize {
-    #[cfg(feature = "parallel")]
-    return rayon::current_num_threads();
-    #[cfg(not(feature = "parallel"))]
-    1
 }
 
 fn main() {
@@ -476,15 +510,7 @@ fn main() {
             "each engine's steps back to back"
         }
     );
-    println!(
-        "threads: broadleaf {} ({}), rapier 1",
-        broadleaf_threads(),
-        if cfg!(feature = "parallel") {
-            "feature parallel, rayon's global pool: RAYON_NUM_THREADS"
-        } else {
-            "serial build: feature parallel off"
-        }
-    );
+    println!("broadleaf threads: {}", broadleaf_threads());
     println!();
     println!(
         "| scene | N | broadleaf ns/object/step | rapier ns/object/step | speed-up | pairs (broadleaf) | pairs (rapier) | exact pairs | missed | extra |"
@@ -520,6 +546,16 @@ fn main() {
         rows.push(r);
     }
     println!();
+    if args.groups > 0 {
+        println!(
+            "groups: every object of a scene in group (scene id mod {g}) of {g}, pairing only \
+             within it (memberships = filter = 1 << (id % {g})): broadleaf `set_groups` on \
+             insert, rapier the same InteractionGroups (And) on its colliders, the brute force \
+             filtered by the same rule",
+            g = args.groups
+        );
+        println!();
+    }
     for r in &rows {
         if !r.cmp.holds() {
             println!(
@@ -770,8 +806,30 @@ const QUERY_COUNT: usize = 100_000;
 const QUERY_EDGE: (f32, f32) = (1.0, 4.0);
 /// Every this many-th query is checked against the other engine.
 const QUERY_CHECK_EVERY: usize = 100;
-/// Largest difference of the two engines' ray `t` that still counts as the same hit.
+/// Largest difference of the two engines' ray or cast `t` (or nearest distance) that still
+/// counts as the same answer.
 const RAY_T_TOLERANCE: f32 = 1e-4;
+/// Radius of the spheres `--queries` casts, in metres.
+const CAST_RADIUS: f32 = 0.25;
+
+/// Whether the two engines' closest answers agree: both none, or the same value (`t` or
+/// distance) within [`RAY_T_TOLERANCE`] and the same key, or a tie (as for a start inside two
+/// overlapping spheres, both at 0) that rapier broke the other way: `value_of` rapier's key,
+/// computed from the scene's own sphere, equals broadleaf's value within the tolerance.
+fn same_closest(
+    ours: Option<(ProxyKey, f32)>,
+    rapier: Option<(Option<ProxyKey>, f32)>,
+    value_of: impl Fn(ProxyKey) -> Option<f32>,
+) -> bool {
+    match (ours, rapier) {
+        (None, None) => true,
+        (Some((ka, va)), Some((Some(kr), vr))) => {
+            (va - vr).abs() <= RAY_T_TOLERANCE
+                && (ka == kr || value_of(kr).is_some_and(|v| (v - va).abs() <= RAY_T_TOLERANCE))
+        }
+        _ => false,
+    }
+}
 
 /// A direction uniform on the unit sphere (rejection from the cube, then normalised).
 fn unit_dir(rng: &mut Rng) -> Vec3 {
@@ -819,6 +877,21 @@ fn run_queries(args: &Args) -> usize {
     let rays: Vec<(Vec3, Vec3)> = (0..QUERY_COUNT)
         .map(|_| (rng.vec3_in(bounds.min, bounds.max), unit_dir(&mut rng)))
         .collect();
+    let casts: Vec<(Vec3, Vec3)> = (0..QUERY_COUNT)
+        .map(|_| (rng.vec3_in(bounds.min, bounds.max), unit_dir(&mut rng)))
+        .collect();
+    let points: Vec<Vec3> = (0..QUERY_COUNT)
+        .map(|_| rng.vec3_in(bounds.min, bounds.max))
+        .collect();
+    let ball = Ball::new(CAST_RADIUS);
+    // Like broadleaf's cast: a start touching or overlapping is a hit at t = 0, and the
+    // contact geometry broadleaf does not compute is not asked for there either.
+    let cast_options = ShapeCastOptions {
+        max_time_of_impact: max_t,
+        target_distance: 0.0,
+        stop_at_penetration: true,
+        compute_impact_geometry_on_penetration: false,
+    };
     let qp = theirs.query_pipeline();
     let rapier_box = |b: &Aabb, mut f: Box<dyn FnMut(rapier3d::geometry::ColliderHandle) + '_>| {
         let q = to_parry(b);
@@ -857,6 +930,31 @@ fn run_queries(args: &Args) -> usize {
         rapier_rays += usize::from(black_box(hit).is_some());
     }
     let rapier_ray = per_query(t);
+    let (mut ours_casts, mut rapier_casts) = (0usize, 0usize);
+    let t = Instant::now();
+    for &(o, d) in &casts {
+        let hit = ours.bp.cast_sphere(o, CAST_RADIUS, d, max_t);
+        ours_casts += usize::from(black_box(hit).is_some());
+    }
+    let ours_cast = per_query(t);
+    let t = Instant::now();
+    for &(o, d) in &casts {
+        let hit = qp.cast_shape(&Pose::from_translation(o), d, &ball, cast_options);
+        rapier_casts += usize::from(black_box(hit).is_some());
+    }
+    let rapier_cast = per_query(t);
+    let (mut ours_near, mut rapier_near) = (0usize, 0usize);
+    let t = Instant::now();
+    for &p in &points {
+        ours_near += black_box(ours.bp.nearest(p, 1)).len();
+    }
+    let ours_nearest = per_query(t);
+    let t = Instant::now();
+    for &p in &points {
+        let hit = qp.project_point(p, f32::MAX, true);
+        rapier_near += usize::from(black_box(hit).is_some());
+    }
+    let rapier_nearest = per_query(t);
 
     // The sample: every QUERY_CHECK_EVERY-th query, both engines' answers in broadleaf keys.
     let key_of = |h| theirs.scene_id(h).and_then(|id| ours.feed.key(id));
@@ -868,6 +966,7 @@ fn run_queries(args: &Args) -> usize {
         .filter_map(|(id, &c)| Some((ours.feed.key(u32::try_from(id).ok()?)?, c)))
         .collect();
     let (mut box_bad, mut ray_bad, mut checked) = (0, 0, 0);
+    let (mut cast_bad, mut near_bad) = (0, 0);
     for b in boxes.iter().step_by(QUERY_CHECK_EVERY) {
         let mut a: Vec<ProxyKey> = Vec::new();
         ours.bp.query_aabb(b, |k| a.push(k));
@@ -888,18 +987,45 @@ fn run_queries(args: &Args) -> usize {
         // both t = 0) may go to either: rapier's pick agrees if the scene's sphere of that
         // key is hit at the same t.
         let t_of = |k: ProxyKey| geom::ray_sphere(o, d, *center_of.get(&k)?, scene.radius, max_t);
-        let same = match (a, r) {
-            (None, None) => true,
-            (Some((ka, ta)), Some((Some(kr), tr))) => {
-                (ta - tr).abs() <= RAY_T_TOLERANCE
-                    && (ka == kr || t_of(kr).is_some_and(|t| (t - ta).abs() <= RAY_T_TOLERANCE))
-            }
-            _ => false,
-        };
+        let same = same_closest(a, r, t_of);
         if !same {
             eprintln!("ray mismatch: origin {o} dir {d}: broadleaf {a:?}, rapier {r:?}");
         }
         ray_bad += usize::from(!same);
+    }
+    for &(o, d) in casts.iter().step_by(QUERY_CHECK_EVERY) {
+        let a = ours.bp.cast_sphere(o, CAST_RADIUS, d, max_t);
+        let r = qp
+            .cast_shape(&Pose::from_translation(o), d, &ball, cast_options)
+            .map(|(h, hit)| (key_of(h), hit.time_of_impact));
+        let t_of = |k: ProxyKey| {
+            let c = *center_of.get(&k)?;
+            geom::sphere_cast_sphere(o, CAST_RADIUS, d, max_t, c, scene.radius)
+        };
+        let same = same_closest(a, r, t_of);
+        if !same {
+            eprintln!("sphere cast mismatch: origin {o} dir {d}: broadleaf {a:?}, rapier {r:?}");
+        }
+        cast_bad += usize::from(!same);
+    }
+    for &p in points.iter().step_by(QUERY_CHECK_EVERY) {
+        let a = ours.bp.nearest(p, 1).first().copied();
+        // Solid: a point inside a ball projects onto itself, distance 0 as in broadleaf.
+        let r = qp
+            .project_point(p, f32::MAX, true)
+            .map(|(h, proj)| (key_of(h), p.distance(proj.point)));
+        let d_of = |k: ProxyKey| {
+            Some(geom::point_sphere_distance(
+                p,
+                *center_of.get(&k)?,
+                scene.radius,
+            ))
+        };
+        let same = same_closest(a, r, d_of);
+        if !same {
+            eprintln!("nearest mismatch: point {p}: broadleaf {a:?}, rapier {r:?}");
+        }
+        near_bad += usize::from(!same);
     }
 
     println!(
@@ -909,12 +1035,19 @@ fn run_queries(args: &Args) -> usize {
          {QUERY_CHECK_EVERY}th query",
         args.seed
     );
+    println!(
+        "sphere casts: radius {CAST_RADIUS} m, origins and directions drawn like the rays', \
+         rapier cast_shape with a Ball (stop at penetration: t = 0 for a start touching, like \
+         broadleaf); nearest: points uniform in the cube, broadleaf nearest(p, 1) against \
+         rapier project_point (solid), its distance |p - projection|"
+    );
     println!();
     println!(
         "| query | count | broadleaf ns/query | rapier ns/query | speed-up | hits (broadleaf) | hits (rapier) | checked | mismatches |"
     );
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     let edge = format!("box {}–{} m", QUERY_EDGE.0, QUERY_EDGE.1);
+    let cast_label = format!("sphere cast r = {CAST_RADIUS} m, first hit");
     for (what, ours_ns, rapier_ns, oh, rh, bad) in [
         (
             edge.as_str(),
@@ -932,6 +1065,22 @@ fn run_queries(args: &Args) -> usize {
             rapier_rays,
             ray_bad,
         ),
+        (
+            cast_label.as_str(),
+            ours_cast,
+            rapier_cast,
+            ours_casts,
+            rapier_casts,
+            cast_bad,
+        ),
+        (
+            "nearest, k = 1",
+            ours_nearest,
+            rapier_nearest,
+            ours_near,
+            rapier_near,
+            near_bad,
+        ),
     ] {
         println!(
             "| {what} | {QUERY_COUNT} | {ours_ns:.1} | {rapier_ns:.1} | {:.2} | {oh} | {rh} | {checked} | {bad} |",
@@ -939,5 +1088,5 @@ fn run_queries(args: &Args) -> usize {
         );
     }
     println!();
-    box_bad + ray_bad
+    box_bad + ray_bad + cast_bad + near_bad
 }

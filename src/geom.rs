@@ -146,6 +146,16 @@ impl Aabb {
         let t_far = far.min_element().min(max_t);
         (t_near <= t_far).then_some(t_near)
     }
+
+    /// The ray's exit parameter from the box, capped at `max_t`, for a ray that
+    /// [`Aabb::ray_entry`] says enters it (same lanes and NaN rules).
+    pub(crate) fn ray_exit(&self, origin: Vec3, inv_dir: Vec3, max_t: f32) -> f32 {
+        let t1 = (self.min - origin) * inv_dir;
+        let t2 = (self.max - origin) * inv_dir;
+        let (n1, n2) = (t1.is_nan_mask(), t2.is_nan_mask());
+        let far = Vec3::select(n1, Vec3::INFINITY, t1).max(Vec3::select(n2, Vec3::INFINITY, t2));
+        far.min_element().min(max_t)
+    }
 }
 
 /// A box in SIMD lanes, 32 bytes: the crate's one box type for hot loops. Two of them are

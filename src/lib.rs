@@ -9,8 +9,9 @@
 //! - **[`BroadPhase`]** — start here. One key space for spheres and rigid bodies: each sphere
 //!   lives in an [`Octree`] ([`BroadPhase::octree`]), each body in a dynamic or a static
 //!   [`Bvh`] ([`BroadPhase::bvh`]), all under the broadphase's keys. One sorted pair list per
-//!   [`BroadPhase::step`], plus `added` / `removed` events, collision groups, ray casts and box
-//!   queries. It adapts by itself to how much of the world moves: a step either runs the
+//!   [`BroadPhase::step`], plus `added` / `removed` events, collision groups
+//!   ([`CollisionGroups`]), and queries of the shapes as given: boxes, spheres, rays, sphere
+//!   casts and the nearest proxies. It adapts by itself to how much of the world moves: a step either runs the
 //!   structures' own pair passes over exact boxes, or has them hold fat boxes (whose margin
 //!   follows each proxy's own motion) and re-tests only the candidates of what moved, whichever
 //!   its work estimate says is cheaper; [`BroadPhase::stats`] says which ran. Nothing in
@@ -51,7 +52,8 @@
 //! # Guarantees
 //! - **Exact pairs.** With `Config::margin == 0` the pair set equals [`brute::pairs`] over
 //!   the current boxes: nothing missed, nothing extra. A margin grows every box first. Static
-//!   bodies never pair with each other.
+//!   bodies never pair with each other, nor two proxies whose [`CollisionGroups`] do not
+//!   allow it (bevy_rapier's rule).
 //! - **Deterministic.** `pairs`, `added` and `removed` are sorted by `(a, b)` with keys ordered
 //!   by slot; the same operations in the same order give bit-identical lists on every run.
 //! - **Bad input is refused, never half-applied.** NaN or infinite coordinates, a negative
@@ -105,6 +107,8 @@ pub mod rapier;
 #[cfg(any(test, feature = "fixtures"))]
 mod rng;
 mod sweep;
+#[cfg(test)]
+mod test_geom;
 
 pub use broadphase::{
     BodyKind, BroadPhase, CollisionGroups, Config, Pass, Passes, Shape, StepPairs, StepStats,

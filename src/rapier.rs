@@ -28,16 +28,32 @@
 //! is therefore in rapier's set; rapier's set also holds near misses, so with margin 0 the
 //! contract is `exact ⊆ ours ⊆ rapier` with `ours == exact`.
 //!
-//! rapier filters pairs broadleaf knows nothing about: colliders sharing a parent body,
-//! collision groups, and `ActiveCollisionTypes` (fixed×fixed and kinematic×kinematic are off by
-//! default). `ours ⊆ rapier` holds for worlds with one collider per body, default groups and
-//! `ActiveCollisionTypes::all()` on every collider.
+//! rapier filters pairs broadleaf knows nothing about: colliders sharing a parent body and
+//! `ActiveCollisionTypes` (fixed×fixed and kinematic×kinematic are off by default).
+//! `ours ⊆ rapier` holds for worlds with one collider per body and
+//! `ActiveCollisionTypes::all()` on every collider, whatever their collision groups.
+//!
+//! # Collision groups
+//!
+//! Each collider's `collision_groups()` is copied into the broadphase
+//! ([`BroadPhase::set_groups`]) when it is inserted and whenever `sync` sees them changed:
+//! `memberships` and `filter` bit for bit (`Group::bits`). rapier 0.36 filters a pair by
+//! `InteractionGroups::test`, which is broadleaf's rule
+//! (`a.memberships & b.filter != 0 && b.memberships & a.filter != 0`,
+//! `InteractionTestMode::And`, the default) unless **both** colliders use
+//! `InteractionTestMode::Or`; then either half of the rule suffices (its broad phase already
+//! creates no pair that `test` rejects). broadleaf has only the
+//! `And` rule, and the mirror applies it to every pair: an `Or`-mode collider is approximated
+//! by `And` (counted in [`SyncReport::or_mode`]). The approximation only drops pairs: the
+//! mirror may lack an `Or`×`Or` pair that rapier keeps because one half of the rule holds, and
+//! never reports a pair rapier filters, so `ours ⊆ rapier` still holds. [`Mirror::exact_pairs`]
+//! applies the same rule, from the mirror's own record of each collider's groups.
 
 use crate::pair::{self, Pair, ProxyKey};
-use crate::{Aabb, BodyKind, BroadPhase, Config, Shape, StepPairs, Vec3, brute};
+use crate::{Aabb, BodyKind, BroadPhase, CollisionGroups, Config, Shape, StepPairs, Vec3, brute};
 use core::fmt;
 use rapier3d::dynamics::RigidBodySet;
-use rapier3d::geometry::{Collider, ColliderHandle, ColliderSet, NarrowPhase};
+use rapier3d::geometry::{Collider, ColliderHandle, ColliderSet, InteractionTestMode, NarrowPhase};
 use rapier3d::math::Pose;
 use slotmap::SecondaryMap;
 
@@ -66,6 +82,8 @@ struct Entry {
     /// The sphere or box the broadphase was last given for this collider (and accepted): the
     /// mirror's own record, from which [`Mirror::exact_pairs`] builds the reference.
     shape: Shape,
+    /// The collider's collision groups as the broadphase was last given them.
+    groups: CollisionGroups,
     /// The `sync` call that last saw the collider.
     stamp: u64,
 }
@@ -82,12 +100,19 @@ pub struct SyncReport {
     /// Colliders whose pose or shape gave a non-finite sphere or box: not inserted, or left at
     /// their previous box, as rapier's broad phase does with them.
     pub skipped: usize,
+    /// Mirrored colliders whose collision groups changed and were pushed (not counting
+    /// inserts).
+    pub regrouped: usize,
+    /// Mirrored colliders whose collision groups use `InteractionTestMode::Or`, which the
+    /// mirror filters by the `And` rule (see the module docs).
+    pub or_mode: usize,
 }
 
 /// A [`BroadPhase`] that follows a rapier `ColliderSet`: ball colliders are spheres (world
 /// centre, radius), every other collider a body by its world AABB; those bodies are
 /// [`BodyKind::Static`] on a fixed parent or without a parent, else [`BodyKind::Dynamic`]
-/// (spheres have no kind: a ball on a fixed body is a sphere like any other).
+/// (spheres have no kind: a ball on a fixed body is a sphere like any other). Each proxy has
+/// its collider's collision groups (see the module docs for `InteractionTestMode::Or`).
 #[derive(Clone, Debug)]
 pub struct Mirror {
     broadphase: BroadPhase,
@@ -113,8 +138,9 @@ impl Mirror {
         }
     }
 
-    /// Brings the broadphase up to date with `colliders`: inserts new enabled colliders,
-    /// pushes changed spheres and boxes, removes vanished or disabled ones. Each collider's
+    /// Brings the broadphase up to date with `colliders`: inserts new enabled colliders with
+    /// their collision groups, pushes changed spheres, boxes and groups, removes vanished or
+    /// disabled ones. Each collider's
     /// pose is its parent's current pose × `position_wrt_parent` (its own pose without a
     /// parent): the pose the next `PhysicsPipeline::step` detects collisions at. Call it right
     /// before that step (see the module docs).
@@ -126,6 +152,7 @@ impl Mirror {
                 continue;
             }
             let shape = world_shape(co, bodies);
+            let groups = collision_groups(co);
             let i = handle.into_raw_parts().0 as usize;
             if self.slots.len() <= i {
                 self.slots.resize(i + 1, None);
@@ -154,6 +181,12 @@ impl Mirror {
                             Err(_) => report.skipped += 1,
                         }
                     }
+                    if e.groups != groups {
+                        let set = self.broadphase.set_groups(e.key, groups);
+                        debug_assert!(set.is_ok(), "a mirrored key is live");
+                        e.groups = groups;
+                        report.regrouped += 1;
+                    }
                 }
                 slot @ None => {
                     let inserted = match shape {
@@ -164,11 +197,14 @@ impl Mirror {
                     };
                     match inserted {
                         Ok(key) => {
+                            let set = self.broadphase.set_groups(key, groups);
+                            debug_assert!(set.is_ok(), "a key just inserted is live");
                             *slot = Some(Entry {
                                 handle,
                                 key,
                                 class: Class::of(&shape),
                                 shape,
+                                groups,
                                 stamp: self.stamp,
                             });
                             self.handles.insert(key, handle);
@@ -177,6 +213,10 @@ impl Mirror {
                         Err(_) => report.skipped += 1,
                     }
                 }
+            }
+            if self.slots[i].is_some() && co.collision_groups().test_mode == InteractionTestMode::Or
+            {
+                report.or_mode += 1;
             }
         }
         // In index order, so the broadphase's key reuse (and so its pair order) is
@@ -263,31 +303,47 @@ impl Mirror {
 
     /// True for a key this mirror holds as a static body.
     fn is_static(&self, key: ProxyKey) -> bool {
-        self.handles
-            .get(key)
-            .and_then(|&h| self.slots.get(h.into_raw_parts().0 as usize))
-            .and_then(|slot| *slot)
+        self.entry(key)
             .is_some_and(|e| e.class == Class::Body(BodyKind::Static))
     }
 
+    /// The collision groups the mirror gave the broadphase for a key it holds (its copy of
+    /// the collider's groups at the last `sync`); `None` for a key this mirror does not hold.
+    #[must_use]
+    pub fn groups(&self, key: ProxyKey) -> Option<CollisionGroups> {
+        self.entry(key).map(|e| e.groups)
+    }
+
+    fn entry(&self, key: ProxyKey) -> Option<Entry> {
+        let h = self.handles.get(key)?;
+        let e = (*self.slots.get(h.into_raw_parts().0 as usize)?)?;
+        (e.key == key).then_some(e)
+    }
+
     /// The brute-force pair set of the mirrored colliders as the last `sync` gave them to the
-    /// broadphase, from the mirror's own record of each sphere and box (not from the
-    /// broadphase), grown by the configured margin (the exact set with margin 0), by
-    /// [`brute::sweep_pairs`].
+    /// broadphase, from the mirror's own record of each sphere, box and collision groups (not
+    /// from the broadphase): boxes grown by the configured margin (the exact set with margin
+    /// 0), paired by [`brute::sweep_pairs`], then the pairs whose groups do not allow them
+    /// ([`CollisionGroups::allows`]) left out.
     #[must_use]
     pub fn exact_pairs(&self) -> Vec<Pair> {
         let margin = self.broadphase.config().margin;
-        let proxies: Vec<brute::Proxy> = self
-            .slots
-            .iter()
-            .flatten()
+        let entries = self.slots.iter().flatten();
+        let proxies: Vec<brute::Proxy> = entries
+            .clone()
             .map(|e| brute::Proxy {
                 key: e.key,
                 aabb: pair_box(&e.shape, margin),
                 is_static: e.class == Class::Body(BodyKind::Static),
             })
             .collect();
-        brute::sweep_pairs(&proxies)
+        let mut pairs = brute::sweep_pairs(&proxies);
+        if entries.clone().any(|e| e.groups != CollisionGroups::ALL) {
+            let groups: SecondaryMap<ProxyKey, CollisionGroups> =
+                entries.map(|e| (e.key, e.groups)).collect();
+            pairs.retain(|p| groups[p.a].allows(groups[p.b]));
+        }
+        pairs
     }
 
     /// Steps the broadphase and compares its pairs with rapier's current pairs and with brute
@@ -320,6 +376,16 @@ fn pair_box(shape: &Shape, margin: f32) -> Aabb {
                 (aabb.max + m).min(Vec3::splat(f32::MAX)),
             )
         }
+    }
+}
+
+/// The collider's collision groups in broadleaf's terms: the same bits (the test mode is
+/// dropped, see the module docs).
+fn collision_groups(co: &Collider) -> CollisionGroups {
+    let g = co.collision_groups();
+    CollisionGroups {
+        memberships: g.memberships.bits(),
+        filter: g.filter.bits(),
     }
 }
 

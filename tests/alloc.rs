@@ -101,22 +101,54 @@ fn steady_gas(placement: Placement) {
     steady_gas_with(placement, 0.0, 1.0);
 }
 
-/// `speed` scales the gas's velocities. The guarantee is for one thread: with feature
-/// `parallel` the test runs in a one-thread pool (more threads allow a bounded number of
-/// allocations, checked in tests/parallel.rs).
+/// `speed` scales the gas's velocities. With the feature `parallel` the steps run on a
+/// one-thread pool: the promise is none on one thread (see `steady_parallel_steps_allocate_a_bounded_number`
+/// for more threads).
 fn steady_gas_with(placement: Placement, skin: f32, speed: f32) {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    #[cfg(feature = "parallel")]
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .expect("a thread pool")
-        .install(|| steady_gas_on_this_thread(placement, skin, speed));
-    #[cfg(not(feature = "parallel"))]
-    steady_gas_on_this_thread(placement, skin, speed);
+    let counts = on_threads(1, || steady_counts(placement, skin, speed));
+    assert!(
+        counts.iter().all(|&c| c == 0),
+        "allocations per step after warm-up: {counts:?}"
+    );
 }
 
-fn steady_gas_on_this_thread(placement: Placement, skin: f32, speed: f32) {
+/// Runs `f` on a pool of `threads` threads with the feature `parallel`, else on this thread.
+fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    #[cfg(feature = "parallel")]
+    {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("a thread pool")
+            .install(f)
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        let _ = threads;
+        f()
+    }
+}
+
+/// With threads, a parallel step hands tasks to the pool: rayon may allocate for them, a
+/// number per step bounded by the tasks, not by the world's size.
+#[cfg(feature = "parallel")]
+#[test]
+fn steady_parallel_steps_allocate_a_bounded_number() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let counts = on_threads(2, || steady_counts(Placement::Loose, 0.0, 1.0));
+    assert!(
+        counts.iter().all(|&c| c <= MAX_PARALLEL_ALLOCATIONS),
+        "allocations per step after warm-up: {counts:?}"
+    );
+}
+
+/// The bound the crate docs state for a parallel step's allocations.
+#[cfg(feature = "parallel")]
+const MAX_PARALLEL_ALLOCATIONS: usize = 64;
+
+/// Allocations in each of 60 steady steps of a 10k gas after its warm-up.
+fn steady_counts(placement: Placement, skin: f32, speed: f32) -> Vec<usize> {
     let mut gas = Gas::new(10_000, 7);
     for v in &mut gas.velocities {
         *v *= speed;
@@ -149,10 +181,7 @@ fn steady_gas_on_this_thread(placement: Placement, skin: f32, speed: f32) {
         assert!(!out.pairs.is_empty());
         counts.push(ALLOCATIONS.load(Ordering::Relaxed) - before);
     }
-    assert!(
-        counts.iter().all(|&c| c == 0),
-        "allocations per step after warm-up: {counts:?}"
-    );
+    counts
 }
 
 #[test]

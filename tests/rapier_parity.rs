@@ -1,13 +1,15 @@
 //! broadleaf against rapier3d's broad phase in a real rapier simulation: at every step
 //! `exact ⊆ ours ⊆ rapier` and `ours == exact`, with the mirror synced right before each
-//! `PhysicsPipeline::step` (the poses rapier detects collisions at).
+//! `PhysicsPipeline::step` (the poses rapier detects collisions at); with collision groups
+//! copied from the colliders, `exact` applies the groups rule.
 #![cfg(feature = "rapier")]
 
 use broadleaf::fixtures::scene::Rng;
 use broadleaf::pair::{self, Pair};
 use broadleaf::rapier::{Comparison, Mirror};
-use broadleaf::{Aabb, Config, Vec3};
+use broadleaf::{Aabb, Config, Vec3, brute};
 use rapier3d::prelude::*;
+use std::collections::BTreeSet;
 
 /// A rapier world and everything `PhysicsPipeline::step` needs.
 struct World {
@@ -281,4 +283,154 @@ fn recorded_pile_settles_inside_its_bounds() {
         .map(|(a, b)| a.distance(*b))
         .fold(0.0f32, f32::max);
     assert!(moved < 0.05, "still moving {moved} m per step");
+}
+
+/// The groups of the `k`-th ball of [`collision_groups_filter_like_rapier_at_every_step`]: four
+/// groups `g = k % 4`, each colliding only with itself (`memberships = filter = g`), except
+/// every 7th ball, a bridge in `g` and `g + 1` (both masks), and every 11th, in `g` with filter
+/// `g | g + 1` under `InteractionTestMode::Or`: an `Or` ball of `g` and one of `g + 1` pass
+/// rapier's test by one half of the rule only, the pairs the mirror's `And` rule drops.
+fn ball_groups(k: usize) -> InteractionGroups {
+    let g = (k % 4) as u32;
+    let own = Group::from_bits_retain(1 << g);
+    let next = Group::from_bits_retain(1 << ((g + 1) % 4));
+    if k % 11 == 0 {
+        InteractionGroups::new(own, own | next, InteractionTestMode::Or)
+    } else if k % 7 == 0 {
+        InteractionGroups::new(own | next, own | next, InteractionTestMode::And)
+    } else {
+        InteractionGroups::new(own, own, InteractionTestMode::And)
+    }
+}
+
+/// Gives the ball `body`'s collider [`ball_groups`]`(k)`.
+fn group_ball(world: &mut World, body: RigidBodyHandle, k: usize) {
+    let co = world.bodies[body].colliders()[0];
+    world.colliders[co].set_collision_groups(ball_groups(k));
+}
+
+/// The falling scene with collision groups: the balls in four groups that fall through each
+/// other ([`ball_groups`]), the dynamic cuboids in a fifth group that pairs with the walls
+/// (default groups, all / all) and each other but no ball; balls churned and regrouped as
+/// the run goes. At every step the cross-check holds with the groups rule in `exact`, and the
+/// test checks the mirror's filtering itself against rapier's colliders: of the overlapping
+/// pairs (the brute force of the mirrored shapes without groups), exactly those that pass
+/// rapier's `test_and` on the colliders' current groups are in `exact`, and every pair that
+/// passes rapier's own `test` (Or mode included) is in rapier's pairs.
+#[test]
+fn collision_groups_filter_like_rapier_at_every_step() {
+    const STEPS: usize = 200;
+    let mut rng = Rng::new(2207);
+    let (mut world, mut balls) = falling_scene(&mut rng);
+    let mut next_ball = 0;
+    for &b in &balls {
+        group_ball(&mut world, b, next_ball);
+        next_ball += 1;
+    }
+    let boxes = InteractionGroups::new(Group::GROUP_5, Group::ALL, InteractionTestMode::And);
+    for (_, co) in world.colliders.iter_mut() {
+        let on_dynamic = co.parent().is_some_and(|p| world.bodies[p].is_dynamic());
+        if co.shape().as_cuboid().is_some() && on_dynamic {
+            co.set_collision_groups(boxes);
+        }
+    }
+    let mut mirror = Mirror::new(Config {
+        bounds: Aabb::new(Vec3::new(-10.0, -2.0, -10.0), Vec3::new(10.0, 30.0, 10.0)),
+        octree_depth: 4,
+        ..Config::default()
+    });
+    let (mut filtered, mut dropped_or, mut regrouped, mut or_mode, mut max_exact) = (0, 0, 0, 0, 0);
+    let mut rapier = Vec::new();
+    for step in 0..STEPS {
+        if step % 50 == 25 {
+            for _ in 0..40 {
+                let i = rng.below(balls.len() as u32) as usize;
+                world.remove(balls.swap_remove(i));
+            }
+            for _ in 0..40 {
+                let c = rng.vec3_in(Vec3::new(-7.0, 18.0, -7.0), Vec3::new(7.0, 22.0, 7.0));
+                let b = world.add(
+                    RigidBodyBuilder::dynamic().translation(c),
+                    ColliderBuilder::ball(0.5),
+                );
+                group_ball(&mut world, b, next_ball);
+                next_ball += 1;
+                balls.push(b);
+            }
+        }
+        // Regroup: 30 balls take another ball's groups, before the step that sees it.
+        if step % 40 == 10 {
+            for _ in 0..30 {
+                let b = balls[rng.below(balls.len() as u32) as usize];
+                group_ball(&mut world, b, rng.below(1000) as usize);
+            }
+        }
+        let report = mirror.sync(&world.bodies, &world.colliders);
+        assert_eq!(report.skipped, 0, "step {step}: {report:?}");
+        regrouped += report.regrouped;
+        or_mode = or_mode.max(report.or_mode);
+        world.step();
+        let cmp = mirror.compare(&world.narrow_phase);
+        if !cmp.holds() {
+            panic!("{}", explain(step, &cmp, &mut mirror, &world));
+        }
+        max_exact = max_exact.max(cmp.exact);
+
+        // The mirror's filtering against rapier's own rule on the colliders as they are.
+        let exact: BTreeSet<Pair> = mirror.exact_pairs().into_iter().collect();
+        mirror.rapier_pairs(&world.narrow_phase, &mut rapier);
+        let bp = mirror.broadphase();
+        let proxies: Vec<brute::Proxy> = world
+            .colliders
+            .iter()
+            .map(|(h, co)| {
+                let key = mirror.key(h).expect("every collider is mirrored");
+                let fixed = co.parent().is_none_or(|p| world.bodies[p].is_fixed());
+                brute::Proxy {
+                    key,
+                    aabb: bp.aabb(key).expect("a mirrored key is live"),
+                    is_static: fixed && co.shape().as_ball().is_none(),
+                }
+            })
+            .collect();
+        for p in brute::sweep_pairs(&proxies) {
+            let groups = [p.a, p.b].map(|k| {
+                let h = mirror.handle(k).expect("a mirrored key");
+                let g = world.colliders[h].collision_groups();
+                let mirrored = mirror.groups(k).expect("a mirrored key");
+                assert_eq!(
+                    (mirrored.memberships, mirrored.filter),
+                    (g.memberships.bits(), g.filter.bits()),
+                    "step {step}: the mirror's groups of {h:?}"
+                );
+                g
+            });
+            let and = groups[0].test_and(groups[1]);
+            assert_eq!(exact.contains(&p), and, "step {step}: {p:?} {groups:?}");
+            if groups[0].test(groups[1]) {
+                assert!(
+                    rapier.binary_search(&p).is_ok(),
+                    "step {step}: rapier lacks {p:?} {groups:?}"
+                );
+            }
+            filtered += usize::from(!and);
+            dropped_or += usize::from(!and && groups[0].test(groups[1]));
+        }
+    }
+    println!(
+        "{STEPS} steps: up to {max_exact} exact pairs; {filtered} overlapping pairs filtered by \
+         groups in all, {dropped_or} of them Or×Or pairs rapier keeps; {regrouped} regroupings; \
+         {or_mode} Or-mode colliders"
+    );
+    assert!(max_exact > 1000, "the balls must pile up: {max_exact}");
+    assert!(
+        filtered > 10_000,
+        "groups must filter overlapping pairs: {filtered}"
+    );
+    assert!(dropped_or > 0, "the Or approximation must be exercised");
+    assert!(
+        regrouped >= 30,
+        "regroupings must reach the mirror: {regrouped}"
+    );
+    assert!(or_mode > 100, "{or_mode}");
 }

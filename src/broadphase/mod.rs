@@ -177,14 +177,14 @@ impl Config {
         Ok(())
     }
 
-    /// The configuration of both BVHs: fuller leaves than the standalone default, since the
-    /// pair passes are the hot path and a leaf's all-pairs loop is cheaper than the node pairs
-    /// it replaces.
+    /// The configuration of both BVHs: much fuller leaves than the standalone default, since
+    /// the pair passes are the hot path and a leaf pair's bit-mask kernel (up to 64 boxes a
+    /// side) is cheaper than the node pairs it replaces.
     fn bvh_config(&self) -> BvhConfig {
         BvhConfig {
             rebuild_threshold: self.rebuild_threshold,
-            max_leaf_size: 16,
-            traversal_cost: 8.0,
+            max_leaf_size: BVH_LEAF_SIZE,
+            traversal_cost: BVH_TRAVERSAL_COST,
             ..BvhConfig::default()
         }
     }
@@ -502,7 +502,9 @@ impl BroadPhase {
             .ok_or(Error::Full)?;
         let key = self.store.key(slot);
         let held = self.held_shape(slot, self.cached);
-        self.store.held[slot as usize] = held.aabb;
+        if self.cached {
+            self.store.set_held(slot as usize, held.aabb);
+        }
         match shape {
             Shape::Sphere { center, .. } => self.octree.insert_checked(key, center, held.radius),
             Shape::Body { kind, .. } => {
@@ -659,7 +661,7 @@ impl BroadPhase {
         if self.cached {
             self.refresh_fat(slot, &exact);
         } else {
-            let placed = self.tree_mut(kind).update_checked(key, &exact.aabb());
+            let placed = self.tree_mut(kind).update_box(key, &exact);
             debug_assert!(placed.is_ok(), "a live body missing from its BVH");
             self.mark(slot, flag::MOVED);
         }
@@ -701,7 +703,7 @@ impl BroadPhase {
     fn hold(&mut self, slot: u32, fat: bool) {
         let s = slot as usize;
         let held = self.held_shape(slot, fat);
-        self.store.held[s] = held.aabb;
+        self.store.set_held(s, held.aabb);
         let key = self.store.key(slot);
         // The key is live: the structures hold every live proxy under its key.
         let placed = match self.store.shape[s] {
@@ -710,7 +712,7 @@ impl BroadPhase {
                 if kind == BodyKind::Dynamic && fat {
                     self.dynamic_escapes += 1;
                 }
-                self.tree_mut(kind).update_checked(key, &held.aabb.aabb())
+                self.tree_mut(kind).update_box(key, &held.aabb)
             }
         };
         debug_assert!(placed.is_ok(), "a live proxy missing from its structure");
@@ -862,6 +864,12 @@ impl BroadPhase {
         }
     }
 }
+
+/// The broadphase's BVHs' largest leaf, in boxes (`BvhConfig::max_leaf_size`).
+const BVH_LEAF_SIZE: u32 = 32;
+/// The broadphase's BVHs' node visit cost, in box tests (`BvhConfig::traversal_cost`): high
+/// enough that SAH fills leaves up to [`BVH_LEAF_SIZE`].
+const BVH_TRAVERSAL_COST: f32 = 16.0;
 
 /// The most live proxies: the structures index their entries with `u32`.
 const MAX_PROXIES: usize = (u32::MAX - 2) as usize;

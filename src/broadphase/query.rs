@@ -6,6 +6,11 @@ use super::{BroadPhase, Shape};
 use crate::geom::{self, SimdBox, check_aabb};
 use crate::{Aabb, ProxyKey, Vec3};
 
+/// `nearest`'s first radius beyond the bounds, as a fraction of the spacing `k` proxies spread
+/// evenly over the bounds would have: below 1, a first round usually finds `k` in a small
+/// region; a miss only doubles the radius.
+const NEAREST_START: f32 = 0.5;
+
 impl BroadPhase {
     /// Calls `f` with every proxy whose (margin-grown) box overlaps `aabb`, each once, in no
     /// particular order; nothing for a non-finite or inverted query box.
@@ -140,7 +145,8 @@ impl BroadPhase {
             return out;
         }
         let bounds = self.config.bounds;
-        let spacing = bounds.extent().max_element() * (k as f32 / n as f32).min(1.0).cbrt();
+        let spacing =
+            NEAREST_START * bounds.extent().max_element() * (k as f32 / n as f32).min(1.0).cbrt();
         let mut radius = geom::point_aabb_distance(point, &bounds) + spacing;
         loop {
             out.clear();
@@ -166,12 +172,12 @@ impl BroadPhase {
         out
     }
 
-    /// Calls `f(key, shape)` for every proxy whose held box is within `radius` of `p`: a
-    /// superset of the proxies whose shapes are, since a shape lies in its held box.
+    /// Calls `f(key, shape)` for every proxy whose held box is within `radius` of `p` (spheres:
+    /// whose held box meets the cube `p ± radius`): a superset of the proxies whose shapes
+    /// are, since a shape lies in its held box.
     fn within(&self, p: Vec3, radius: f32, mut f: impl FnMut(ProxyKey, Shape)) {
         let shape = |k: ProxyKey| self.store.shape[crate::pair::slot(k) as usize];
-        self.octree
-            .within_distance(p, radius, |k, _| f(k, shape(k)));
+        self.octree.near(p, radius, |k| f(k, shape(k)));
         self.dynamic
             .within_distance(p, radius, |k, _| f(k, shape(k)));
         self.statics

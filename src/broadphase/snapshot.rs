@@ -245,7 +245,6 @@ impl Snapshot {
         st.flags.reserve_exact(n);
         st.shape.reserve_exact(n);
         st.exact.reserve_exact(n);
-        st.held.reserve_exact(n);
         st.groups.reserve_exact(n);
         st.speed.reserve_exact(n);
         st.stamp.reserve_exact(n);
@@ -312,7 +311,6 @@ impl Snapshot {
                 .push(if kind == Kind::Free { flag::GONE } else { 0 });
             st.shape.push(shape);
             st.exact.push(exact);
-            st.held.push(exact);
             st.groups.push(groups);
             st.speed.push(0.0);
             st.stamp.push(self.now);
@@ -328,7 +326,6 @@ impl Snapshot {
             let slot = s as u32;
             let key = bp.store.key(slot);
             let held = bp.held_shape(slot, false);
-            bp.store.held[s] = held.aabb;
             match bp.store.shape[s] {
                 Shape::Sphere { center, .. } => bp.octree.insert_checked(key, center, held.radius),
                 Shape::Body { kind, .. } => {

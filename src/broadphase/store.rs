@@ -51,7 +51,7 @@ pub(super) struct Store {
     pub(super) exact: Vec<SimdBox>,
     /// The box its structure (octree or BVH) holds for it while the incremental pass runs: a
     /// fat box around the exact one (outside that regime the structure holds the exact box and
-    /// this is stale). 32 bytes.
+    /// this is stale, or not allocated yet: see [`Store::set_held`]). 32 bytes.
     pub(super) held: Vec<SimdBox>,
     /// Collision groups. 8 bytes.
     pub(super) groups: Vec<CollisionGroups>,
@@ -124,7 +124,6 @@ impl Store {
                 self.flags.push(0);
                 self.shape.push(shape);
                 self.exact.push(exact);
-                self.held.push(exact);
                 self.groups.push(CollisionGroups::default());
                 self.speed.push(0.0);
                 self.stamp.push(step);
@@ -137,7 +136,9 @@ impl Store {
         self.flags[s] = 0;
         self.shape[s] = shape;
         self.exact[s] = exact;
-        self.held[s] = exact;
+        if let Some(h) = self.held.get_mut(s) {
+            *h = exact;
+        }
         self.groups[s] = CollisionGroups::default();
         self.speed[s] = 0.0;
         self.stamp[s] = step;
@@ -180,6 +181,16 @@ impl Store {
         self.free = free;
         self.quarantine = quarantine;
         self.live = live;
+    }
+
+    /// Sets the held box of slot `s`, growing `held` to every slot first: it is filled only
+    /// once the incremental regime is entered, so a world that never enters it keeps none.
+    #[inline]
+    pub(super) fn set_held(&mut self, s: usize, b: SimdBox) {
+        if self.held.len() <= s {
+            self.held.resize(self.version.len(), SimdBox::EMPTY);
+        }
+        self.held[s] = b;
     }
 
     /// Heap bytes held (capacity, not length).

@@ -316,11 +316,17 @@ impl Bvh {
     #[inline]
     pub(crate) fn update_checked(&mut self, key: ProxyKey, aabb: &Aabb) -> Result<(), Error> {
         debug_assert!(check_aabb(aabb).is_ok());
-        let b = SimdBox::new(aabb);
+        self.update_box(key, &SimdBox::new(aabb))
+    }
+
+    /// [`Bvh::update_checked`] of a box already in the hot form: a caller holding a `SimdBox`
+    /// passes it as is (making an `Aabb` of it and back goes through memory and stalls).
+    #[inline]
+    pub(crate) fn update_box(&mut self, key: ProxyKey, b: &SimdBox) -> Result<(), Error> {
         let id = *self.ids.get(key).ok_or(Error::UnknownProxy)? as usize;
-        self.boxes[id] = b;
+        self.boxes[id] = *b;
         if id < self.tree_len {
-            self.enlarge_ancestors(self.leaf_of[id], &b);
+            self.enlarge_ancestors(self.leaf_of[id], b);
         }
         Ok(())
     }

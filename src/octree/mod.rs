@@ -93,8 +93,10 @@ pub enum Placement {
 /// Per-sphere data, indexed by id: the slot index of the sphere's key, so a caller that
 /// updates its spheres in key order streams through it, and a removal leaves a hole (`node ==
 /// NONE`) instead of moving another sphere. The pair pass reads `aabb`, `qmin`/`qmax` and
-/// `walk_key`; queries follow the node lists.
+/// `walk_key`; queries follow the node lists ([`Link`]). One cache line: an update in no
+/// particular order (a world whose keys were reused) reads and writes exactly one line here.
 #[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
 struct Obj {
     /// `center ± radius`, the box every pair test uses. 24 bytes.
     aabb: Aabb,
@@ -104,13 +106,13 @@ struct Obj {
     qmax: [u16; 3],
     /// The node the sphere is linked in. 4 bytes.
     node: u32,
-    /// Neighbours in the node's list, `NONE` at the ends. 8 bytes.
-    next: u32,
-    prev: u32,
     /// The node's walk key (`Grid::walk_key`), set on every link. 8 bytes.
     walk_key: u64,
+    /// The sphere exactly as given. 16 bytes.
+    center: Vec3,
+    radius: f32,
 }
-const _: () = assert!(core::mem::size_of::<Obj>() == 56);
+const _: () = assert!(core::mem::size_of::<Obj>() == 64);
 
 impl Obj {
     /// An id no sphere holds.
@@ -119,9 +121,24 @@ impl Obj {
         qmin: [0; 3],
         qmax: [0; 3],
         node: NONE,
+        walk_key: 0,
+        center: Vec3::ZERO,
+        radius: 0.0,
+    };
+}
+
+/// A sphere's neighbours in its node's list, `NONE` at the ends; read by queries and written
+/// only when the sphere changes node. 8 bytes.
+#[derive(Clone, Copy, Debug)]
+struct Link {
+    next: u32,
+    prev: u32,
+}
+
+impl Link {
+    const NONE: Link = Link {
         next: NONE,
         prev: NONE,
-        walk_key: 0,
     };
 }
 
@@ -173,8 +190,8 @@ pub struct Octree {
     grid: Grid,
     /// Hot data by id (see [`Obj`]).
     objs: Vec<Obj>,
-    /// Centre and radius by id, exactly as given.
-    spheres: Vec<(Vec3, f32)>,
+    /// List links by id.
+    links: Vec<Link>,
     /// Id → key, the null key for a hole: a key is live iff `keys[its slot index]` is it.
     keys: Vec<ProxyKey>,
     /// Live spheres.
@@ -209,7 +226,7 @@ impl Octree {
         Ok(Octree {
             grid: Grid::new(bounds, depth, placement),
             objs: Vec::new(),
-            spheres: Vec::new(),
+            links: Vec::new(),
             keys: Vec::new(),
             live: 0,
             minted: SlotMap::with_key(),
@@ -265,7 +282,7 @@ impl Octree {
     #[must_use]
     pub fn heap_bytes(&self) -> usize {
         self.objs.capacity() * core::mem::size_of::<Obj>()
-            + self.spheres.capacity() * 16
+            + self.links.capacity() * 8
             + self.keys.capacity() * 8
             + self.nodes.heap_bytes()
             + self.passes.heap_bytes()
@@ -315,8 +332,8 @@ impl Octree {
             let was_outside = self.is_outside(id);
             self.overflow = self.overflow - u32::from(was_outside) + u32::from(at.outside);
         }
-        self.spheres[i] = (center, radius);
         let o = &mut self.objs[i];
+        (o.center, o.radius) = (center, radius);
         o.aabb = at.aabb;
         o.qmin = at.qmin;
         o.qmax = at.qmax;
@@ -348,7 +365,7 @@ impl Octree {
         self.live -= 1;
         while self.objs.last().is_some_and(|o| o.node == NONE) {
             self.objs.pop();
-            self.spheres.pop();
+            self.links.pop();
             self.keys.pop();
         }
         Ok(())
@@ -381,7 +398,10 @@ impl Octree {
     /// The sphere's centre and radius exactly as last given, or `None` for a stale key.
     #[must_use]
     pub fn sphere(&self, key: ProxyKey) -> Option<(Vec3, f32)> {
-        self.id_of(key).map(|id| self.spheres[id as usize])
+        self.id_of(key).map(|id| {
+            let o = &self.objs[id as usize];
+            (o.center, o.radius)
+        })
     }
 
     /// The level (0 = root) of the node holding the sphere, or `None` for a stale key.
@@ -487,16 +507,17 @@ impl Octree {
         let i = id as usize;
         if self.objs.len() <= i {
             self.objs.resize(i + 1, Obj::HOLE);
-            self.spheres.resize(i + 1, (Vec3::ZERO, 0.0));
+            self.links.resize(i + 1, Link::NONE);
             self.keys.resize(i + 1, ProxyKey::default());
         }
         self.objs[i] = Obj {
             aabb: at.aabb,
             qmin: at.qmin,
             qmax: at.qmax,
+            center,
+            radius,
             ..Obj::HOLE
         };
-        self.spheres[i] = (center, radius);
         self.keys[i] = key;
         self.live += 1;
         self.per_level[level_of(at.node) as usize] += 1;
@@ -509,7 +530,7 @@ impl Octree {
     fn is_outside(&self, id: u32) -> bool {
         let o = &self.objs[id as usize];
         o.node == 0 && {
-            let (c, r) = self.spheres[id as usize];
+            let (c, r) = (o.center, o.radius);
             self.grid.is_outside(&o.aabb, c, r)
         }
     }
@@ -522,10 +543,12 @@ impl Octree {
         let o = &mut self.objs[id as usize];
         o.node = node;
         o.walk_key = walk_key;
-        o.prev = NONE;
-        o.next = head;
+        self.links[id as usize] = Link {
+            next: head,
+            prev: NONE,
+        };
         if head != NONE {
-            self.objs[head as usize].prev = id;
+            self.links[head as usize].prev = id;
         }
         self.nodes.set_head(node, id);
         if became_occupied {
@@ -535,16 +558,15 @@ impl Octree {
 
     /// Takes object `id` out of its node's list (its `node` field is left as it was).
     fn unlink(&mut self, id: u32) {
-        let Obj {
-            node, next, prev, ..
-        } = self.objs[id as usize];
+        let node = self.objs[id as usize].node;
+        let Link { next, prev } = self.links[id as usize];
         if prev == NONE {
             self.nodes.set_head(node, next);
         } else {
-            self.objs[prev as usize].next = next;
+            self.links[prev as usize].next = next;
         }
         if next != NONE {
-            self.objs[next as usize].prev = prev;
+            self.links[next as usize].prev = prev;
         }
         if self.nodes.is_empty(node) {
             self.nodes.mark_empty(node);

@@ -12,7 +12,14 @@ use glam::Vec3;
 
 /// Queries whose reaching cells over the occupied levels are at most this many read those
 /// cells' lists directly; larger ones walk the occupied subtrees.
-const DIRECT_CELLS: u64 = 96;
+const DIRECT_CELLS: u64 = 256;
+
+/// A ray is cut into pieces no longer than the deepest occupied level's cells; one longer than
+/// this many pieces walks the occupied subtrees instead.
+const MAX_RAY_PIECES: f32 = 65_536.0;
+
+/// Relative widening of a ray piece's box against the rounding of its end points.
+const RAY_PIECE_SLACK: f32 = 1e-5;
 
 impl Octree {
     /// Depth-first over occupied nodes from the root: `enter(cell)` decides whether to visit a
@@ -25,7 +32,7 @@ impl Octree {
             let mut i = self.nodes.head_at(slot);
             while i != NONE {
                 visit(i);
-                i = self.objs[i as usize].next;
+                i = self.links[i as usize].next;
             }
         });
     }
@@ -37,10 +44,17 @@ impl Octree {
     /// level: no walk down from the root, whose upper levels cost a visit each while holding
     /// few spheres. A large one walks the occupied subtrees instead, whose masks skip empty
     /// regions.
-    fn candidates(&self, aabb: &Aabb, mut visit: impl FnMut(u32)) {
+    fn candidates(&self, aabb: &Aabb, visit: impl FnMut(u32)) {
+        self.candidates_from(aabb, true, false, visit);
+    }
+
+    /// [`Octree::candidates`], the root's list left out unless `root`; with `small` the
+    /// caller knows the box spans about a deepest occupied cell (a ray piece) and the direct
+    /// lists are read without counting the cells first.
+    fn candidates_from(&self, aabb: &Aabb, root: bool, small: bool, mut visit: impl FnMut(u32)) {
         let (qlo, qhi) = (self.grid.quantize(aabb.min), self.grid.quantize(aabb.max));
         let mut cells = 0u64;
-        for level in 1..=self.grid.depth {
+        for level in (1..=self.grid.depth).filter(|_| !small) {
             if self.per_level[level as usize] > 0 {
                 let (a, b) = self.grid.reaching_cells(level, qlo, qhi);
                 cells += (0..3)
@@ -49,17 +63,24 @@ impl Octree {
             }
         }
         if cells > DIRECT_CELLS {
-            self.traverse(|cell| self.grid.reaches(cell, qlo, qhi), visit);
+            self.traverse(
+                |cell| self.grid.reaches(cell, qlo, qhi),
+                |id| {
+                    if root || self.objs[id as usize].node != 0 {
+                        visit(id);
+                    }
+                },
+            );
             return;
         }
         let mut list = |node: u32| {
             let mut i = self.nodes.head(node);
             while i != NONE {
                 visit(i);
-                i = self.objs[i as usize].next;
+                i = self.links[i as usize].next;
             }
         };
-        if self.per_level[0] > 0 {
+        if root && self.per_level[0] > 0 {
             list(0);
         }
         for level in 1..=self.grid.depth {
@@ -104,7 +125,7 @@ impl Octree {
             return;
         }
         self.candidates(&Aabb::from_center_radius(center, radius), |id| {
-            let (c, r) = self.spheres[id as usize];
+            let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
             if (c - center).length_squared() <= (r + radius) * (r + radius) {
                 f(self.keys[id as usize]);
             }
@@ -133,7 +154,7 @@ impl Octree {
                     .is_some()
             },
             |id| {
-                let (c, r) = self.spheres[id as usize];
+                let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
                 if let Some(t) = geom::ray_sphere(origin, dir, c, r, limit()) {
                     let key = self.keys[id as usize];
                     let better = best
@@ -190,7 +211,7 @@ impl Octree {
                     .is_some()
             },
             |id| {
-                let (c, r) = self.spheres[id as usize];
+                let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
                 if let Some(t) = hit(c, r) {
                     f(self.keys[id as usize], t);
                 }
@@ -205,6 +226,89 @@ impl Octree {
     /// among them: the root is always entered, and below it a sphere's box lies in its node's
     /// reach box grown by the slack.
     fn ray_ids(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        max_t: f32,
+        inflate: f32,
+        mut visit: impl FnMut(u32, f32) -> f32,
+    ) {
+        let mut best = max_t;
+        // The root's spheres (overflow, and strict straddlers of its planes) once, up front.
+        let mut i = self.nodes.head(0);
+        while i != NONE {
+            best = best.min(visit(i, best));
+            i = self.links[i as usize].next;
+        }
+        let Some(deepest) = (1..=self.grid.depth)
+            .rev()
+            .find(|&l| self.per_level[l as usize] > 0)
+        else {
+            return;
+        };
+        // Spheres below the root lie in the bounds grown by half their extent (a loose
+        // level-1 cell reaches a quarter of it past the bounds).
+        let extent = self.grid.bounds.extent();
+        let region = self.grid.bounds.grown(extent.max_element() * 0.5 + inflate);
+        let inv = geom::inverse_dir(dir);
+        let Some(t0) = region.ray_entry(origin, inv, best) else {
+            return;
+        };
+        let t1 = region.ray_exit(origin, inv, best);
+        let cell = extent.min_element() / (1u32 << deepest) as f32;
+        let dt = cell / dir.abs().max_element();
+        let pieces = (t1 - t0) / dt;
+        if !(dt > 0.0 && pieces.is_finite() && pieces <= MAX_RAY_PIECES) {
+            self.ray_ids_walk(origin, dir, best, inflate, |id, b| {
+                if self.objs[id as usize].node == 0 {
+                    b
+                } else {
+                    visit(id, b)
+                }
+            });
+            return;
+        }
+        // Pieces in order of `t`, each a box around its stretch of the segment grown by
+        // `inflate` and a slack fixed for the whole ray (so that each axis' piece intervals
+        // only move forward: the pieces whose ranges meet a sphere's range are consecutive,
+        // and a sphere is visited in the first of them only).
+        let (a, b) = (origin + dir * t0, origin + dir * t1);
+        let slack = RAY_PIECE_SLACK * a.abs().max(b.abs()).max_element().max(1.0) + inflate;
+        let q = |t_lo: f32, t_hi: f32| {
+            let (p, r) = (origin + dir * t_lo, origin + dir * t_hi);
+            Aabb::new(p.min(r) - Vec3::splat(slack), p.max(r) + Vec3::splat(slack))
+        };
+        let meets = |o: &super::Obj, lo: [u16; 3], hi: [u16; 3]| {
+            (0..3).all(|a| o.qmin[a] <= hi[a] && lo[a] <= o.qmax[a])
+        };
+        let mut prev: Option<([u16; 3], [u16; 3])> = None;
+        let mut k = 0u32;
+        loop {
+            let ta = t0 + dt * k as f32;
+            if ta > t1.min(best) {
+                break;
+            }
+            let tb = (t0 + dt * (k + 1) as f32).min(t1);
+            let piece = q(ta, tb);
+            let range = (self.grid.quantize(piece.min), self.grid.quantize(piece.max));
+            self.candidates_from(&piece, false, true, |id| {
+                let o = &self.objs[id as usize];
+                let new =
+                    meets(o, range.0, range.1) && prev.is_none_or(|(lo, hi)| !meets(o, lo, hi));
+                if new {
+                    best = best.min(visit(id, best));
+                }
+            });
+            if tb >= t1 {
+                break;
+            }
+            prev = Some(range);
+            k += 1;
+        }
+    }
+
+    /// [`Octree::ray_ids`] by a walk over the occupied subtrees, for rays too long for pieces.
+    fn ray_ids_walk(
         &self,
         origin: Vec3,
         dir: Vec3,
@@ -261,25 +365,21 @@ impl Octree {
     /// box is within `radius`, since that box lies in the grown reach box and the distance
     /// does not decrease as a box shrinks.
     fn near_ids(&self, p: Vec3, radius: f32, visit: impl FnMut(u32)) {
-        let slack = self.grid.slack();
-        self.traverse(
-            |cell| geom::point_aabb_distance(p, &self.grid.reach_box(cell).grown(slack)) <= radius,
-            visit,
-        );
+        // A box within `radius` of `p` overlaps the cube `p ± radius`.
+        self.candidates(&Aabb::from_center_radius(p, radius), visit);
     }
 
-    /// Calls `f(key, aabb)` for every sphere whose stored box `aabb` (`center ± radius`) is
-    /// within `radius` of `p` ([`geom::point_aabb_distance`] `<= radius`, so touching counts),
-    /// once each, in no particular order. Nothing for a non-finite `p` or a NaN or negative
-    /// `radius`; no allocation.
-    pub(crate) fn within_distance(&self, p: Vec3, radius: f32, mut f: impl FnMut(ProxyKey, &Aabb)) {
+    /// Calls `f(key)` for every sphere whose stored box overlaps the cube `p ± radius`, once
+    /// each: a superset of those within `radius` of `p`, for callers that measure exact
+    /// distances themselves. Nothing for a non-finite `p` or a NaN or negative `radius`.
+    pub(crate) fn near(&self, p: Vec3, radius: f32, mut f: impl FnMut(ProxyKey)) {
         if !p.is_finite() || radius.is_nan() || radius < 0.0 {
             return;
         }
+        let cube = Aabb::from_center_radius(p, radius);
         self.near_ids(p, radius, |id| {
-            let aabb = &self.objs[id as usize].aabb;
-            if geom::point_aabb_distance(p, aabb) <= radius {
-                f(self.keys[id as usize], aabb);
+            if self.objs[id as usize].aabb.overlaps(&cube) {
+                f(self.keys[id as usize]);
             }
         });
     }
@@ -306,7 +406,7 @@ impl Octree {
         let inflate = radius + geom::cast_pad(center, radius, dir, max_t);
         let mut best: Option<(ProxyKey, f32)> = None;
         self.ray_ids(center, dir, max_t, inflate, |id, limit| {
-            let (c, r) = self.spheres[id as usize];
+            let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
             if let Some(t) = geom::sphere_cast_sphere(center, radius, dir, limit, c, r) {
                 let key = self.keys[id as usize];
                 if best.is_none_or(|(bk, bt)| (t, key) < (bt, bk)) {
@@ -343,7 +443,7 @@ impl Octree {
             let mut within = 0;
             let reach = radius + geom::distance_pad(point, radius);
             self.near_ids(point, reach, |id| {
-                let (c, r) = self.spheres[id as usize];
+                let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
                 let d = geom::point_sphere_distance(point, c, r);
                 within += usize::from(d <= radius);
                 out.push((self.keys[id as usize], d));
@@ -382,31 +482,8 @@ mod tests {
     use super::*;
     use crate::Placement;
     use crate::rng::Rng;
+    use crate::test_geom::segment_in_box;
     use std::collections::BTreeMap;
-
-    /// The part of `t ∈ [0, max_t]` the segment `o + t·d` spends in the box `lo..=hi`, in
-    /// `f64`, by the test's own slab loop; `None` if it misses.
-    fn segment_in_box(o: Vec3, d: Vec3, max_t: f32, lo: Vec3, hi: Vec3) -> Option<(f64, f64)> {
-        let (mut t0, mut t1) = (0.0f64, f64::from(max_t));
-        for a in 0..3 {
-            let (o, d, lo, hi) = (
-                f64::from(o[a]),
-                f64::from(d[a]),
-                f64::from(lo[a]),
-                f64::from(hi[a]),
-            );
-            if d == 0.0 {
-                if o < lo || o > hi {
-                    return None;
-                }
-            } else {
-                let (a, b) = ((lo - o) / d, (hi - o) / d);
-                t0 = t0.max(a.min(b));
-                t1 = t1.min(a.max(b));
-            }
-        }
-        (t0 <= t1).then_some((t0, t1))
-    }
 
     /// The distance from `p` to the box `lo..=hi`, in `f64`: `p` minus its clamp to the box.
     fn box_distance(p: Vec3, lo: Vec3, hi: Vec3) -> f64 {
@@ -565,7 +642,7 @@ mod tests {
     }
 
     #[test]
-    fn within_distance_visits_every_near_box_exactly_once() {
+    fn near_visits_every_near_box_once_and_only_boxes_meeting_the_cube() {
         for (seed, placement) in [(4, Placement::Strict), (5, Placement::Loose)] {
             let (tree, shapes) = world(seed, placement);
             let mut rng = Rng::new(seed + 100);
@@ -577,21 +654,18 @@ mod tests {
                     _ => rng.range(0.0, 5.0),
                 };
                 let mut seen = BTreeMap::new();
-                tree.within_distance(p, radius, |key, aabb| {
-                    assert_eq!(Some(*aabb), tree.aabb(key));
-                    *seen.entry(key).or_insert(0) += 1;
-                });
+                tree.near(p, radius, |key| *seen.entry(key).or_insert(0) += 1);
                 assert!(seen.values().all(|&n| n == 1), "a sphere visited twice");
                 for &(key, c, r) in &shapes {
                     let (lo, hi) = own_box(c, r);
-                    let near = geom::point_aabb_distance(p, &Aabb::new(lo, hi)) <= radius;
-                    assert_eq!(seen.contains_key(&key), near, "query {q} key {key:?}");
-                    let d = box_distance(p, lo, hi);
-                    let r = f64::from(radius);
-                    if near {
-                        assert!(d <= r + 1e-4, "query {q}: a box at {d} > {r} visited");
-                    } else {
-                        assert!(d >= r - 1e-4, "query {q}: a box at {d} <= {r} skipped");
+                    // The test's own distance: every box within the radius is visited.
+                    if box_distance(p, lo, hi) <= f64::from(radius) - 1e-4 {
+                        assert!(seen.contains_key(&key), "query {q}: a near box skipped");
+                    }
+                    // Only boxes that meet the cube `p ± radius`, by the test's own compare.
+                    let meets = (0..3).all(|a| lo[a] <= p[a] + radius && p[a] - radius <= hi[a]);
+                    if seen.contains_key(&key) {
+                        assert!(meets, "query {q}: a box off the cube visited");
                     }
                 }
             }
@@ -622,7 +696,7 @@ mod tests {
             (Vec3::ZERO, -1.0),
             (Vec3::ZERO, nan),
         ] {
-            tree.within_distance(p, radius, |_, _| n += 1);
+            tree.near(p, radius, |_| n += 1);
         }
         assert_eq!(n, 0);
     }

@@ -16,11 +16,7 @@ impl Octree {
     /// overflow and key-map counts agree. O(n + occupied nodes); for tests and debugging.
     pub fn validate(&self) {
         let n = self.objs.len();
-        assert_eq!(
-            self.spheres.len(),
-            n,
-            "spheres and objects differ in length"
-        );
+        assert_eq!(self.links.len(), n, "links and objects differ in length");
         assert_eq!(self.keys.len(), n, "keys and objects differ in length");
         let live = self.objs.iter().filter(|o| o.node != NONE).count();
         assert_eq!(live, self.live, "live count");
@@ -41,7 +37,7 @@ impl Octree {
                 Some(id as u32),
                 "key map disagrees at id {id}"
             );
-            let (c, r) = self.spheres[id];
+            let (c, r) = (o.center, o.radius);
             let at = self.grid.locate(c, r);
             assert_eq!(
                 o.aabb, at.aabb,
@@ -98,14 +94,15 @@ impl Octree {
                     "id {i} is listed in node {node} but names {}",
                     o.node
                 );
-                assert_eq!(o.prev, prev, "broken back link at id {i}");
+                let link = self.links[i as usize];
+                assert_eq!(link.prev, prev, "broken back link at id {i}");
                 reached += 1;
                 assert!(
                     reached <= n,
                     "node lists hold more entries than spheres (a cycle?)"
                 );
                 prev = i;
-                i = o.next;
+                i = link.next;
             }
             assert!(
                 cell.level < self.grid.depth || self.nodes.mask(node) == 0,
