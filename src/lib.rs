@@ -106,6 +106,7 @@ pub mod pair;
 pub mod rapier;
 #[cfg(any(test, feature = "fixtures"))]
 mod rng;
+mod search;
 mod sweep;
 #[cfg(test)]
 mod test_geom;

@@ -4,6 +4,7 @@
 
 use super::{BroadPhase, Shape};
 use crate::geom::{self, SimdBox, check_aabb};
+use crate::search::{FirstHit, nearest_expanding};
 use crate::{Aabb, ProxyKey, Vec3};
 
 /// `nearest`'s first radius beyond the bounds, as a fraction of the spacing `k` proxies spread
@@ -83,26 +84,28 @@ impl BroadPhase {
         dir: Vec3,
         max_t: f32,
         inflate: f32,
-        hit: impl Fn(Shape, f32) -> Option<f32>,
+        hit_of: impl Fn(Shape, f32) -> Option<f32>,
     ) -> Option<(ProxyKey, f32)> {
-        let best = core::cell::Cell::new(None::<(ProxyKey, f32)>);
-        let limit = || best.get().map_or(max_t, |(_, t)| t);
-        let visit = |key: ProxyKey, _: &Aabb| {
-            let shape = self.store.shape[crate::pair::slot(key) as usize];
-            if let Some(t) = hit(shape, limit())
-                && best.get().is_none_or(|(k, b)| (t, key) < (b, k))
-            {
-                best.set(Some((key, t)));
-            }
-            limit()
+        let mut hit = FirstHit::new(max_t);
+        let t_of = |key: ProxyKey, limit: f32| {
+            hit_of(self.store.shape[crate::pair::slot(key) as usize], limit)
         };
+        let limit = hit.limit();
         self.octree
-            .ray_candidates(origin, dir, max_t, inflate, visit);
+            .ray_candidates(origin, dir, limit, inflate, |k, _| {
+                hit.offer(k, t_of(k, hit.limit()))
+            });
+        let limit = hit.limit();
         self.dynamic
-            .ray_candidates(origin, dir, limit(), inflate, visit);
+            .ray_candidates(origin, dir, limit, inflate, |k, _| {
+                hit.offer(k, t_of(k, hit.limit()))
+            });
+        let limit = hit.limit();
         self.statics
-            .ray_candidates(origin, dir, limit(), inflate, visit);
-        best.get()
+            .ray_candidates(origin, dir, limit, inflate, |k, _| {
+                hit.offer(k, t_of(k, hit.limit()))
+            });
+        hit.best()
     }
 
     /// Calls `f` with every proxy whose shape, as the user gave it, is within `radius` of
@@ -139,18 +142,15 @@ impl BroadPhase {
     /// exact distance (or every proxy was seen). A proxy not seen is farther than the radius.
     #[must_use]
     pub fn nearest(&self, point: Vec3, k: usize) -> Vec<(ProxyKey, f32)> {
-        let mut out = Vec::new();
         let n = self.len();
         if k == 0 || n == 0 || !point.is_finite() {
-            return out;
+            return Vec::new();
         }
         let bounds = self.config.bounds;
         let spacing =
             NEAREST_START * bounds.extent().max_element() * (k as f32 / n as f32).min(1.0).cbrt();
-        let mut radius = geom::point_aabb_distance(point, &bounds) + spacing;
-        loop {
-            out.clear();
-            let mut within = 0;
+        let start = geom::point_aabb_distance(point, &bounds) + spacing;
+        nearest_expanding(k, n, start, |radius, out| {
             let reach = radius + geom::distance_pad(point, radius);
             self.within(point, reach, |key, shape| {
                 let d = match shape {
@@ -159,17 +159,9 @@ impl BroadPhase {
                     }
                     Shape::Body { aabb, .. } => geom::point_aabb_distance(point, &aabb),
                 };
-                within += usize::from(d <= radius);
                 out.push((key, d));
             });
-            if within >= k || out.len() >= n || radius == f32::INFINITY {
-                break;
-            }
-            radius = (radius * 2.0).max(f32::MIN_POSITIVE);
-        }
-        out.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-        out.truncate(k);
-        out
+        })
     }
 
     /// Calls `f(key, shape)` for every proxy whose held box is within `radius` of `p` (spheres:

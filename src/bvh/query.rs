@@ -9,6 +9,7 @@ use crate::geom::{
     self, Aabb, SimdBox, check_aabb, check_sphere, inverse_dir, point_aabb_distance, ray_is_valid,
 };
 use crate::pair::ProxyKey;
+use crate::search::{FirstHit, nearest_expanding};
 use glam::Vec3;
 use slotmap::Key;
 
@@ -84,63 +85,11 @@ impl Bvh {
             return None;
         }
         let inv = inverse_dir(dir);
-        let mut best: Option<(ProxyKey, f32)> = None;
-        let mut limit = max_t;
-        let mut consider = |key: ProxyKey, aabb: &Aabb, limit: &mut f32| {
-            if key.is_null() {
-                return;
-            }
-            if let Some(t) = aabb.ray_entry(origin, inv, *limit) {
-                let better = match best {
-                    None => true,
-                    Some((k, bt)) => t < bt || (t == bt && key < k),
-                };
-                if better {
-                    best = Some((key, t));
-                    *limit = t;
-                }
-            }
-        };
-        for (b, &key) in self.pending_boxes().iter().zip(self.pending_keys()) {
-            consider(key, &b.aabb(), &mut limit);
-        }
-        let Some(root) = self.nodes.first() else {
-            return best;
-        };
-        let Some(t_root) = root.aabb().ray_entry(origin, inv, limit) else {
-            return best;
-        };
-        let mut stack = SmallStack::<(u32, f32), INLINE_STACK>::new((0, 0.0));
-        stack.push((0, t_root));
-        while let Some((n, t_enter)) = stack.pop() {
-            if t_enter > limit {
-                continue;
-            }
-            let node = &self.nodes[n as usize];
-            if node.is_leaf() {
-                for i in node.range() {
-                    consider(self.keys[i], &self.boxes[i].aabb(), &mut limit);
-                }
-                continue;
-            }
-            let (a, b) = node.children(n);
-            let ta = self.nodes[a as usize].aabb().ray_entry(origin, inv, limit);
-            let tb = self.nodes[b as usize].aabb().ray_entry(origin, inv, limit);
-            match (ta, tb) {
-                (Some(ta), Some(tb)) if tb < ta => {
-                    stack.push((a, ta));
-                    stack.push((b, tb));
-                }
-                (Some(ta), Some(tb)) => {
-                    stack.push((b, tb));
-                    stack.push((a, ta));
-                }
-                (Some(ta), None) => stack.push((a, ta)),
-                (None, Some(tb)) => stack.push((b, tb)),
-                (None, None) => {}
-            }
-        }
-        best
+        let mut hit = FirstHit::new(max_t);
+        self.ray_candidates(origin, dir, max_t, 0.0, |key, aabb| {
+            hit.offer(key, aabb.ray_entry(origin, inv, hit.limit()))
+        });
+        hit.best()
     }
 
     /// Calls `f(key, t)` for every live box hit by the segment `origin + t·dir`,
@@ -299,17 +248,14 @@ impl Bvh {
             return None;
         }
         let inflate = radius + geom::cast_pad(center, radius, dir, max_t);
-        let mut best: Option<(ProxyKey, f32)> = None;
+        let mut hit = FirstHit::new(max_t);
         self.ray_candidates(center, dir, max_t, inflate, |key, aabb| {
-            let limit = best.map_or(max_t, |(_, t)| t);
-            if let Some(t) = geom::sphere_cast_aabb(center, radius, dir, limit, aabb) {
-                if best.is_none_or(|(bk, bt)| (t, key) < (bt, bk)) {
-                    best = Some((key, t));
-                }
-            }
-            best.map_or(max_t, |(_, t)| t)
+            hit.offer(
+                key,
+                geom::sphere_cast_aabb(center, radius, dir, hit.limit(), aabb),
+            )
         });
-        best
+        hit.best()
     }
 
     /// The `k` live boxes nearest `point` by [`geom::point_aabb_distance`] (0 inside a box),
@@ -323,10 +269,9 @@ impl Bvh {
     /// order are the answer.
     #[must_use]
     pub fn nearest(&self, point: Vec3, k: usize) -> Vec<(ProxyKey, f32)> {
-        let mut out = Vec::new();
         let n = self.len();
         if k == 0 || n == 0 || !point.is_finite() {
-            return out;
+            return Vec::new();
         }
         let bounds = self.pending_boxes().iter().fold(
             self.nodes.first().map_or(Aabb::EMPTY, |r| r.aabb()),
@@ -334,20 +279,12 @@ impl Bvh {
         );
         let spacing =
             bounds.extent().max_element().max(0.0) * (k as f32 / n as f32).min(1.0).cbrt();
-        let mut radius = point_aabb_distance(point, &bounds) + spacing;
-        loop {
-            out.clear();
+        let start = point_aabb_distance(point, &bounds) + spacing;
+        nearest_expanding(k, n, start, |radius, out| {
             self.within_distance(point, radius, |key, aabb| {
                 out.push((key, point_aabb_distance(point, aabb)));
             });
-            if out.len() >= k.min(n) {
-                break;
-            }
-            radius = (radius * 2.0).max(f32::MIN_POSITIVE);
-        }
-        out.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-        out.truncate(k);
-        out
+        })
     }
 
     pub(super) fn pending_boxes(&self) -> &[SimdBox] {

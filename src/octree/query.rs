@@ -8,6 +8,7 @@ use super::cell::Cell;
 use super::{NONE, Octree};
 use crate::geom::{self, Aabb};
 use crate::pair::ProxyKey;
+use crate::search::{FirstHit, nearest_expanding};
 use glam::Vec3;
 
 /// Queries whose reaching cells over the occupied levels are at most this many read those
@@ -143,8 +144,8 @@ impl Octree {
         }
         let inv = geom::inverse_dir(dir);
         let slack = self.grid.slack();
-        let best = core::cell::Cell::new(None::<(ProxyKey, f32)>);
-        let limit = || best.get().map_or(max_t, |(_, t)| t);
+        let hit = core::cell::Cell::new(FirstHit::new(max_t));
+        let limit = || hit.get().limit();
         self.traverse(
             |cell| {
                 self.grid
@@ -154,19 +155,14 @@ impl Octree {
                     .is_some()
             },
             |id| {
-                let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
-                if let Some(t) = geom::ray_sphere(origin, dir, c, r, limit()) {
-                    let key = self.keys[id as usize];
-                    let better = best
-                        .get()
-                        .is_none_or(|(bk, bt)| t < bt || (t == bt && key < bk));
-                    if better {
-                        best.set(Some((key, t)));
-                    }
-                }
+                let o = &self.objs[id as usize];
+                let t = geom::ray_sphere(origin, dir, o.center, o.radius, limit());
+                let mut h = hit.get();
+                h.offer(self.keys[id as usize], t);
+                hit.set(h);
             },
         );
-        best.get()
+        hit.get().best()
     }
 
     /// Calls `f(key, t)` for every sphere hit by the segment (same rules as
@@ -404,18 +400,13 @@ impl Octree {
             return None;
         }
         let inflate = radius + geom::cast_pad(center, radius, dir, max_t);
-        let mut best: Option<(ProxyKey, f32)> = None;
+        let mut hit = FirstHit::new(max_t);
         self.ray_ids(center, dir, max_t, inflate, |id, limit| {
-            let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
-            if let Some(t) = geom::sphere_cast_sphere(center, radius, dir, limit, c, r) {
-                let key = self.keys[id as usize];
-                if best.is_none_or(|(bk, bt)| (t, key) < (bt, bk)) {
-                    best = Some((key, t));
-                }
-            }
-            best.map_or(max_t, |(_, t)| t)
+            let o = &self.objs[id as usize];
+            let t = geom::sphere_cast_sphere(center, radius, dir, limit, o.center, o.radius);
+            hit.offer(self.keys[id as usize], t)
         });
-        best
+        hit.best()
     }
 
     /// The `k` spheres nearest `point` by [`geom::point_sphere_distance`] (0 inside a sphere),
@@ -430,32 +421,21 @@ impl Octree {
     /// the radius, so the first `k` seen in `(distance, key)` order are the answer.
     #[must_use]
     pub fn nearest(&self, point: Vec3, k: usize) -> Vec<(ProxyKey, f32)> {
-        let mut out = Vec::new();
         let n = self.live;
         if k == 0 || n == 0 || !point.is_finite() {
-            return out;
+            return Vec::new();
         }
         let bounds = self.grid.bounds;
         let spacing = bounds.extent().max_element() * (k as f32 / n as f32).min(1.0).cbrt();
-        let mut radius = geom::point_aabb_distance(point, &bounds) + spacing;
-        loop {
-            out.clear();
-            let mut within = 0;
+        let start = geom::point_aabb_distance(point, &bounds) + spacing;
+        nearest_expanding(k, n, start, |radius, out| {
             let reach = radius + geom::distance_pad(point, radius);
             self.near_ids(point, reach, |id| {
-                let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
-                let d = geom::point_sphere_distance(point, c, r);
-                within += usize::from(d <= radius);
+                let o = &self.objs[id as usize];
+                let d = geom::point_sphere_distance(point, o.center, o.radius);
                 out.push((self.keys[id as usize], d));
             });
-            if within >= k || out.len() == n {
-                break;
-            }
-            radius = (radius * 2.0).max(f32::MIN_POSITIVE);
-        }
-        out.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-        out.truncate(k);
-        out
+        })
     }
 
     /// Calls `f(level, cell)` for every node that holds at least one sphere, parents before
