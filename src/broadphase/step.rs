@@ -146,6 +146,16 @@ impl Parallel {
     }
 }
 
+/// The key pair of a packed slot pair (slots live, or quarantined since their removal).
+#[inline]
+fn key_pair(store: &Store, p: u64) -> Pair {
+    let (a, b) = unpack(p);
+    Pair {
+        a: store.key(a as u32),
+        b: store.key(b as u32),
+    }
+}
+
 /// The packed pair of two distinct slots: the smaller in the high half.
 #[inline]
 pub(super) fn pack(a: u32, b: u32) -> u64 {
@@ -600,13 +610,7 @@ impl BroadPhase {
             ahead(removed);
         }
         let store = &self.store;
-        let to_pair = |&p: &u64| {
-            let (a, b) = unpack(p);
-            Pair {
-                a: store.key(a as u32),
-                b: store.key(b as u32),
-            }
-        };
+        let to_pair = |&p: &u64| key_pair(store, p);
         self.pairs.clear();
         self.pairs.par_extend(self.packed.par_iter().map(to_pair));
         self.added.clear();
@@ -626,13 +630,7 @@ impl BroadPhase {
             &mut self.removed_packed,
         );
         let store = &self.store;
-        let to_pair = |&p: &u64| {
-            let (a, b) = unpack(p);
-            Pair {
-                a: store.key(a as u32),
-                b: store.key(b as u32),
-            }
-        };
+        let to_pair = |&p: &u64| key_pair(store, p);
         self.pairs.clear();
         self.pairs.extend(self.packed.iter().map(to_pair));
         self.added.clear();
