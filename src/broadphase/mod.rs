@@ -9,7 +9,13 @@
 //! *incremental pass* has the structures hold, for every proxy, a fat box around its exact one,
 //! keeps the candidate pairs of overlapping fat boxes, re-tests only what moved, and queries
 //! the structures for the proxies that left their fat box.
+//!
+//! The files: this one holds the type and its public API; [`config`] the settings,
+//! [`fat`] the fat-box layer (motion, fat boxes, the marks a step reads), [`step`] the passes,
+//! [`query`] the queries, [`snapshot`] the serde form and [`validate`] the invariants.
 
+mod config;
+mod fat;
 mod query;
 mod radix;
 #[cfg(feature = "serde")]
@@ -18,11 +24,14 @@ mod step;
 mod store;
 mod validate;
 
-use crate::bvh::{Bvh, BvhConfig};
+pub use config::{Config, Passes};
+
+use crate::bvh::Bvh;
 use crate::geom::{self, SimdBox, check_aabb, check_sphere};
-use crate::octree::{Octree, Placement};
+use crate::octree::Octree;
 use crate::pair::{Pair, ProxyKey};
 use crate::{Aabb, BatchError, Error, Vec3};
+use fat::finite_grown;
 use store::{Kind, Store, flag};
 
 /// Whether a body moves. Static bodies never pair with each other.
@@ -85,107 +94,6 @@ impl Shape {
         match *self {
             Shape::Sphere { center, radius } => Aabb::from_center_radius(center, radius + margin),
             Shape::Body { aabb, .. } => finite_grown(&aabb, margin),
-        }
-    }
-}
-
-/// Settings of a [`BroadPhase`]. Every field has a default, and the defaults are the fast
-/// choice for every kind of world: nothing here needs tuning for speed.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Config {
-    /// The region the octree subdivides, in metres; finite with `min < max`. Spheres outside
-    /// it are kept (in the octree's root) and paired like any other, only less efficiently.
-    pub bounds: Aabb,
-    /// Levels of the octree below the root, `0..=octree::MAX_DEPTH`: the deepest cells are
-    /// `bounds / 2^depth` wide. With the default [`Placement::Loose`] a sphere lives at the
-    /// deepest level whose cells are at least its diameter, so the depth only caps how small
-    /// a cell gets: spheres smaller than the deepest cells share them.
-    pub octree_depth: u32,
-    /// Which node of the octree a sphere lives in ([`Placement`]).
-    pub octree_placement: Placement,
-    /// Every box is grown by this many metres on each side before pairing; `>= 0`. With the
-    /// default 0 the pair set equals the brute-force set exactly.
-    pub margin: f32,
-    /// The dynamic bodies' BVH is rebuilt when its SAH cost after a refit exceeds this many
-    /// times its cost at its last build; finite, `>= 1`.
-    pub rebuild_threshold: f32,
-    /// A fixed fat-box margin in metres (finite, `>= 0`) instead of the adaptive one; 0 (the
-    /// default) lets every proxy's margin follow how far it moves per step. The pairs are the
-    /// same either way; only the cost changes.
-    pub skin: f32,
-    /// Which passes a step may run: [`Passes::Adaptive`] (the default) picks the cheaper one
-    /// each step; the others force one, for comparisons and tests.
-    pub passes: Passes,
-}
-
-/// Which passes [`BroadPhase::step`] may run. The pair lists are the same whichever runs.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Passes {
-    /// Each step runs whichever pass its work estimate says is cheaper.
-    #[default]
-    Adaptive,
-    /// Every step runs the full pass (no fat boxes, no candidates).
-    Full,
-    /// Every step after the first runs the incremental pass.
-    Incremental,
-}
-
-impl Default for Config {
-    /// Bounds ±512 m, octree depth 9 (deepest cells 2 m), loose placement, margin 0, rebuild
-    /// threshold 1.5, adaptive fat margins (skin 0), adaptive passes.
-    fn default() -> Self {
-        Self {
-            bounds: Aabb::new(Vec3::splat(-512.0), Vec3::splat(512.0)),
-            octree_depth: 9,
-            octree_placement: Placement::Loose,
-            margin: 0.0,
-            rebuild_threshold: 1.5,
-            skin: 0.0,
-            passes: Passes::Adaptive,
-        }
-    }
-}
-
-impl Config {
-    /// `Ok` if every field is in its documented range, else the first offending field.
-    pub fn validate(&self) -> Result<(), Error> {
-        geom::check_bounds(&self.bounds)?;
-        if self.octree_depth > crate::octree::MAX_DEPTH {
-            return Err(Error::DepthOutOfRange {
-                depth: self.octree_depth,
-                max: crate::octree::MAX_DEPTH,
-            });
-        }
-        if !(self.margin.is_finite() && self.margin >= 0.0) {
-            return Err(Error::InvalidConfig {
-                what: "margin",
-                value: self.margin,
-            });
-        }
-        if !(self.rebuild_threshold.is_finite() && self.rebuild_threshold >= 1.0) {
-            return Err(Error::InvalidConfig {
-                what: "rebuild_threshold",
-                value: self.rebuild_threshold,
-            });
-        }
-        if !(self.skin.is_finite() && self.skin >= 0.0) {
-            return Err(Error::InvalidConfig {
-                what: "skin",
-                value: self.skin,
-            });
-        }
-        Ok(())
-    }
-
-    /// The configuration of both BVHs: much fuller leaves than the standalone default, since
-    /// the pair passes are the hot path and a leaf pair's bit-mask kernel (up to 64 boxes a
-    /// side) is cheaper than the node pairs it replaces.
-    fn bvh_config(&self) -> BvhConfig {
-        BvhConfig {
-            rebuild_threshold: self.rebuild_threshold,
-            max_leaf_size: BVH_LEAF_SIZE,
-            traversal_cost: BVH_TRAVERSAL_COST,
-            ..BvhConfig::default()
         }
     }
 }
@@ -667,121 +575,6 @@ impl BroadPhase {
         }
     }
 
-    /// Records how far slot `s` moved per step since its last update (its new exact box is
-    /// `exact`), for its fat margin and the pass estimate.
-    #[inline]
-    fn note_motion(&mut self, s: usize, exact: &SimdBox) {
-        let old = self.store.exact[s];
-        let moved = ((exact.min + exact.max) - (old.min + old.max))
-            .abs()
-            .max_element()
-            * 0.5;
-        let steps = self.now.wrapping_sub(self.store.stamp[s]).max(1);
-        let speed = moved / steps as f32;
-        self.store.speed[s] = speed;
-        if step::outgrows_min_margin(speed, exact.extent().max_element()) {
-            self.fast_movers += 1;
-        }
-        self.store.stamp[s] = self.now;
-    }
-
-    /// In the incremental regime: keeps the fat box if it still holds `exact`, else gives the
-    /// slot a new one, which its structure holds from now on.
-    #[inline]
-    fn refresh_fat(&mut self, slot: u32, exact: &SimdBox) {
-        if self.store.held[slot as usize].contains(exact) {
-            self.mark(slot, flag::MOVED);
-        } else {
-            self.hold(slot, true);
-            self.mark(slot, flag::MOVED | flag::ESCAPED);
-        }
-    }
-
-    /// Gives `slot` a new held box (its exact box, or with `fat` a fat box around it) and
-    /// writes it to the slot's structure.
-    #[inline]
-    fn hold(&mut self, slot: u32, fat: bool) {
-        let s = slot as usize;
-        let held = self.held_shape(slot, fat);
-        self.store.set_held(s, held.aabb);
-        let key = self.store.key(slot);
-        // The key is live: the structures hold every live proxy under its key.
-        let placed = match self.store.shape[s] {
-            Shape::Sphere { center, .. } => self.octree.update_checked(key, center, held.radius),
-            Shape::Body { kind, .. } => {
-                if kind == BodyKind::Dynamic && fat {
-                    self.dynamic_escapes += 1;
-                }
-                self.tree_mut(kind).update_box(key, &held.aabb)
-            }
-        };
-        debug_assert!(placed.is_ok(), "a live proxy missing from its structure");
-    }
-
-    /// Sets `bits` on a slot and lists it where a bit is new.
-    #[inline]
-    fn mark(&mut self, slot: u32, bits: u8) {
-        let f = &mut self.store.flags[slot as usize];
-        let new = bits & !*f;
-        *f |= bits;
-        if new & flag::MOVED != 0 {
-            self.movers.push(slot);
-        }
-        if new & flag::ESCAPED != 0 {
-            self.escaped.push(slot);
-        }
-    }
-
-    /// The box pairs are computed on: the shape's box grown by the margin, with faces that
-    /// overflow kept at `±f32::MAX` (which overlaps exactly what `±∞` would).
-    #[inline]
-    fn exact_box(&self, shape: &Shape) -> SimdBox {
-        let m = self.config.margin;
-        match *shape {
-            Shape::Sphere { center, radius } => {
-                SimdBox::from_center_radius(center, (radius + m).min(f32::MAX))
-            }
-            Shape::Body { aabb, .. } if m == 0.0 => SimdBox::new(&aabb),
-            Shape::Body { aabb, .. } => SimdBox::new(&finite_grown(&aabb, m)),
-        }
-    }
-
-    /// What `slot`'s structure should hold: its exact box, or with `fat` one grown by a
-    /// margin sized by the slot's speed. A sphere is held as a sphere of the same centre and
-    /// a larger radius, whose box contains the exact one (rounding is monotone).
-    #[inline]
-    fn held_shape(&self, slot: u32, fat: bool) -> Held {
-        let s = slot as usize;
-        let exact = self.store.exact[s];
-        let margin = if !fat {
-            0.0
-        } else if self.config.skin > 0.0 {
-            self.config.skin
-        } else {
-            let resting = self.now.wrapping_sub(self.store.stamp[s]) > 1;
-            let speed = if resting { 0.0 } else { self.store.speed[s] };
-            step::margin(speed, exact.extent().max_element()) * step::jitter(slot)
-        };
-        match self.store.shape[s] {
-            Shape::Sphere { center, radius } => {
-                // Huge finite radii stay finite: the octree places the sphere in its root.
-                let r = (radius + self.config.margin + margin).min(f32::MAX);
-                Held {
-                    aabb: SimdBox::from_center_radius(center, r),
-                    radius: r,
-                }
-            }
-            Shape::Body { .. } if margin == 0.0 => Held {
-                aabb: exact,
-                radius: 0.0,
-            },
-            Shape::Body { .. } => Held {
-                aabb: SimdBox::new(&finite_grown(&exact.aabb(), margin)),
-                radius: 0.0,
-            },
-        }
-    }
-
     /// Removes a proxy; its pairs are reported in `removed` at the next step.
     /// `Err(UnknownProxy)` for a stale key.
     pub fn remove(&mut self, key: ProxyKey) -> Result<(), Error> {
@@ -865,28 +658,5 @@ impl BroadPhase {
     }
 }
 
-/// The broadphase's BVHs' largest leaf, in boxes (`BvhConfig::max_leaf_size`).
-const BVH_LEAF_SIZE: u32 = 32;
-/// The broadphase's BVHs' node visit cost, in box tests (`BvhConfig::traversal_cost`): high
-/// enough that SAH fills leaves up to [`BVH_LEAF_SIZE`].
-const BVH_TRAVERSAL_COST: f32 = 16.0;
-
 /// The most live proxies: the structures index their entries with `u32`.
 const MAX_PROXIES: usize = (u32::MAX - 2) as usize;
-
-/// What a structure holds for a proxy: its box, and for a sphere the radius that box is
-/// `center ± radius` of.
-#[derive(Clone, Copy, Debug)]
-struct Held {
-    aabb: SimdBox,
-    radius: f32,
-}
-
-/// `aabb` grown by `margin`, with coordinates that overflowed clamped to `±f32::MAX`.
-fn finite_grown(aabb: &Aabb, margin: f32) -> Aabb {
-    let g = aabb.grown(margin);
-    Aabb {
-        min: g.min.max(Vec3::splat(-f32::MAX)),
-        max: g.max.min(Vec3::splat(f32::MAX)),
-    }
-}

@@ -31,6 +31,7 @@
 //! serial pass's at any thread count. What stays serial: the updates (the caller's), the
 //! refits, a BVH pass split no further than one task, and the incremental pass.
 
+use super::fat::LOOKAHEAD_STEPS;
 #[cfg(feature = "parallel")]
 use super::radix;
 use super::radix::{bits_of, sort_u64};
@@ -57,39 +58,6 @@ mod cost {
 /// The incremental regime is entered when its estimated cost is below this fraction of the
 /// full pass: the margin pays for the rebuild that enters it.
 const ENTER_FRACTION: f64 = 0.5;
-
-/// A proxy's fat margin covers this many steps of its last measured motion.
-const LOOKAHEAD_STEPS: f32 = 3.0;
-/// The smallest fat margin, as a fraction of the box's largest extent: resting proxies keep a
-/// box this much larger than exact, so jitter does not make them escape.
-const MIN_MARGIN: f32 = 1.0 / 64.0;
-/// The largest fat margin, as a fraction of the box's largest extent: a teleport must not
-/// leave a huge fat box behind.
-const MAX_MARGIN: f32 = 0.5;
-
-/// The fat margin of a box of largest extent `size` moving `speed` metres per step.
-#[inline]
-pub(super) fn margin(speed: f32, size: f32) -> f32 {
-    (speed * LOOKAHEAD_STEPS)
-        .min(size * MAX_MARGIN)
-        .max(size * MIN_MARGIN)
-}
-
-/// A per-slot factor in `[1, 2)` on the fat margin. Proxies given fat boxes in the same step
-/// at the same speed would otherwise all leave them in the same later step (a burst of
-/// queries); spread margins spread the escapes.
-#[inline]
-pub(super) fn jitter(slot: u32) -> f32 {
-    let h = slot.wrapping_mul(0x9E37_79B9) >> 8;
-    1.0 + h as f32 / (1u32 << 24) as f32
-}
-
-/// True if a box of largest extent `size` moving `speed` per step gets a margin above the
-/// smallest: it will leave its fat box every few steps.
-#[inline]
-pub(super) fn outgrows_min_margin(speed: f32, size: f32) -> bool {
-    speed * LOOKAHEAD_STEPS > size * MIN_MARGIN
-}
 
 /// A full pass splits over rayon's current pool only with at least this many spheres (and
 /// more than one thread): the octree's pass is the work that splits (the BVH passes run as

@@ -1,0 +1,113 @@
+//! [`Config`]: the settings of a [`BroadPhase`](super::BroadPhase), their defaults and checks.
+
+use crate::bvh::BvhConfig;
+use crate::geom;
+use crate::octree::Placement;
+use crate::{Aabb, Error, Vec3};
+
+/// Settings of a [`BroadPhase`]. Every field has a default, and the defaults are the fast
+/// choice for every kind of world: nothing here needs tuning for speed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Config {
+    /// The region the octree subdivides, in metres; finite with `min < max`. Spheres outside
+    /// it are kept (in the octree's root) and paired like any other, only less efficiently.
+    pub bounds: Aabb,
+    /// Levels of the octree below the root, `0..=octree::MAX_DEPTH`: the deepest cells are
+    /// `bounds / 2^depth` wide. With the default [`Placement::Loose`] a sphere lives at the
+    /// deepest level whose cells are at least its diameter, so the depth only caps how small
+    /// a cell gets: spheres smaller than the deepest cells share them.
+    pub octree_depth: u32,
+    /// Which node of the octree a sphere lives in ([`Placement`]).
+    pub octree_placement: Placement,
+    /// Every box is grown by this many metres on each side before pairing; `>= 0`. With the
+    /// default 0 the pair set equals the brute-force set exactly.
+    pub margin: f32,
+    /// The dynamic bodies' BVH is rebuilt when its SAH cost after a refit exceeds this many
+    /// times its cost at its last build; finite, `>= 1`.
+    pub rebuild_threshold: f32,
+    /// A fixed fat-box margin in metres (finite, `>= 0`) instead of the adaptive one; 0 (the
+    /// default) lets every proxy's margin follow how far it moves per step. The pairs are the
+    /// same either way; only the cost changes.
+    pub skin: f32,
+    /// Which passes a step may run: [`Passes::Adaptive`] (the default) picks the cheaper one
+    /// each step; the others force one, for comparisons and tests.
+    pub passes: Passes,
+}
+
+/// Which passes [`BroadPhase::step`] may run. The pair lists are the same whichever runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Passes {
+    /// Each step runs whichever pass its work estimate says is cheaper.
+    #[default]
+    Adaptive,
+    /// Every step runs the full pass (no fat boxes, no candidates).
+    Full,
+    /// Every step after the first runs the incremental pass.
+    Incremental,
+}
+
+impl Default for Config {
+    /// Bounds ±512 m, octree depth 9 (deepest cells 2 m), loose placement, margin 0, rebuild
+    /// threshold 1.5, adaptive fat margins (skin 0), adaptive passes.
+    fn default() -> Self {
+        Self {
+            bounds: Aabb::new(Vec3::splat(-512.0), Vec3::splat(512.0)),
+            octree_depth: 9,
+            octree_placement: Placement::Loose,
+            margin: 0.0,
+            rebuild_threshold: 1.5,
+            skin: 0.0,
+            passes: Passes::Adaptive,
+        }
+    }
+}
+
+impl Config {
+    /// `Ok` if every field is in its documented range, else the first offending field.
+    pub fn validate(&self) -> Result<(), Error> {
+        geom::check_bounds(&self.bounds)?;
+        if self.octree_depth > crate::octree::MAX_DEPTH {
+            return Err(Error::DepthOutOfRange {
+                depth: self.octree_depth,
+                max: crate::octree::MAX_DEPTH,
+            });
+        }
+        if !(self.margin.is_finite() && self.margin >= 0.0) {
+            return Err(Error::InvalidConfig {
+                what: "margin",
+                value: self.margin,
+            });
+        }
+        if !(self.rebuild_threshold.is_finite() && self.rebuild_threshold >= 1.0) {
+            return Err(Error::InvalidConfig {
+                what: "rebuild_threshold",
+                value: self.rebuild_threshold,
+            });
+        }
+        if !(self.skin.is_finite() && self.skin >= 0.0) {
+            return Err(Error::InvalidConfig {
+                what: "skin",
+                value: self.skin,
+            });
+        }
+        Ok(())
+    }
+
+    /// The configuration of both BVHs: much fuller leaves than the standalone default, since
+    /// the pair passes are the hot path and a leaf pair's bit-mask kernel (up to 64 boxes a
+    /// side) is cheaper than the node pairs it replaces.
+    pub(super) fn bvh_config(&self) -> BvhConfig {
+        BvhConfig {
+            rebuild_threshold: self.rebuild_threshold,
+            max_leaf_size: BVH_LEAF_SIZE,
+            traversal_cost: BVH_TRAVERSAL_COST,
+            ..BvhConfig::default()
+        }
+    }
+}
+
+/// The broadphase's BVHs' largest leaf, in boxes (`BvhConfig::max_leaf_size`).
+const BVH_LEAF_SIZE: u32 = 32;
+/// The broadphase's BVHs' node visit cost, in box tests (`BvhConfig::traversal_cost`): high
+/// enough that SAH fills leaves up to [`BVH_LEAF_SIZE`].
+const BVH_TRAVERSAL_COST: f32 = 16.0;

@@ -1,0 +1,175 @@
+//! The fat-box layer of the incremental regime: how far each proxy moves per step, the fat
+//! box its structure holds while the candidates are kept (a margin of a few steps of its own
+//! motion), and the marks that list the slots a step must look at.
+
+use super::store::flag;
+use super::{BodyKind, BroadPhase, Shape};
+use crate::geom::SimdBox;
+use crate::{Aabb, Vec3};
+
+/// A proxy's fat margin covers this many steps of its last measured motion.
+pub(super) const LOOKAHEAD_STEPS: f32 = 3.0;
+/// The smallest fat margin, as a fraction of the box's largest extent: resting proxies keep a
+/// box this much larger than exact, so jitter does not make them escape.
+const MIN_MARGIN: f32 = 1.0 / 64.0;
+/// The largest fat margin, as a fraction of the box's largest extent: a teleport must not
+/// leave a huge fat box behind.
+const MAX_MARGIN: f32 = 0.5;
+
+/// The fat margin of a box of largest extent `size` moving `speed` metres per step.
+#[inline]
+fn margin(speed: f32, size: f32) -> f32 {
+    (speed * LOOKAHEAD_STEPS)
+        .min(size * MAX_MARGIN)
+        .max(size * MIN_MARGIN)
+}
+
+/// A per-slot factor in `[1, 2)` on the fat margin. Proxies given fat boxes in the same step
+/// at the same speed would otherwise all leave them in the same later step (a burst of
+/// queries); spread margins spread the escapes.
+#[inline]
+fn jitter(slot: u32) -> f32 {
+    let h = slot.wrapping_mul(0x9E37_79B9) >> 8;
+    1.0 + h as f32 / (1u32 << 24) as f32
+}
+
+/// True if a box of largest extent `size` moving `speed` per step gets a margin above the
+/// smallest: it will leave its fat box every few steps.
+#[inline]
+pub(super) fn outgrows_min_margin(speed: f32, size: f32) -> bool {
+    speed * LOOKAHEAD_STEPS > size * MIN_MARGIN
+}
+
+impl BroadPhase {
+    /// Records how far slot `s` moved per step since its last update (its new exact box is
+    /// `exact`), for its fat margin and the pass estimate.
+    #[inline]
+    pub(super) fn note_motion(&mut self, s: usize, exact: &SimdBox) {
+        let old = self.store.exact[s];
+        let moved = ((exact.min + exact.max) - (old.min + old.max))
+            .abs()
+            .max_element()
+            * 0.5;
+        let steps = self.now.wrapping_sub(self.store.stamp[s]).max(1);
+        let speed = moved / steps as f32;
+        self.store.speed[s] = speed;
+        if outgrows_min_margin(speed, exact.extent().max_element()) {
+            self.fast_movers += 1;
+        }
+        self.store.stamp[s] = self.now;
+    }
+
+    /// In the incremental regime: keeps the fat box if it still holds `exact`, else gives the
+    /// slot a new one, which its structure holds from now on.
+    #[inline]
+    pub(super) fn refresh_fat(&mut self, slot: u32, exact: &SimdBox) {
+        if self.store.held[slot as usize].contains(exact) {
+            self.mark(slot, flag::MOVED);
+        } else {
+            self.hold(slot, true);
+            self.mark(slot, flag::MOVED | flag::ESCAPED);
+        }
+    }
+
+    /// Gives `slot` a new held box (its exact box, or with `fat` a fat box around it) and
+    /// writes it to the slot's structure.
+    #[inline]
+    pub(super) fn hold(&mut self, slot: u32, fat: bool) {
+        let s = slot as usize;
+        let held = self.held_shape(slot, fat);
+        self.store.set_held(s, held.aabb);
+        let key = self.store.key(slot);
+        // The key is live: the structures hold every live proxy under its key.
+        let placed = match self.store.shape[s] {
+            Shape::Sphere { center, .. } => self.octree.update_checked(key, center, held.radius),
+            Shape::Body { kind, .. } => {
+                if kind == BodyKind::Dynamic && fat {
+                    self.dynamic_escapes += 1;
+                }
+                self.tree_mut(kind).update_box(key, &held.aabb)
+            }
+        };
+        debug_assert!(placed.is_ok(), "a live proxy missing from its structure");
+    }
+
+    /// Sets `bits` on a slot and lists it where a bit is new.
+    #[inline]
+    pub(super) fn mark(&mut self, slot: u32, bits: u8) {
+        let f = &mut self.store.flags[slot as usize];
+        let new = bits & !*f;
+        *f |= bits;
+        if new & flag::MOVED != 0 {
+            self.movers.push(slot);
+        }
+        if new & flag::ESCAPED != 0 {
+            self.escaped.push(slot);
+        }
+    }
+
+    /// The box pairs are computed on: the shape's box grown by the margin, with faces that
+    /// overflow kept at `±f32::MAX` (which overlaps exactly what `±∞` would).
+    #[inline]
+    pub(super) fn exact_box(&self, shape: &Shape) -> SimdBox {
+        let m = self.config.margin;
+        match *shape {
+            Shape::Sphere { center, radius } => {
+                SimdBox::from_center_radius(center, (radius + m).min(f32::MAX))
+            }
+            Shape::Body { aabb, .. } if m == 0.0 => SimdBox::new(&aabb),
+            Shape::Body { aabb, .. } => SimdBox::new(&finite_grown(&aabb, m)),
+        }
+    }
+
+    /// What `slot`'s structure should hold: its exact box, or with `fat` one grown by a
+    /// margin sized by the slot's speed. A sphere is held as a sphere of the same centre and
+    /// a larger radius, whose box contains the exact one (rounding is monotone).
+    #[inline]
+    pub(super) fn held_shape(&self, slot: u32, fat: bool) -> Held {
+        let s = slot as usize;
+        let exact = self.store.exact[s];
+        let margin = if !fat {
+            0.0
+        } else if self.config.skin > 0.0 {
+            self.config.skin
+        } else {
+            let resting = self.now.wrapping_sub(self.store.stamp[s]) > 1;
+            let speed = if resting { 0.0 } else { self.store.speed[s] };
+            margin(speed, exact.extent().max_element()) * jitter(slot)
+        };
+        match self.store.shape[s] {
+            Shape::Sphere { center, radius } => {
+                // Huge finite radii stay finite: the octree places the sphere in its root.
+                let r = (radius + self.config.margin + margin).min(f32::MAX);
+                Held {
+                    aabb: SimdBox::from_center_radius(center, r),
+                    radius: r,
+                }
+            }
+            Shape::Body { .. } if margin == 0.0 => Held {
+                aabb: exact,
+                radius: 0.0,
+            },
+            Shape::Body { .. } => Held {
+                aabb: SimdBox::new(&finite_grown(&exact.aabb(), margin)),
+                radius: 0.0,
+            },
+        }
+    }
+}
+
+/// What a structure holds for a proxy: its box, and for a sphere the radius that box is
+/// `center ± radius` of.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Held {
+    pub(super) aabb: SimdBox,
+    pub(super) radius: f32,
+}
+
+/// `aabb` grown by `margin`, with coordinates that overflowed clamped to `±f32::MAX`.
+pub(super) fn finite_grown(aabb: &Aabb, margin: f32) -> Aabb {
+    let g = aabb.grown(margin);
+    Aabb {
+        min: g.min.max(Vec3::splat(-f32::MAX)),
+        max: g.max.min(Vec3::splat(f32::MAX)),
+    }
+}
