@@ -5,7 +5,7 @@ use crate::geom;
 use crate::octree::Placement;
 use crate::{Aabb, Error, Vec3};
 
-/// Settings of a [`BroadPhase`]. Every field has a default, and the defaults are the fast
+/// Settings of a [`BroadPhase`](super::BroadPhase). Every field has a default, and the defaults are the fast
 /// choice for every kind of world: nothing here needs tuning for speed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Config {
@@ -34,7 +34,7 @@ pub struct Config {
     pub passes: Passes,
 }
 
-/// Which passes [`BroadPhase::step`] may run. The pair lists are the same whichever runs.
+/// Which passes [`BroadPhase::step`](super::BroadPhase::step) may run. The pair lists are the same whichever runs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Passes {
     /// Each step runs whichever pass its work estimate says is cheaper.
