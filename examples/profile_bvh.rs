@@ -150,7 +150,8 @@ fn step(args: &Args) {
         scene.advance(&mut frame);
         let t = Instant::now();
         feed.apply(&mut bp, &frame).expect("valid frame");
-        pairs = bp.step().pairs.len();
+        bp.step();
+        pairs = bp.pairs().len();
         let dt = t.elapsed().as_secs_f64();
         if i >= args.warmup {
             ns.push(dt * 1e9 / objects);

@@ -130,9 +130,9 @@ fn main() {
                 for (&k, &c) in keys.iter().zip(&gas.centers) {
                     bp.update_sphere(k, c, gas.radius).expect("live key");
                 }
-                let s = bp.step();
-                black_box((s.added.len(), s.removed.len()));
-                s.pairs.len()
+                bp.step();
+                black_box((bp.added().len(), bp.removed().len()));
+                bp.pairs().len()
             });
         }
         "feed" => {
@@ -155,7 +155,8 @@ fn main() {
                 let t = Instant::now();
                 pair_count = black_box(measured_step(&mut || {
                     feed.apply(&mut bp, &frame).expect("valid frame");
-                    bp.step().pairs.len()
+                    bp.step();
+                    bp.pairs().len()
                 }));
                 if i >= WARMUP {
                     times.push(t.elapsed().as_nanos() as f64 / n as f64);
@@ -248,7 +249,8 @@ fn time_feeding(gas: &Gas, way: Way, steps: usize) -> (f64, f64) {
             Way::FeedBatch | Way::FeedPerCall => feed.apply(&mut bp, &frame).expect("valid frame"),
         }
         let moved = t.elapsed();
-        black_box(bp.step().pairs.len());
+        bp.step();
+        black_box(bp.pairs().len());
         let stepped = t.elapsed();
         if i >= WARMUP {
             apply.push(moved.as_nanos() as f64 / n);

@@ -398,7 +398,8 @@ fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
         ours.feed
             .apply(&mut ours.bp, frame)
             .expect("scene frames are valid");
-        let pairs = ours.bp.step().pairs;
+        ours.bp.step();
+        let pairs = ours.bp.pairs();
         let ns = t.elapsed().as_nanos() as f64;
         last_pairs.clear();
         last_pairs.extend_from_slice(pairs);

@@ -40,10 +40,11 @@
 //! for frame in 0..120 {
 //!     let y = 2.0 - 0.02 * frame as f32;             // the physics moves the ball
 //!     bp.update_sphere(ball, Vec3::new(0.0, y, 0.0), 0.5)?;
-//!     let step = bp.step();
-//!     for pair in step.added {
-//!         // narrow phase: a new contact candidate (pair.a < pair.b)
+//!     bp.step();
+//!     for pair in bp.added() {
+//!         // narrow phase: a new contact candidate (pair.a < pair.b), its shapes at hand
 //!         assert_eq!((pair.a, pair.b), (floor.min(ball), floor.max(ball)));
+//!         assert!(bp.shape(pair.b).is_some());
 //!     }
 //! }
 //! # Ok::<(), broadleaf::Error>(())
@@ -54,7 +55,7 @@
 //!   the current boxes: nothing missed, nothing extra. A margin grows every box first. Static
 //!   bodies never pair with each other, nor two proxies whose [`CollisionGroups`] do not
 //!   allow it (bevy_rapier's rule).
-//! - **Deterministic.** `pairs`, `added` and `removed` are sorted by `(a, b)` with keys ordered
+//! - **Deterministic.** [`BroadPhase::pairs`], [`BroadPhase::added`] and [`BroadPhase::removed`] are sorted by `(a, b)` with keys ordered
 //!   by slot; the same operations in the same order give bit-identical lists on every run.
 //! - **Bad input is refused, never half-applied.** NaN or infinite coordinates, a negative
 //!   radius, an inverted box or a stale key give an [`Error`] and leave the structure exactly
@@ -112,7 +113,7 @@ mod sweep;
 mod test_geom;
 
 pub use broadphase::{
-    BodyKind, BroadPhase, CollisionGroups, Config, Pass, Passes, Shape, StepPairs, StepStats,
+    BodyKind, BroadPhase, CollisionGroups, Config, Pass, Passes, Shape, StepStats,
 };
 pub use bvh::{Bvh, BvhConfig, SplitMethod};
 pub use error::{BatchError, Error};

@@ -50,7 +50,7 @@
 //! applies the same rule, from the mirror's own record of each collider's groups.
 
 use crate::pair::{self, Pair, ProxyKey};
-use crate::{Aabb, BodyKind, BroadPhase, CollisionGroups, Config, Shape, StepPairs, Vec3, brute};
+use crate::{Aabb, BodyKind, BroadPhase, CollisionGroups, Config, Shape, Vec3, brute};
 use core::fmt;
 use rapier3d::dynamics::RigidBodySet;
 use rapier3d::geometry::{Collider, ColliderHandle, ColliderSet, InteractionTestMode, NarrowPhase};
@@ -244,9 +244,10 @@ impl Mirror {
         &self.broadphase
     }
 
-    /// The broadphase's [`BroadPhase::step`]: this step's pairs and events.
-    pub fn step(&mut self) -> StepPairs<'_> {
-        self.broadphase.step()
+    /// The broadphase's [`BroadPhase::step`]; its lists are then read through
+    /// [`Mirror::broadphase`].
+    pub fn step(&mut self) {
+        self.broadphase.step();
     }
 
     /// Number of mirrored colliders.
@@ -352,7 +353,8 @@ impl Mirror {
         let mut rapier = core::mem::take(&mut self.rapier);
         let unmapped = self.rapier_pairs(narrow_phase, &mut rapier);
         let exact = self.exact_pairs();
-        let ours = self.broadphase.step().pairs;
+        self.broadphase.step();
+        let ours = self.broadphase.pairs();
         let mut cmp = Comparison::new(ours, &rapier, &exact);
         cmp.unmapped = unmapped;
         self.rapier = rapier;
@@ -446,7 +448,7 @@ pub struct Comparison {
 }
 
 impl Comparison {
-    /// Compares three pair sets given as lists of canonical pairs (as `StepPairs::pairs`,
+    /// Compares three pair sets given as lists of canonical pairs (as [`BroadPhase::pairs`],
     /// [`brute::sweep_pairs`] and [`Mirror::rapier_pairs`] give them); unsorted or duplicated
     /// lists are sorted and deduplicated on a copy first. `unmapped` is 0.
     #[must_use]

@@ -121,10 +121,10 @@ fn scene_hash_with_skin(unrelated: Unrelated, skin: f32) -> u64 {
         if spheres[j].is_null() {
             spheres[j] = bp.insert_sphere(gas.centers[j], gas.radius).unwrap();
         }
-        let out = bp.step();
-        h.pairs(1, out.pairs);
-        h.pairs(2, out.added);
-        h.pairs(3, out.removed);
+        bp.step();
+        h.pairs(1, bp.pairs());
+        h.pairs(2, bp.added());
+        h.pairs(3, bp.removed());
     }
     h.0
 }
@@ -291,10 +291,10 @@ fn model_scene_hashes(config: Config) -> Hashes {
             added,
             removed,
         } = model.expect_step();
-        let out = bp.step();
-        lib.pairs(1, out.pairs);
-        lib.pairs(2, out.added);
-        lib.pairs(3, out.removed);
+        bp.step();
+        lib.pairs(1, bp.pairs());
+        lib.pairs(2, bp.added());
+        lib.pairs(3, bp.removed());
         for (tag, list) in [(1, &pairs), (2, &added), (3, &removed)] {
             let as_pairs: Vec<Pair> = list.iter().map(|&(a, b)| Pair { a, b }).collect();
             own.pairs(tag, &as_pairs);

@@ -135,14 +135,14 @@ impl Checked {
         let now: BTreeSet<KeyPair> = want.iter().copied().collect();
         let added: Vec<KeyPair> = now.difference(&self.prev).copied().collect();
         let removed: Vec<KeyPair> = self.prev.difference(&now).copied().collect();
-        let out = bp.step();
-        self.model.assert_list(context, "pairs", out.pairs, &want);
-        self.model.assert_list(context, "added", out.added, &added);
+        bp.step();
+        self.model.assert_list(context, "pairs", bp.pairs(), &want);
+        self.model.assert_list(context, "added", bp.added(), &added);
         self.model
-            .assert_list(context, "removed", out.removed, &removed);
-        self.digest.pairs(1, out.pairs);
-        self.digest.pairs(2, out.added);
-        self.digest.pairs(3, out.removed);
+            .assert_list(context, "removed", bp.removed(), &removed);
+        self.digest.pairs(1, bp.pairs());
+        self.digest.pairs(2, bp.added());
+        self.digest.pairs(3, bp.removed());
         self.prev = now;
         bp.validate();
     }

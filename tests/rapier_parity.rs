@@ -88,7 +88,8 @@ fn explain(step: usize, cmp: &Comparison, mirror: &mut Mirror, world: &World) ->
     let mut rapier = Vec::new();
     mirror.rapier_pairs(&world.narrow_phase, &mut rapier);
     let exact = mirror.exact_pairs();
-    let ours = mirror.step().pairs.to_vec();
+    mirror.step();
+    let ours = mirror.broadphase().pairs().to_vec();
     let (mut a, mut b) = (Vec::new(), Vec::new());
     let mut out = format!("step {step}: {cmp}\n");
     let mut list = |what: &str, pairs: &[Pair]| {

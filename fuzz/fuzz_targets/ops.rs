@@ -281,10 +281,10 @@ fn check(
     );
     let added: Vec<KeyPair> = now.difference(&before).copied().collect();
     let removed: Vec<KeyPair> = before.difference(&now).copied().collect();
-    let out = bp.step();
-    assert_eq!(as_key_pairs(out.pairs), expected);
-    assert_eq!(as_key_pairs(out.added), added);
-    assert_eq!(as_key_pairs(out.removed), removed);
+    bp.step();
+    assert_eq!(as_key_pairs(bp.pairs()), expected);
+    assert_eq!(as_key_pairs(bp.added()), added);
+    assert_eq!(as_key_pairs(bp.removed()), removed);
     bp.validate();
     expected
 }

@@ -130,18 +130,6 @@ impl CollisionGroups {
     }
 }
 
-/// The result of one [`BroadPhase::step`]: all three lists sorted by `(a, b)`.
-#[derive(Clone, Copy, Debug)]
-pub struct StepPairs<'a> {
-    /// Every pair whose (margin-grown) boxes overlap now.
-    pub pairs: &'a [Pair],
-    /// Pairs in `pairs` that were not in the previous step's list.
-    pub added: &'a [Pair],
-    /// Pairs of the previous step's list that are not in `pairs` (including every pair of a
-    /// proxy removed since).
-    pub removed: &'a [Pair],
-}
-
 /// Which pass a step ran.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Pass {
@@ -644,17 +632,39 @@ impl BroadPhase {
             .map(|s| (self.store.key(s), self.store.shape[s as usize]))
     }
 
-    /// Computes this step's pairs and their difference with the previous step's. Steady state
+    /// Computes this step's pairs and their difference with the previous step's, then
+    /// returns: read them through [`BroadPhase::pairs`], [`BroadPhase::added`] and
+    /// [`BroadPhase::removed`], which borrow the broadphase only for reading, so the loop over
+    /// them may look proxies up ([`BroadPhase::shape`], [`BroadPhase::groups`]). Steady state
     /// allocates nothing: every list is kept and reused.
-    pub fn step(&mut self) -> StepPairs<'_> {
+    pub fn step(&mut self) {
         let plan = self.plan();
         self.run(plan);
         self.now = self.now.wrapping_add(1);
-        StepPairs {
-            pairs: &self.pairs,
-            added: &self.added,
-            removed: &self.removed,
-        }
+    }
+
+    /// Every pair whose (margin-grown) boxes overlapped at the last [`BroadPhase::step`],
+    /// sorted by `(a, b)`; empty before the first step. Operations since that step show only
+    /// in the next one.
+    #[must_use]
+    pub fn pairs(&self) -> &[Pair] {
+        &self.pairs
+    }
+
+    /// The pairs of the last step's [`BroadPhase::pairs`] that were not in the step's before
+    /// it, sorted by `(a, b)`.
+    #[must_use]
+    pub fn added(&self) -> &[Pair] {
+        &self.added
+    }
+
+    /// The pairs of the step before the last that are not in the last step's
+    /// [`BroadPhase::pairs`] (including every pair of a proxy removed in between), sorted by
+    /// `(a, b)`. A removed proxy's key in this list is already stale: [`BroadPhase::shape`]
+    /// gives `None` for it.
+    #[must_use]
+    pub fn removed(&self) -> &[Pair] {
+        &self.removed
     }
 }
 
