@@ -312,7 +312,10 @@ impl Octree {
         }
         let limit = region::overflow_limit(self.live).max(2 * self.overflow_after as usize);
         if self.overflow as usize > limit || self.live > 2 * self.regrow.rooted {
-            match self.regrow.propose(&self.objs, self.live, self.hint, self.grid.placement) {
+            match self
+                .regrow
+                .propose(&self.objs, self.live, self.hint, self.grid.placement)
+            {
                 Some(p) => self.reroot(p.bounds, p.depth),
                 None => {
                     // No finite region covers the world: keep this one, and wait for twice
@@ -324,7 +327,10 @@ impl Octree {
             return;
         }
         if self.regrow.tick() {
-            match self.regrow.propose(&self.objs, self.live, self.hint, self.grid.placement) {
+            match self
+                .regrow
+                .propose(&self.objs, self.live, self.hint, self.grid.placement)
+            {
                 Some(p) if region::worth_it(&self.grid, &p) => self.reroot(p.bounds, p.depth),
                 _ => self.regrow.back_off(),
             }
