@@ -316,11 +316,11 @@ impl Octree {
                 .regrow
                 .propose(&self.objs, self.live, self.hint, self.grid.placement)
             {
-                Some(p) => self.reroot(p.bounds, p.depth),
+                Some(p) => self.reroot(&p),
                 None => {
                     // No finite region covers the world: keep this one, and wait for twice
                     // the overflow (or spheres) before trying again.
-                    self.regrow.rooted(self.live);
+                    self.regrow.rooted(self.live, None);
                     self.overflow_after = self.overflow;
                 }
             }
@@ -331,17 +331,17 @@ impl Octree {
                 .regrow
                 .propose(&self.objs, self.live, self.hint, self.grid.placement)
             {
-                Some(p) if region::worth_it(&self.grid, &p) => self.reroot(p.bounds, p.depth),
+                Some(p) if region::worth_it(&self.grid, &p) => self.reroot(&p),
                 _ => self.regrow.back_off(),
             }
         }
     }
 
-    /// Places every sphere again in a tree over `bounds` with levels `0..=depth`.
+    /// Places every sphere again in a tree over the proposal's region and depth.
     #[inline(never)]
-    fn reroot(&mut self, bounds: Aabb, depth: u32) {
-        self.grid = Grid::new(bounds, depth, self.grid.placement);
-        self.nodes.reset(cell::node_count(depth));
+    fn reroot(&mut self, p: &region::Proposal) {
+        self.grid = Grid::new(p.bounds, p.depth, self.grid.placement);
+        self.nodes.reset(cell::node_count(p.depth));
         self.per_level = [0; MAX_DEPTH as usize + 1];
         self.overflow = 0;
         for id in 0..self.objs.len() as u32 {
@@ -355,7 +355,7 @@ impl Octree {
             self.overflow += u32::from(at.outside);
             self.link(id, at.node);
         }
-        self.regrow.rooted(self.live);
+        self.regrow.rooted(self.live, Some(p.span_center));
         self.overflow_after = self.overflow;
         self.reroots += 1;
     }

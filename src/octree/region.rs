@@ -48,7 +48,7 @@ use glam::Vec3;
 const CELL_DIAMETERS: f32 = 1.25;
 /// A re-rooted region covers the spheres' boxes grown by this factor around their centre,
 /// before rounding its side up to a power of two cells.
-const GROW: f32 = 1.5;
+const GROW: f32 = 2.0;
 /// Loose trees get this many levels below the median sphere's, for smaller spheres.
 const LEVELS_BELOW_TYPICAL: u32 = 2;
 /// The overflow limit is at least this many spheres.
@@ -78,6 +78,8 @@ pub(super) struct Proposal {
     pub(super) typical_cell: f32,
     /// The median radius.
     pub(super) typical_radius: f32,
+    /// The centre of the spheres' span the region was built around.
+    pub(super) span_center: Vec3,
 }
 
 /// The growing policy's state: when to audit, and the scratch of [`propose`].
@@ -85,6 +87,9 @@ pub(super) struct Proposal {
 pub(super) struct Regrow {
     /// Live spheres at the last re-root (0 before the first).
     pub(super) rooted: usize,
+    /// The centre of the spheres' span at the last re-root, if any: a world that moved since
+    /// gets its next region shifted ahead of its motion.
+    last_center: Option<Vec3>,
     /// Calls to `maintain` left until the next audit, and the current period.
     countdown: u32,
     period: u32,
@@ -98,9 +103,13 @@ impl Regrow {
         self.scratch.capacity() * 4
     }
 
-    /// Resets the audit clock after a re-root of `live` spheres.
-    pub(super) fn rooted(&mut self, live: usize) {
+    /// Resets the audit clock after a re-root of `live` spheres around `span_center` (`None`:
+    /// no region was found, the tree kept its own).
+    pub(super) fn rooted(&mut self, live: usize, span_center: Option<Vec3>) {
         self.rooted = live;
+        if span_center.is_some() {
+            self.last_center = span_center;
+        }
         self.period = FIRST_AUDIT_PERIOD;
         self.countdown = FIRST_AUDIT_PERIOD;
     }
@@ -155,11 +164,13 @@ impl Regrow {
                 }
             }
         }
-        let center = span.center();
+        let mut center = span.center();
         if !center.is_finite() {
             return None;
         }
         let side = wide(&span);
+        let span_center = center;
+        let moved = self.last_center.map_or(Vec3::ZERO, |last| center - last);
         // The side's floor: a cube a few float steps wide at the region's distance from the
         // origin, so its corners stay apart.
         let floor = center.abs().max_element().max(1.0) * f32::EPSILON * 64.0;
@@ -171,6 +182,12 @@ impl Regrow {
         } else {
             (side.max(floor), MAX_DEPTH)
         };
+        // Ahead by the world's motion since the last proposal, as far as the region still
+        // covers the span: a world in flight then crosses the whole margin before it leaves.
+        let room = (Vec3::splat(side) - span.extent()) * 0.5;
+        if moved.is_finite() && room.is_finite() {
+            center += moved.clamp(-room.max(Vec3::ZERO), room.max(Vec3::ZERO));
+        }
         let half = Vec3::splat(side * 0.5);
         let bounds = Aabb::new(center - half, center + half);
         geom::check_bounds(&bounds).ok()?;
@@ -184,6 +201,7 @@ impl Regrow {
             depth,
             typical_cell: grid.typical_cell(r),
             typical_radius: r,
+            span_center,
         })
     }
 }
