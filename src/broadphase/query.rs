@@ -136,8 +136,8 @@ impl BroadPhase {
     /// distances, sorted by `(distance, key)`; all of them if there are fewer. Empty for
     /// `k == 0` or a non-finite `point`.
     ///
-    /// An expanding search: from the distance to `Config::bounds` plus the spacing `k` proxies
-    /// spread evenly over the bounds would have, each round takes every proxy whose held box
+    /// An expanding search: from the distance to the octree's region plus the spacing `k`
+    /// proxies spread evenly over it would have, each round takes every proxy whose held box
     /// is within the radius and doubles the radius until `k` of them are within it by their
     /// exact distance (or every proxy was seen). A proxy not seen is farther than the radius.
     #[must_use]
@@ -146,7 +146,7 @@ impl BroadPhase {
         if k == 0 || n == 0 || !point.is_finite() {
             return Vec::new();
         }
-        let bounds = self.config.bounds;
+        let bounds = self.octree.bounds();
         let spacing =
             NEAREST_START * bounds.extent().max_element() * (k as f32 / n as f32).min(1.0).cbrt();
         let start = geom::point_aabb_distance(point, &bounds) + spacing;
