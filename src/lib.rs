@@ -50,6 +50,37 @@
 //! # Ok::<(), broadleaf::Error>(())
 //! ```
 //!
+//! # Queries
+//! Every query comes in two forms. The plain one ([`BroadPhase::query_aabb`],
+//! [`BroadPhase::query_sphere`], [`BroadPhase::cast_ray`], [`BroadPhase::cast_sphere`],
+//! [`BroadPhase::nearest`]) sees every proxy. The engine's one ([`BroadPhase::query_aabb_with`],
+//! [`BroadPhase::query_sphere_with`], [`BroadPhase::cast_ray_with`],
+//! [`BroadPhase::cast_sphere_with`], [`BroadPhase::nearest_into`]) takes a [`QueryFilter`]
+//! (collision groups, a key to exclude, a predicate), gives casts the nearest hit the filter
+//! passes, lets a visitor stop with [`ControlFlow::Break`](core::ops::ControlFlow), and fills
+//! a buffer of the caller's instead of allocating. Both are exact, as the shapes were given.
+//! [`Octree`] and [`Bvh`] have the stopping form too (`try_query_aabb`, `try_query_sphere`).
+//! ```
+//! use broadleaf::{BroadPhase, Config, QueryFilter, Vec3};
+//! use core::ops::ControlFlow;
+//!
+//! let mut bp = BroadPhase::new(Config::default());
+//! let me = bp.insert_sphere(Vec3::ZERO, 1.0)?;
+//! let other = bp.insert_sphere(Vec3::new(1.5, 0.0, 0.0), 1.0)?;
+//! let not_me = QueryFilter::new().exclude(me);
+//! // Is anything but me within 2 m? Stop at the first.
+//! let mut found = None;
+//! let flow = bp.query_sphere_with(Vec3::ZERO, 2.0, &not_me, |key| {
+//!     found = Some(key);
+//!     ControlFlow::Break(())
+//! });
+//! assert!(flow.is_break() && found == Some(other));
+//! let mut near = Vec::with_capacity(16);            // reused from call to call
+//! bp.nearest_into(Vec3::ZERO, 4, &not_me, &mut near);
+//! assert_eq!(near, [(other, 0.5)]);
+//! # Ok::<(), broadleaf::Error>(())
+//! ```
+//!
 //! # Guarantees
 //! - **Exact pairs.** With `Config::margin == 0` the pair set equals [`brute::pairs`] over
 //!   the current boxes: nothing missed, nothing extra. A margin grows every box first. Static
@@ -113,7 +144,8 @@ mod sweep;
 mod test_geom;
 
 pub use broadphase::{
-    BodyKind, BroadPhase, CollisionGroups, Config, Pass, Passes, Shape, StepStats,
+    BodyKind, BroadPhase, CollisionGroups, Config, Pass, Passes, QueryFilter, QueryPredicate,
+    Shape, StepStats,
 };
 pub use bvh::{Bvh, BvhConfig, SplitMethod};
 pub use error::{BatchError, Error};

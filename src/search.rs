@@ -1,7 +1,15 @@
-//! What the structures' and the broadphase's searches share: the running first hit of a cast
-//! and the expanding-radius k-nearest loop. Depends on `pair` only.
+//! What the structures' and the broadphase's searches share: how a sphere cast opens, the
+//! running first hit of a cast, where a k-nearest search starts and its expanding-radius loop.
+//! Depends on `geom` and `pair` only.
 
+use crate::geom::{self, Aabb};
 use crate::pair::ProxyKey;
+use glam::Vec3;
+
+/// A nearest search's first radius beyond the searched objects' bounds, as a fraction of the
+/// spacing `k` objects spread evenly over those bounds would have: below 1, a first round
+/// usually finds `k` in a small region; a miss only doubles the radius.
+const NEAREST_START: f32 = 0.5;
 
 /// The smallest `(t, key)` offered so far, within `[0, max_t]`: a cast's answer, with ties
 /// going to the smaller key.
@@ -14,6 +22,23 @@ pub(crate) struct FirstHit {
 impl FirstHit {
     pub(crate) fn new(max_t: f32) -> Self {
         FirstHit { max_t, best: None }
+    }
+
+    /// How every sphere cast opens: `None` for a non-finite argument, a negative `radius` or a
+    /// negative `max_t`; else the empty first hit and how far the candidates' boxes are grown:
+    /// `radius` plus a relative pad, since the exact sphere tests work in `f64` and the box
+    /// tests in `f32`.
+    pub(crate) fn sphere_cast(
+        center: Vec3,
+        radius: f32,
+        dir: Vec3,
+        max_t: f32,
+    ) -> Option<(Self, f32)> {
+        if !geom::cast_is_valid(center, radius, dir, max_t) {
+            return None;
+        }
+        let inflate = radius + geom::cast_pad(center, radius, dir, max_t);
+        Some((FirstHit::new(max_t), inflate))
     }
 
     /// The `t` a later hit must not exceed: the best so far, else `max_t`.
@@ -38,29 +63,39 @@ impl FirstHit {
     }
 }
 
-/// The `k` nearest of `n` objects by an expanding search: from `radius`, each round has
-/// `collect(radius, out)` push `(key, exact distance)` for every object that may be within
-/// `radius` (a superset is fine; every object within it must be there) and doubles the
-/// radius until `k` pushed ones are within it, all `n` were pushed, or the radius is
-/// infinite. An object not pushed is farther than the radius, so the first `k` pushed in
-/// `(distance, key)` order are the answer.
+/// Where a search for the `k` nearest of `n` objects lying in `bounds` starts: the distance
+/// from `point` to `bounds` plus [`NEAREST_START`] of the spacing `k` objects spread evenly
+/// over them would have. Any start is exact (the loop widens until it has its answer); this
+/// one only decides how many rounds that takes.
+pub(crate) fn nearest_start(point: Vec3, bounds: &Aabb, k: usize, n: usize) -> f32 {
+    let spread = (k as f32 / n as f32).min(1.0).cbrt();
+    let spacing = NEAREST_START * bounds.extent().max_element().max(0.0) * spread;
+    geom::point_aabb_distance(point, bounds) + spacing
+}
+
+/// The `k` nearest of `n` objects by an expanding search, into `out` (cleared first): from
+/// `radius`, each round has `collect(radius, out)` push `(key, exact distance)` for the
+/// objects that may be within `radius` and are wanted (a superset is fine; every wanted one
+/// within it must be there) and return how many objects it looked at, wanted or not; the
+/// radius doubles until `k` pushed ones are within it, all `n` objects were looked at, or the
+/// radius is infinite. An object not pushed is unwanted or farther than the radius, so the
+/// first `k` pushed in `(distance, key)` order are the answer. Allocates only to grow `out`.
 pub(crate) fn nearest_expanding(
     k: usize,
     n: usize,
     mut radius: f32,
-    mut collect: impl FnMut(f32, &mut Vec<(ProxyKey, f32)>),
-) -> Vec<(ProxyKey, f32)> {
-    let mut out = Vec::new();
+    out: &mut Vec<(ProxyKey, f32)>,
+    mut collect: impl FnMut(f32, &mut Vec<(ProxyKey, f32)>) -> usize,
+) {
     loop {
         out.clear();
-        collect(radius, &mut out);
+        let seen = collect(radius, out);
         let within = out.iter().filter(|&&(_, d)| d <= radius).count();
-        if within >= k || out.len() >= n || radius == f32::INFINITY {
+        if within >= k || seen >= n || radius == f32::INFINITY {
             break;
         }
         radius = (radius * 2.0).max(f32::MIN_POSITIVE);
     }
     out.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
     out.truncate(k);
-    out
 }

@@ -25,6 +25,7 @@ mod store;
 mod validate;
 
 pub use config::{Config, Passes};
+pub use query::{QueryFilter, QueryPredicate};
 
 use crate::bvh::Bvh;
 use crate::geom::{self, SimdBox, check_aabb, check_sphere};

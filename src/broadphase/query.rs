@@ -1,34 +1,154 @@
-//! Box queries and ray casts of a [`BroadPhase`]: the structures find the proxies whose held
-//! boxes (exact, or fat around the exact ones) the query meets, and each is re-tested against
-//! its exact shape.
+//! Box, sphere, ray, sphere-cast and nearest queries of a [`BroadPhase`], and the
+//! [`QueryFilter`] an engine's queries pass: the structures find the proxies whose held boxes
+//! (exact, or fat around the exact ones) the query meets, each is re-tested against its exact
+//! shape, and only then offered to the filter.
+//!
+//! Each query comes twice: the plain form (`query_aabb`, `cast_ray`, `nearest`, …) sees every
+//! proxy and visits every match; the `_with` form (`query_aabb_with`, `cast_ray_with`,
+//! `nearest_into`, …) takes a [`QueryFilter`], and its visitor returns a [`ControlFlow`] whose
+//! `Break` ends the query at once.
 
-use super::{BroadPhase, Shape};
+use super::{BroadPhase, CollisionGroups, Shape};
 use crate::geom::{self, SimdBox, check_aabb};
-use crate::search::{FirstHit, nearest_expanding};
+use crate::search::{FirstHit, nearest_expanding, nearest_start};
 use crate::{Aabb, ProxyKey, Vec3};
+use core::ops::ControlFlow;
 
-/// `nearest`'s first radius beyond the bounds, as a fraction of the spacing `k` proxies spread
-/// evenly over the bounds would have: below 1, a first round usually finds `k` in a small
-/// region; a miss only doubles the radius.
-const NEAREST_START: f32 = 0.5;
+/// The predicate of a [`QueryFilter`]: true to let the proxy `key` of this shape through.
+pub type QueryPredicate<'a> = &'a dyn Fn(ProxyKey, &Shape) -> bool;
+
+/// Which proxies a query may report, like rapier's `QueryFilter`: a proxy passes if it is not
+/// `exclude`, its groups and `groups` allow each other ([`CollisionGroups::allows`]), and
+/// `predicate` accepts it. The default passes every proxy.
+///
+/// ```
+/// use broadleaf::{BroadPhase, CollisionGroups, Config, QueryFilter, Vec3};
+///
+/// let mut bp = BroadPhase::new(Config::default());
+/// let player = bp.insert_sphere(Vec3::ZERO, 0.5)?;
+/// let wall = bp.insert_sphere(Vec3::new(5.0, 0.0, 0.0), 1.0)?;
+/// let ghost = bp.insert_sphere(Vec3::new(2.0, 0.0, 0.0), 0.5)?;
+/// bp.set_groups(ghost, CollisionGroups { memberships: 0b10, filter: u32::MAX })?;
+///
+/// // A ray from the player skips the player itself and what is not in group 1.
+/// let solid = CollisionGroups { memberships: u32::MAX, filter: 0b01 };
+/// let filter = QueryFilter::new().exclude(player).groups(solid);
+/// let hit = bp.cast_ray_with(Vec3::ZERO, Vec3::X, 100.0, &filter);
+/// assert_eq!(hit, Some((wall, 4.0)));
+///
+/// // A predicate sees the key and the shape: skip the small ones.
+/// let big = |_, shape: &broadleaf::Shape| shape.aabb().extent().x > 1.5;
+/// let filter = QueryFilter::new().predicate(&big);
+/// let hit = bp.cast_ray_with(Vec3::new(-3.0, 0.0, 0.0), Vec3::X, 100.0, &filter);
+/// assert_eq!(hit, Some((wall, 7.0)));
+/// # Ok::<(), broadleaf::Error>(())
+/// ```
+#[derive(Clone, Copy, Default)]
+pub struct QueryFilter<'a> {
+    /// Only proxies whose groups and these allow each other; `None`: any groups.
+    pub groups: Option<CollisionGroups>,
+    /// This proxy is never reported (a ray from a player skips the player).
+    pub exclude: Option<ProxyKey>,
+    /// Only proxies for which this returns true. It is called only for proxies that pass the
+    /// query's exact geometric test and the other two rules; a `nearest` search may call it
+    /// again for the same proxy as its radius grows.
+    pub predicate: Option<QueryPredicate<'a>>,
+}
+
+impl<'a> QueryFilter<'a> {
+    /// The filter that passes every proxy.
+    #[must_use]
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Only proxies whose groups and `groups` allow each other.
+    #[must_use]
+    pub fn groups(mut self, groups: CollisionGroups) -> Self {
+        self.groups = Some(groups);
+        self
+    }
+
+    /// Never reports `key`.
+    #[must_use]
+    pub fn exclude(mut self, key: ProxyKey) -> Self {
+        self.exclude = Some(key);
+        self
+    }
+
+    /// Only proxies for which `predicate(key, shape)` is true.
+    #[must_use]
+    pub fn predicate(mut self, predicate: QueryPredicate<'a>) -> Self {
+        self.predicate = Some(predicate);
+        self
+    }
+}
+
+impl core::fmt::Debug for QueryFilter<'_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("QueryFilter")
+            .field("groups", &self.groups)
+            .field("exclude", &self.exclude)
+            .field(
+                "predicate",
+                &self.predicate.map(|_| "Fn(ProxyKey, &Shape) -> bool"),
+            )
+            .finish()
+    }
+}
+
+/// The visitor of the plain queries: every match, never a stop.
+fn every(mut f: impl FnMut(ProxyKey)) -> impl FnMut(ProxyKey) -> ControlFlow<()> {
+    move |key| {
+        f(key);
+        ControlFlow::Continue(())
+    }
+}
 
 impl BroadPhase {
+    /// True if `filter` passes the live proxy `key` in `slot`: the cheap rules first, the
+    /// user's predicate last.
+    #[inline]
+    fn passes(&self, filter: &QueryFilter<'_>, key: ProxyKey, slot: usize) -> bool {
+        filter.exclude != Some(key)
+            && filter
+                .groups
+                .is_none_or(|g| g.allows(self.store.groups[slot]))
+            && filter
+                .predicate
+                .is_none_or(|p| p(key, &self.store.shape[slot]))
+    }
+
     /// Calls `f` with every proxy whose (margin-grown) box overlaps `aabb`, each once, in no
     /// particular order; nothing for a non-finite or inverted query box.
-    pub fn query_aabb(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
+    pub fn query_aabb(&self, aabb: &Aabb, f: impl FnMut(ProxyKey)) {
+        let _ = self.query_aabb_with(aabb, &QueryFilter::new(), every(f));
+    }
+
+    /// [`BroadPhase::query_aabb`] for the proxies `filter` passes, until `f` returns
+    /// [`ControlFlow::Break`]: that ends the query and is returned (`Continue` if every match
+    /// was visited).
+    pub fn query_aabb_with(
+        &self,
+        aabb: &Aabb,
+        filter: &QueryFilter<'_>,
+        mut f: impl FnMut(ProxyKey) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
         if check_aabb(aabb).is_err() {
-            return;
+            return ControlFlow::Continue(());
         }
         let q = SimdBox::new(aabb);
-        let exact = &self.store.exact;
         let mut test = |k: ProxyKey| {
-            if exact[crate::pair::slot(k) as usize].overlaps(&q) {
-                f(k);
+            let s = crate::pair::slot(k) as usize;
+            if self.store.exact[s].overlaps(&q) && self.passes(filter, k, s) {
+                f(k)
+            } else {
+                ControlFlow::Continue(())
             }
         };
-        self.octree.query_aabb_unchecked(aabb, &mut test);
-        self.dynamic.query_aabb_unchecked(aabb, &mut test);
-        self.statics.query_aabb_unchecked(aabb, &mut test);
+        self.octree.try_query_aabb_unchecked(aabb, &mut test)?;
+        self.dynamic.try_query_aabb_unchecked(aabb, &mut test)?;
+        self.statics.try_query_aabb_unchecked(aabb, &mut test)
     }
 
     /// The nearest proxy hit by the segment `origin + t·dir`, `t ∈ [0, max_t]`, with its `t`
@@ -37,11 +157,25 @@ impl BroadPhase {
     /// key. `None` for a non-finite ray or `max_t < 0`.
     #[must_use]
     pub fn cast_ray(&self, origin: Vec3, dir: Vec3, max_t: f32) -> Option<(ProxyKey, f32)> {
+        self.cast_ray_with(origin, dir, max_t, &QueryFilter::new())
+    }
+
+    /// [`BroadPhase::cast_ray`] among the proxies `filter` passes: the nearest hit that
+    /// passes (ties to the smaller key), whatever it rejected in front of it.
+    #[must_use]
+    pub fn cast_ray_with(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        max_t: f32,
+        filter: &QueryFilter<'_>,
+    ) -> Option<(ProxyKey, f32)> {
         if !geom::ray_is_valid(origin, dir, max_t) {
             return None;
         }
         let inv = geom::inverse_dir(dir);
-        self.first_hit(origin, dir, max_t, 0.0, |shape, limit| match shape {
+        let hit = FirstHit::new(max_t);
+        self.first_hit(hit, origin, dir, 0.0, filter, |shape, limit| match *shape {
             Shape::Sphere { center, radius } => {
                 geom::ray_sphere(origin, dir, center, radius, limit)
             }
@@ -62,33 +196,56 @@ impl BroadPhase {
         dir: Vec3,
         max_t: f32,
     ) -> Option<(ProxyKey, f32)> {
-        if !geom::cast_is_valid(center, radius, dir, max_t) {
-            return None;
-        }
-        let inflate = radius + geom::cast_pad(center, radius, dir, max_t);
-        self.first_hit(center, dir, max_t, inflate, |shape, limit| match shape {
-            Shape::Sphere {
-                center: c,
-                radius: r,
-            } => geom::sphere_cast_sphere(center, radius, dir, limit, c, r),
-            Shape::Body { aabb, .. } => geom::sphere_cast_aabb(center, radius, dir, limit, &aabb),
-        })
+        self.cast_sphere_with(center, radius, dir, max_t, &QueryFilter::new())
     }
 
-    /// The smallest `(t, key)` of `hit(shape, limit)` over the proxies whose held boxes, grown
-    /// by `inflate`, the segment `origin + t·dir` meets before the best `t` so far: each
-    /// structure is walked nearer subtrees first and prunes what lies behind that `t`.
-    fn first_hit(
+    /// [`BroadPhase::cast_sphere`] among the proxies `filter` passes: the first touch that
+    /// passes (ties to the smaller key), whatever it rejected in front of it.
+    #[must_use]
+    pub fn cast_sphere_with(
         &self,
-        origin: Vec3,
+        center: Vec3,
+        radius: f32,
         dir: Vec3,
         max_t: f32,
-        inflate: f32,
-        hit_of: impl Fn(Shape, f32) -> Option<f32>,
+        filter: &QueryFilter<'_>,
     ) -> Option<(ProxyKey, f32)> {
-        let mut hit = FirstHit::new(max_t);
+        let (hit, inflate) = FirstHit::sphere_cast(center, radius, dir, max_t)?;
+        self.first_hit(
+            hit,
+            center,
+            dir,
+            inflate,
+            filter,
+            |shape, limit| match *shape {
+                Shape::Sphere {
+                    center: c,
+                    radius: r,
+                } => geom::sphere_cast_sphere(center, radius, dir, limit, c, r),
+                Shape::Body { aabb, .. } => {
+                    geom::sphere_cast_aabb(center, radius, dir, limit, &aabb)
+                }
+            },
+        )
+    }
+
+    /// The smallest `(t, key)` of `hit_of(shape, limit)` over the proxies `filter` passes whose
+    /// held boxes, grown by `inflate`, the segment `origin + t·dir` meets before the best `t`
+    /// so far: each structure is walked nearer subtrees first and prunes what lies behind
+    /// that `t`. A rejected proxy does not shorten the segment.
+    fn first_hit(
+        &self,
+        mut hit: FirstHit,
+        origin: Vec3,
+        dir: Vec3,
+        inflate: f32,
+        filter: &QueryFilter<'_>,
+        hit_of: impl Fn(&Shape, f32) -> Option<f32>,
+    ) -> Option<(ProxyKey, f32)> {
         let t_of = |key: ProxyKey, limit: f32| {
-            hit_of(self.store.shape[crate::pair::slot(key) as usize], limit)
+            let s = crate::pair::slot(key) as usize;
+            let t = hit_of(&self.store.shape[s], limit)?;
+            self.passes(filter, key, s).then_some(t)
         };
         let limit = hit.limit();
         self.octree
@@ -112,67 +269,108 @@ impl BroadPhase {
     /// `center` (touching counts): a sphere whose centre is within `radius + its radius`, a
     /// body whose box is within `radius`. Each once, in no particular order; nothing for a
     /// non-finite argument or a negative radius.
-    pub fn query_sphere(&self, center: Vec3, radius: f32, mut f: impl FnMut(ProxyKey)) {
+    pub fn query_sphere(&self, center: Vec3, radius: f32, f: impl FnMut(ProxyKey)) {
+        let _ = self.query_sphere_with(center, radius, &QueryFilter::new(), every(f));
+    }
+
+    /// [`BroadPhase::query_sphere`] for the proxies `filter` passes, until `f` returns
+    /// [`ControlFlow::Break`]: that ends the query and is returned (`Continue` if every match
+    /// was visited).
+    pub fn query_sphere_with(
+        &self,
+        center: Vec3,
+        radius: f32,
+        filter: &QueryFilter<'_>,
+        mut f: impl FnMut(ProxyKey) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
         if geom::check_sphere(center, radius).is_err() {
-            return;
+            return ControlFlow::Continue(());
         }
         let reach = radius + geom::distance_pad(center, radius);
-        self.within(center, reach, |key, shape| {
-            let inside = match shape {
+        self.within(center, reach, |key, s| {
+            let inside = match self.store.shape[s] {
                 Shape::Sphere {
                     center: c,
                     radius: r,
                 } => (c - center).length_squared() <= (r + radius) * (r + radius),
                 Shape::Body { aabb, .. } => geom::point_aabb_distance(center, &aabb) <= radius,
             };
-            if inside {
-                f(key);
+            if inside && self.passes(filter, key, s) {
+                f(key)
+            } else {
+                ControlFlow::Continue(())
             }
-        });
+        })
     }
 
     /// The `k` proxies whose shapes, as the user gave them, are nearest `point` (distance 0
     /// inside: [`geom::point_sphere_distance`], [`geom::point_aabb_distance`]), with their
     /// distances, sorted by `(distance, key)`; all of them if there are fewer. Empty for
-    /// `k == 0` or a non-finite `point`.
-    ///
-    /// An expanding search: from the distance to the octree's region plus the spacing `k`
-    /// proxies spread evenly over it would have, each round takes every proxy whose held box
-    /// is within the radius and doubles the radius until `k` of them are within it by their
-    /// exact distance (or every proxy was seen). A proxy not seen is farther than the radius.
+    /// `k == 0` or a non-finite `point`. Allocates its result; [`BroadPhase::nearest_into`]
+    /// fills a buffer of the caller's instead.
     #[must_use]
     pub fn nearest(&self, point: Vec3, k: usize) -> Vec<(ProxyKey, f32)> {
+        let mut out = Vec::new();
+        self.nearest_into(point, k, &QueryFilter::new(), &mut out);
+        out
+    }
+
+    /// [`BroadPhase::nearest`] among the proxies `filter` passes, into `out` (cleared first).
+    /// It allocates only to grow `out`, which also holds each round's candidates: a buffer
+    /// kept across calls stops allocating once it has held the largest round.
+    ///
+    /// An expanding search: from the distance to the octree's region plus a part of the
+    /// spacing `k` proxies spread evenly over it would have, each round takes every proxy
+    /// whose held box is within the radius and doubles the radius until `k` that pass the
+    /// filter are within it by their exact distance (or every proxy was seen). A proxy not
+    /// seen is farther than the radius.
+    pub fn nearest_into(
+        &self,
+        point: Vec3,
+        k: usize,
+        filter: &QueryFilter<'_>,
+        out: &mut Vec<(ProxyKey, f32)>,
+    ) {
+        out.clear();
         let n = self.len();
         if k == 0 || n == 0 || !point.is_finite() {
-            return Vec::new();
+            return;
         }
-        let bounds = self.octree.bounds();
-        let spacing =
-            NEAREST_START * bounds.extent().max_element() * (k as f32 / n as f32).min(1.0).cbrt();
-        let start = geom::point_aabb_distance(point, &bounds) + spacing;
-        nearest_expanding(k, n, start, |radius, out| {
+        let start = nearest_start(point, &self.octree.bounds(), k, n);
+        nearest_expanding(k, n, start, out, |radius, out| {
             let reach = radius + geom::distance_pad(point, radius);
-            self.within(point, reach, |key, shape| {
-                let d = match shape {
+            let mut seen = 0;
+            let _ = self.within(point, reach, |key, s| {
+                seen += 1;
+                let d = match self.store.shape[s] {
                     Shape::Sphere { center, radius } => {
                         geom::point_sphere_distance(point, center, radius)
                     }
                     Shape::Body { aabb, .. } => geom::point_aabb_distance(point, &aabb),
                 };
-                out.push((key, d));
+                if self.passes(filter, key, s) {
+                    out.push((key, d));
+                }
+                ControlFlow::Continue(())
             });
-        })
+            seen
+        });
     }
 
-    /// Calls `f(key, shape)` for every proxy whose held box is within `radius` of `p` (spheres:
-    /// whose held box meets the cube `p ± radius`): a superset of the proxies whose shapes
-    /// are, since a shape lies in its held box.
-    fn within(&self, p: Vec3, radius: f32, mut f: impl FnMut(ProxyKey, Shape)) {
-        let shape = |k: ProxyKey| self.store.shape[crate::pair::slot(k) as usize];
-        self.octree.near(p, radius, |k| f(k, shape(k)));
+    /// Calls `f(key, slot)` for every proxy whose held box is within `radius` of `p`
+    /// (spheres: whose held box meets the cube `p ± radius`): a superset of the proxies whose
+    /// shapes are, since a shape lies in its held box. The first `Break` of `f` ends it.
+    fn within(
+        &self,
+        p: Vec3,
+        radius: f32,
+        mut f: impl FnMut(ProxyKey, usize) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
+        let slot = |k: ProxyKey| crate::pair::slot(k) as usize;
+        self.octree.near(p, radius, |k| f(k, slot(k)))?;
         self.dynamic
-            .within_distance(p, radius, |k, _| f(k, shape(k)));
+            .within_distance(p, radius, |k, _| f(k, slot(k)))?;
         self.statics
-            .within_distance(p, radius, |k, _| f(k, shape(k)));
+            .within_distance(p, radius, |k, _| f(k, slot(k)))
     }
 }

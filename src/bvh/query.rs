@@ -1,7 +1,8 @@
 //! Box, sphere, ray, sphere-cast and nearest queries against the current boxes (tree and
 //! pending list), and the box-based candidate traversals the `BroadPhase` re-tests exactly.
 //! They take `&self` and keep their stack inline, so they do not allocate unless the tree is
-//! deeper than [`INLINE_STACK`], except [`Bvh::nearest`] for its result.
+//! deeper than [`INLINE_STACK`], except [`Bvh::nearest`] for its result. The `try_` queries
+//! stop as soon as their visitor returns [`ControlFlow::Break`], and say whether it did.
 
 use super::Bvh;
 use super::node::{INLINE_STACK, Node, SmallStack};
@@ -9,7 +10,8 @@ use crate::geom::{
     self, Aabb, SimdBox, check_aabb, check_sphere, inverse_dir, point_aabb_distance, ray_is_valid,
 };
 use crate::pair::ProxyKey;
-use crate::search::{FirstHit, nearest_expanding};
+use crate::search::{FirstHit, nearest_expanding, nearest_start};
+use core::ops::ControlFlow;
 use glam::Vec3;
 use slotmap::Key;
 
@@ -17,44 +19,90 @@ impl Bvh {
     /// Calls `f` with the key of every live box that overlaps `aabb` (closed: touching
     /// counts), each once, in no particular order. A non-finite or inverted query box matches
     /// nothing, as in `Octree::query_aabb` and `BroadPhase::query_aabb`.
-    pub fn query_aabb(&self, aabb: &Aabb, f: impl FnMut(ProxyKey)) {
-        if check_aabb(aabb).is_ok() {
-            self.query_aabb_unchecked(aabb, f);
+    pub fn query_aabb(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
+        let _ = self.try_query_aabb(aabb, |key| {
+            f(key);
+            ControlFlow::Continue(())
+        });
+    }
+
+    /// [`Bvh::query_aabb`] with a visitor that can stop: the first [`ControlFlow::Break`]
+    /// ends the query and is returned; `Continue` if every match was visited.
+    pub fn try_query_aabb(
+        &self,
+        aabb: &Aabb,
+        f: impl FnMut(ProxyKey) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
+        if check_aabb(aabb).is_err() {
+            return ControlFlow::Continue(());
         }
+        self.try_query_aabb_unchecked(aabb, f)
     }
 
     /// [`Bvh::query_aabb`] without the input check, for boxes the crate made itself: a sphere
     /// or body near `f32::MAX` has a box that overflows to ±∞ from finite input, and it must
     /// still find what it overlaps.
     pub(crate) fn query_aabb_unchecked(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
+        let _ = self.try_query_aabb_unchecked(aabb, |key| {
+            f(key);
+            ControlFlow::Continue(())
+        });
+    }
+
+    /// [`Bvh::try_query_aabb`] without the input check.
+    pub(crate) fn try_query_aabb_unchecked(
+        &self,
+        aabb: &Aabb,
+        mut f: impl FnMut(ProxyKey) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
         let q = SimdBox::new(aabb);
-        self.query_tree(&q, |i| f(self.keys[i]));
+        self.try_query_tree(&q, |i| f(self.keys[i]))?;
         for (b, &key) in self.pending_boxes().iter().zip(self.pending_keys()) {
             if b.overlaps(&q) {
-                f(key);
+                f(key)?;
             }
         }
+        ControlFlow::Continue(())
     }
 
     /// The index of every tree primitive (tombstones excluded: their box is empty) whose
     /// box overlaps `aabb`.
     pub(super) fn query_tree(&self, aabb: &SimdBox, mut f: impl FnMut(usize)) {
+        let _ = self.try_query_tree(aabb, |i| {
+            f(i);
+            ControlFlow::Continue(())
+        });
+    }
+
+    /// [`Bvh::query_tree`] until `f` breaks.
+    fn try_query_tree(
+        &self,
+        aabb: &SimdBox,
+        mut f: impl FnMut(usize) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
         self.walk(
             |node| node.bounds().overlaps(aabb),
             |i| {
                 if self.boxes[i].overlaps(aabb) {
-                    f(i);
+                    f(i)
+                } else {
+                    ControlFlow::Continue(())
                 }
             },
-        );
+        )
     }
 
     /// Depth-first over the tree with the inline stack: enters every node that passes
     /// `enter` (children only through their parent) and calls `visit` with each primitive
-    /// index of the leaves entered.
-    fn walk(&self, mut enter: impl FnMut(&Node) -> bool, mut visit: impl FnMut(usize)) {
+    /// index of the leaves entered. The first `Break` of `visit` ends the walk and is
+    /// returned.
+    fn walk(
+        &self,
+        mut enter: impl FnMut(&Node) -> bool,
+        mut visit: impl FnMut(usize) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
         if self.nodes.is_empty() {
-            return;
+            return ControlFlow::Continue(());
         }
         let mut stack = SmallStack::<u32, INLINE_STACK>::new(0);
         stack.push(0);
@@ -64,13 +112,16 @@ impl Bvh {
                 continue;
             }
             if node.is_leaf() {
-                node.range().for_each(&mut visit);
+                for i in node.range() {
+                    visit(i)?;
+                }
             } else {
                 let (a, b) = node.children(n);
                 stack.push(b);
                 stack.push(a);
             }
         }
+        ControlFlow::Continue(())
     }
 
     /// The closest live box hit by the segment `origin + t·dir`, `t ∈ [0, max_t]`, with its
@@ -111,16 +162,16 @@ impl Bvh {
                 f(key, t);
             }
         }
-        self.walk(
+        let _ = self.walk(
             |node| node.aabb().ray_entry(origin, inv, max_t).is_some(),
             |i| {
                 let key = self.keys[i];
-                if key.is_null() {
-                    return;
-                }
-                if let Some(t) = self.boxes[i].aabb().ray_entry(origin, inv, max_t) {
+                if !key.is_null()
+                    && let Some(t) = self.boxes[i].aabb().ray_entry(origin, inv, max_t)
+                {
                     f(key, t);
                 }
+                ControlFlow::Continue(())
             },
         );
     }
@@ -197,25 +248,32 @@ impl Bvh {
     /// ([`geom::point_aabb_distance`] `<= radius`, so touching counts), once each, in no
     /// particular order. Nodes are pruned by the same distance, which never decreases as a box
     /// shrinks, so no box within `radius` is missed. Nothing for a non-finite `p` or a NaN or
-    /// negative `radius`.
-    pub(crate) fn within_distance(&self, p: Vec3, radius: f32, mut f: impl FnMut(ProxyKey, &Aabb)) {
+    /// negative `radius`. The first `Break` of `f` ends it and is returned.
+    pub(crate) fn within_distance(
+        &self,
+        p: Vec3,
+        radius: f32,
+        mut f: impl FnMut(ProxyKey, &Aabb) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
         if !p.is_finite() || radius.is_nan() || radius < 0.0 {
-            return;
+            return ControlFlow::Continue(());
         }
         let near = |b: &Aabb| point_aabb_distance(p, b) <= radius;
         let mut consider = |key: ProxyKey, b: &SimdBox| {
             let aabb = b.aabb();
             if !key.is_null() && near(&aabb) {
-                f(key, &aabb);
+                f(key, &aabb)
+            } else {
+                ControlFlow::Continue(())
             }
         };
         for (b, &key) in self.pending_boxes().iter().zip(self.pending_keys()) {
-            consider(key, b);
+            consider(key, b)?;
         }
         self.walk(
             |node| near(&node.aabb()),
             |i| consider(self.keys[i], &self.boxes[i]),
-        );
+        )
     }
 
     /// Calls `f` with the key of every live box within `radius` of `center`
@@ -223,9 +281,24 @@ impl Bvh {
     /// counts), each once, in no particular order. Nothing for a non-finite `center` or
     /// `radius`, or a negative `radius`.
     pub fn query_sphere(&self, center: Vec3, radius: f32, mut f: impl FnMut(ProxyKey)) {
-        if check_sphere(center, radius).is_ok() {
-            self.within_distance(center, radius, |key, _| f(key));
+        let _ = self.try_query_sphere(center, radius, |key| {
+            f(key);
+            ControlFlow::Continue(())
+        });
+    }
+
+    /// [`Bvh::query_sphere`] with a visitor that can stop: the first [`ControlFlow::Break`]
+    /// ends the query and is returned; `Continue` if every match was visited.
+    pub fn try_query_sphere(
+        &self,
+        center: Vec3,
+        radius: f32,
+        mut f: impl FnMut(ProxyKey) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
+        if check_sphere(center, radius).is_err() {
+            return ControlFlow::Continue(());
         }
+        self.within_distance(center, radius, |key, _| f(key))
     }
 
     /// The first live box touched by the sphere `center + t·dir`, `radius`, `t ∈ [0, max_t]`,
@@ -234,8 +307,8 @@ impl Bvh {
     /// key. `None` if nothing is touched, or for a non-finite argument, a negative `radius` or
     /// a negative `max_t`.
     ///
-    /// Candidates are the boxes grown by `radius` plus a relative pad
-    /// ([`geom::sphere_cast_aabb`] works in `f64`, the slab tests in `f32`), nearer first.
+    /// Candidates are the boxes grown by `radius` plus a relative pad (the exact test works in
+    /// `f64`, the slab tests in `f32`), nearer first.
     #[must_use]
     pub fn cast_sphere(
         &self,
@@ -244,11 +317,7 @@ impl Bvh {
         dir: Vec3,
         max_t: f32,
     ) -> Option<(ProxyKey, f32)> {
-        if !geom::cast_is_valid(center, radius, dir, max_t) {
-            return None;
-        }
-        let inflate = radius + geom::cast_pad(center, radius, dir, max_t);
-        let mut hit = FirstHit::new(max_t);
+        let (mut hit, inflate) = FirstHit::sphere_cast(center, radius, dir, max_t)?;
         self.ray_candidates(center, dir, max_t, inflate, |key, aabb| {
             hit.offer(
                 key,
@@ -262,8 +331,8 @@ impl Bvh {
     /// with their distances, sorted by `(distance, key)`: the first `k` of all boxes in that
     /// order (all of them if there are fewer). Empty for `k == 0` or a non-finite `point`.
     ///
-    /// An expanding search: starting from the distance to the boxes' bounds plus the spacing
-    /// `k` boxes spread evenly over those bounds would have, each round collects the boxes
+    /// An expanding search: starting from the distance to the boxes' bounds plus a part of the
+    /// spacing `k` boxes spread evenly over those bounds would have, each round collects the boxes
     /// within the radius and doubles it until `k` are within it or every box was; a box not
     /// collected is farther than the radius, so the first `k` collected in `(distance, key)`
     /// order are the answer.
@@ -277,14 +346,16 @@ impl Bvh {
             self.nodes.first().map_or(Aabb::EMPTY, |r| r.aabb()),
             |u, b| u.union(&b.aabb()),
         );
-        let spacing =
-            bounds.extent().max_element().max(0.0) * (k as f32 / n as f32).min(1.0).cbrt();
-        let start = point_aabb_distance(point, &bounds) + spacing;
-        nearest_expanding(k, n, start, |radius, out| {
-            self.within_distance(point, radius, |key, aabb| {
+        let start = nearest_start(point, &bounds, k, n);
+        let mut out = Vec::new();
+        nearest_expanding(k, n, start, &mut out, |radius, out| {
+            let _ = self.within_distance(point, radius, |key, aabb| {
                 out.push((key, point_aabb_distance(point, aabb)));
+                ControlFlow::Continue(())
             });
-        })
+            out.len()
+        });
+        out
     }
 
     pub(super) fn pending_boxes(&self) -> &[SimdBox] {
@@ -456,9 +527,10 @@ mod tests {
                 _ => rng.range(0.0, 5.0),
             };
             let mut seen = BTreeMap::new();
-            bvh.within_distance(p, radius, |key, aabb| {
+            let _ = bvh.within_distance(p, radius, |key, aabb| {
                 assert_eq!(Some(*aabb), bvh.aabb(key));
                 *seen.entry(key).or_insert(0) += 1;
+                ControlFlow::Continue(())
             });
             assert!(seen.values().all(|&n| n == 1), "a box visited twice");
             for (key, b) in &shapes {
@@ -498,7 +570,10 @@ mod tests {
             (Vec3::ZERO, -1.0),
             (Vec3::ZERO, nan),
         ] {
-            bvh.within_distance(p, radius, |_, _| n += 1);
+            let _ = bvh.within_distance(p, radius, |_, _| {
+                n += 1;
+                ControlFlow::Continue(())
+            });
         }
         assert_eq!(n, 0);
     }

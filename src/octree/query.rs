@@ -2,13 +2,15 @@
 //! `BroadPhase` re-tests exactly, and the occupied-cell iterator. They follow the node lists
 //! through occupied subtrees ([`Nodes::walk`](super::nodes::Nodes::walk)), entering a node only
 //! if the region its spheres can reach meets the query; none allocates but
-//! [`Octree::nearest`], for its result.
+//! [`Octree::nearest`], for its result. The `try_` queries stop as soon as their visitor
+//! returns [`ControlFlow::Break`], and say whether it did.
 
 use super::cell::Cell;
 use super::{NONE, Octree};
 use crate::geom::{self, Aabb};
 use crate::pair::ProxyKey;
-use crate::search::{FirstHit, nearest_expanding};
+use crate::search::{FirstHit, nearest_expanding, nearest_start};
+use core::ops::ControlFlow;
 use glam::Vec3;
 
 /// Queries whose reaching cells over the occupied levels are at most this many read those
@@ -24,18 +26,33 @@ const RAY_PIECE_SLACK: f32 = 1e-5;
 
 impl Octree {
     /// Depth-first over occupied nodes from the root: `enter(cell)` decides whether to visit a
-    /// node's spheres (`visit(id)`) and children; the root is always entered.
-    fn traverse(&self, enter: impl FnMut(&Cell) -> bool, mut visit: impl FnMut(u32)) {
+    /// node's spheres (`visit(id)`) and children; the root is always entered. The first
+    /// `Break` of `visit` ends the walk (no node is entered after it) and is returned.
+    fn traverse(
+        &self,
+        mut enter: impl FnMut(&Cell) -> bool,
+        mut visit: impl FnMut(u32) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
         if self.is_empty() {
-            return;
+            return ControlFlow::Continue(());
         }
-        self.nodes.walk(Cell::ROOT, enter, |_, slot| {
-            let mut i = self.nodes.head_at(slot);
-            while i != NONE {
-                visit(i);
-                i = self.links[i as usize].next;
-            }
-        });
+        let stopped = core::cell::Cell::new(false);
+        self.nodes.walk(
+            Cell::ROOT,
+            |cell| !stopped.get() && enter(cell),
+            |_, slot| {
+                let mut i = self.nodes.head_at(slot);
+                while i != NONE && !stopped.get() {
+                    stopped.set(visit(i).is_break());
+                    i = self.links[i as usize].next;
+                }
+            },
+        );
+        if stopped.get() {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
     }
 
     /// Visits the ids of every sphere whose integer range overlaps `aabb`'s (a superset of
@@ -45,14 +62,24 @@ impl Octree {
     /// level: no walk down from the root, whose upper levels cost a visit each while holding
     /// few spheres. A large one walks the occupied subtrees instead, whose masks skip empty
     /// regions.
-    fn candidates(&self, aabb: &Aabb, visit: impl FnMut(u32)) {
-        self.candidates_from(aabb, true, false, visit);
+    fn candidates(
+        &self,
+        aabb: &Aabb,
+        visit: impl FnMut(u32) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
+        self.candidates_from(aabb, true, false, visit)
     }
 
     /// [`Octree::candidates`], the root's list left out unless `root`; with `small` the
     /// caller knows the box spans about a deepest occupied cell (a ray piece) and the direct
-    /// lists are read without counting the cells first.
-    fn candidates_from(&self, aabb: &Aabb, root: bool, small: bool, mut visit: impl FnMut(u32)) {
+    /// lists are read without counting the cells first. The first `Break` of `visit` ends it.
+    fn candidates_from(
+        &self,
+        aabb: &Aabb,
+        root: bool,
+        small: bool,
+        mut visit: impl FnMut(u32) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
         let (qlo, qhi) = (self.grid.quantize(aabb.min), self.grid.quantize(aabb.max));
         let mut cells = 0u64;
         for level in (1..=self.grid.depth).filter(|_| !small) {
@@ -64,25 +91,27 @@ impl Octree {
             }
         }
         if cells > DIRECT_CELLS {
-            self.traverse(
+            return self.traverse(
                 |cell| self.grid.reaches(cell, qlo, qhi),
                 |id| {
                     if root || self.objs[id as usize].node != 0 {
-                        visit(id);
+                        visit(id)
+                    } else {
+                        ControlFlow::Continue(())
                     }
                 },
             );
-            return;
         }
         let mut list = |node: u32| {
             let mut i = self.nodes.head(node);
             while i != NONE {
-                visit(i);
+                visit(i)?;
                 i = self.links[i as usize].next;
             }
+            ControlFlow::Continue(())
         };
         if root && self.per_level[0] > 0 {
-            list(0);
+            list(0)?;
         }
         for level in 1..=self.grid.depth {
             if self.per_level[level as usize] == 0 {
@@ -92,45 +121,92 @@ impl Octree {
             for z in a[2]..=b[2] {
                 for y in a[1]..=b[1] {
                     for x in a[0]..=b[0] {
-                        list(Cell::at(level, [x, y, z]).node());
+                        list(Cell::at(level, [x, y, z]).node())?;
                     }
                 }
             }
         }
+        ControlFlow::Continue(())
     }
 
     /// Calls `f` with the key of every sphere whose AABB overlaps `aabb` (closed), once each,
     /// in no particular order. A non-finite or inverted `aabb` finds nothing.
-    pub fn query_aabb(&self, aabb: &Aabb, f: impl FnMut(ProxyKey)) {
-        if geom::check_aabb(aabb).is_ok() {
-            self.query_aabb_unchecked(aabb, f);
+    pub fn query_aabb(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
+        let _ = self.try_query_aabb(aabb, |key| {
+            f(key);
+            ControlFlow::Continue(())
+        });
+    }
+
+    /// [`Octree::query_aabb`] with a visitor that can stop: the first
+    /// [`ControlFlow::Break`] ends the query and is returned; `Continue` if every match was
+    /// visited.
+    pub fn try_query_aabb(
+        &self,
+        aabb: &Aabb,
+        f: impl FnMut(ProxyKey) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
+        if geom::check_aabb(aabb).is_err() {
+            return ControlFlow::Continue(());
         }
+        self.try_query_aabb_unchecked(aabb, f)
     }
 
     /// [`Octree::query_aabb`] without the input check, for boxes the crate made itself: a
     /// sphere or body near `f32::MAX` has a box that overflows to ±∞ from finite input, and it
     /// must still find what it overlaps.
     pub(crate) fn query_aabb_unchecked(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
+        let _ = self.try_query_aabb_unchecked(aabb, |key| {
+            f(key);
+            ControlFlow::Continue(())
+        });
+    }
+
+    /// [`Octree::try_query_aabb`] without the input check.
+    pub(crate) fn try_query_aabb_unchecked(
+        &self,
+        aabb: &Aabb,
+        mut f: impl FnMut(ProxyKey) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
         self.candidates(aabb, |id| {
             if self.objs[id as usize].aabb.overlaps(aabb) {
-                f(self.keys[id as usize]);
+                f(self.keys[id as usize])
+            } else {
+                ControlFlow::Continue(())
             }
-        });
+        })
     }
 
     /// Calls `f` with the key of every sphere that overlaps the query sphere (centre distance
     /// `<= r1 + r2`, so touching spheres count), once each, in no particular order. A
     /// non-finite centre or radius, or a negative radius, finds nothing.
     pub fn query_sphere(&self, center: Vec3, radius: f32, mut f: impl FnMut(ProxyKey)) {
+        let _ = self.try_query_sphere(center, radius, |key| {
+            f(key);
+            ControlFlow::Continue(())
+        });
+    }
+
+    /// [`Octree::query_sphere`] with a visitor that can stop: the first
+    /// [`ControlFlow::Break`] ends the query and is returned; `Continue` if every match was
+    /// visited.
+    pub fn try_query_sphere(
+        &self,
+        center: Vec3,
+        radius: f32,
+        mut f: impl FnMut(ProxyKey) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
         if geom::check_sphere(center, radius).is_err() {
-            return;
+            return ControlFlow::Continue(());
         }
         self.candidates(&Aabb::from_center_radius(center, radius), |id| {
             let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
             if (c - center).length_squared() <= (r + radius) * (r + radius) {
-                f(self.keys[id as usize]);
+                f(self.keys[id as usize])
+            } else {
+                ControlFlow::Continue(())
             }
-        });
+        })
     }
 
     /// The closest sphere hit by the segment `origin + t·dir`, `t ∈ [0, max_t]` (`t` in units
@@ -146,7 +222,7 @@ impl Octree {
         let slack = self.grid.slack();
         let hit = core::cell::Cell::new(FirstHit::new(max_t));
         let limit = || hit.get().limit();
-        self.traverse(
+        let _ = self.traverse(
             |cell| {
                 self.grid
                     .reach_box(cell)
@@ -160,6 +236,7 @@ impl Octree {
                 let mut h = hit.get();
                 h.offer(self.keys[id as usize], t);
                 hit.set(h);
+                ControlFlow::Continue(())
             },
         );
         hit.get().best()
@@ -198,7 +275,7 @@ impl Octree {
         }
         let inv = geom::inverse_dir(dir);
         let slack = self.grid.slack();
-        self.traverse(
+        let _ = self.traverse(
             |cell| {
                 self.grid
                     .reach_box(cell)
@@ -211,6 +288,7 @@ impl Octree {
                 if let Some(t) = hit(c, r) {
                     f(self.keys[id as usize], t);
                 }
+                ControlFlow::Continue(())
             },
         );
     }
@@ -287,13 +365,14 @@ impl Octree {
             let tb = (t0 + dt * (k + 1) as f32).min(t1);
             let piece = q(ta, tb);
             let range = (self.grid.quantize(piece.min), self.grid.quantize(piece.max));
-            self.candidates_from(&piece, false, true, |id| {
+            let _ = self.candidates_from(&piece, false, true, |id| {
                 let o = &self.objs[id as usize];
                 let new =
                     meets(o, range.0, range.1) && prev.is_none_or(|(lo, hi)| !meets(o, lo, hi));
                 if new {
                     best = best.min(visit(id, best));
                 }
+                ControlFlow::Continue(())
             });
             if tb >= t1 {
                 break;
@@ -315,7 +394,7 @@ impl Octree {
         let inv = geom::inverse_dir(dir);
         let slack = self.grid.slack();
         let best = core::cell::Cell::new(max_t);
-        self.traverse(
+        let _ = self.traverse(
             |cell| {
                 self.grid
                     .reach_box(cell)
@@ -324,7 +403,10 @@ impl Octree {
                     .ray_entry(origin, inv, best.get())
                     .is_some()
             },
-            |id| best.set(best.get().min(visit(id, best.get()))),
+            |id| {
+                best.set(best.get().min(visit(id, best.get())));
+                ControlFlow::Continue(())
+            },
         );
     }
 
@@ -360,24 +442,37 @@ impl Octree {
     /// within `radius` of `p` ([`geom::point_aabb_distance`]): a superset of the spheres whose
     /// box is within `radius`, since that box lies in the grown reach box and the distance
     /// does not decrease as a box shrinks.
-    fn near_ids(&self, p: Vec3, radius: f32, visit: impl FnMut(u32)) {
+    fn near_ids(
+        &self,
+        p: Vec3,
+        radius: f32,
+        visit: impl FnMut(u32) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
         // A box within `radius` of `p` overlaps the cube `p ± radius`.
-        self.candidates(&Aabb::from_center_radius(p, radius), visit);
+        self.candidates(&Aabb::from_center_radius(p, radius), visit)
     }
 
     /// Calls `f(key)` for every sphere whose stored box overlaps the cube `p ± radius`, once
     /// each: a superset of those within `radius` of `p`, for callers that measure exact
-    /// distances themselves. Nothing for a non-finite `p` or a NaN or negative `radius`.
-    pub(crate) fn near(&self, p: Vec3, radius: f32, mut f: impl FnMut(ProxyKey)) {
+    /// distances themselves. Nothing for a non-finite `p` or a NaN or negative `radius`. The
+    /// first `Break` of `f` ends it and is returned.
+    pub(crate) fn near(
+        &self,
+        p: Vec3,
+        radius: f32,
+        mut f: impl FnMut(ProxyKey) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
         if !p.is_finite() || radius.is_nan() || radius < 0.0 {
-            return;
+            return ControlFlow::Continue(());
         }
         let cube = Aabb::from_center_radius(p, radius);
         self.near_ids(p, radius, |id| {
             if self.objs[id as usize].aabb.overlaps(&cube) {
-                f(self.keys[id as usize]);
+                f(self.keys[id as usize])
+            } else {
+                ControlFlow::Continue(())
             }
-        });
+        })
     }
 
     /// The first sphere touched by the sphere `center + t·dir`, `radius`, `t ∈ [0, max_t]`,
@@ -385,9 +480,9 @@ impl Octree {
     /// [`geom::sphere_cast_sphere`]; ties go to the smaller key. `None` if nothing is touched,
     /// or for a non-finite argument, a negative `radius` or a negative `max_t`.
     ///
-    /// Nodes are pruned by their reach box grown by `radius` plus a relative pad
-    /// ([`geom::sphere_cast_sphere`] works in `f64`, the node test in `f32`), and every sphere
-    /// of an entered node is tested exactly.
+    /// Nodes are pruned by their reach box grown by `radius` plus a relative pad (the exact
+    /// test works in `f64`, the node test in `f32`), and every sphere of an entered node is
+    /// tested exactly.
     #[must_use]
     pub fn cast_sphere(
         &self,
@@ -396,11 +491,7 @@ impl Octree {
         dir: Vec3,
         max_t: f32,
     ) -> Option<(ProxyKey, f32)> {
-        if !geom::cast_is_valid(center, radius, dir, max_t) {
-            return None;
-        }
-        let inflate = radius + geom::cast_pad(center, radius, dir, max_t);
-        let mut hit = FirstHit::new(max_t);
+        let (mut hit, inflate) = FirstHit::sphere_cast(center, radius, dir, max_t)?;
         self.ray_ids(center, dir, max_t, inflate, |id, limit| {
             let o = &self.objs[id as usize];
             let t = geom::sphere_cast_sphere(center, radius, dir, limit, o.center, o.radius);
@@ -413,8 +504,8 @@ impl Octree {
     /// with their distances, sorted by `(distance, key)`: the first `k` of all spheres in that
     /// order (all of them if there are fewer). Empty for `k == 0` or a non-finite `point`.
     ///
-    /// An expanding search: starting from the distance to the bounds plus the spacing `k`
-    /// spheres spread evenly over the bounds would have, each round computes the exact
+    /// An expanding search: starting from the distance to the bounds plus a part of the
+    /// spacing `k` spheres spread evenly over the bounds would have, each round computes the exact
     /// distance of every sphere of the nodes within the radius (plus a relative pad, as the
     /// node test rounds differently from the `f32` box corners) and doubles the radius until
     /// `k` spheres are within it or every sphere was seen. A sphere not seen is farther than
@@ -425,17 +516,19 @@ impl Octree {
         if k == 0 || n == 0 || !point.is_finite() {
             return Vec::new();
         }
-        let bounds = self.grid.bounds;
-        let spacing = bounds.extent().max_element() * (k as f32 / n as f32).min(1.0).cbrt();
-        let start = geom::point_aabb_distance(point, &bounds) + spacing;
-        nearest_expanding(k, n, start, |radius, out| {
+        let start = nearest_start(point, &self.grid.bounds, k, n);
+        let mut out = Vec::new();
+        nearest_expanding(k, n, start, &mut out, |radius, out| {
             let reach = radius + geom::distance_pad(point, radius);
-            self.near_ids(point, reach, |id| {
+            let _ = self.near_ids(point, reach, |id| {
                 let o = &self.objs[id as usize];
                 let d = geom::point_sphere_distance(point, o.center, o.radius);
                 out.push((self.keys[id as usize], d));
+                ControlFlow::Continue(())
             });
-        })
+            out.len()
+        });
+        out
     }
 
     /// Calls `f(level, cell)` for every node that holds at least one sphere, parents before
@@ -634,7 +727,10 @@ mod tests {
                     _ => rng.range(0.0, 5.0),
                 };
                 let mut seen = BTreeMap::new();
-                tree.near(p, radius, |key| *seen.entry(key).or_insert(0) += 1);
+                let _ = tree.near(p, radius, |key| {
+                    *seen.entry(key).or_insert(0) += 1;
+                    ControlFlow::Continue(())
+                });
                 assert!(seen.values().all(|&n| n == 1), "a sphere visited twice");
                 for &(key, c, r) in &shapes {
                     let (lo, hi) = own_box(c, r);
@@ -676,7 +772,10 @@ mod tests {
             (Vec3::ZERO, -1.0),
             (Vec3::ZERO, nan),
         ] {
-            tree.near(p, radius, |_| n += 1);
+            let _ = tree.near(p, radius, |_| {
+                n += 1;
+                ControlFlow::Continue(())
+            });
         }
         assert_eq!(n, 0);
     }
