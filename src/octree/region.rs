@@ -182,9 +182,10 @@ impl Regrow {
         } else {
             (side.max(floor), MAX_DEPTH)
         };
-        // Ahead by the world's motion since the last proposal, as far as the region still
-        // covers the span: a world in flight then crosses the whole margin before it leaves.
-        let room = (Vec3::splat(side) - span.extent()) * 0.5;
+        // Ahead by the world's motion since the last re-root, by at most half the margin on
+        // each side (the region still covers the span with room for rounding): a world in
+        // flight then crosses more of the margin before it leaves.
+        let room = (Vec3::splat(side) - span.extent()) * 0.25;
         if moved.is_finite() && room.is_finite() {
             center += moved.clamp(-room.max(Vec3::ZERO), room.max(Vec3::ZERO));
         }
