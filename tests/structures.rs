@@ -334,7 +334,9 @@ impl World {
         assert!(oct.is_growing(), "{context}: the octree's region is fixed");
         let side = region.extent();
         assert!(
-            region.is_finite() && side.x > 0.0 && side.x == side.y && side.y == side.z,
+            region.is_finite()
+                && side.min_element() > 0.0
+                && side.max_element() - side.min_element() <= 1e-5 * side.max_element(),
             "{context}: the octree's region {region:?} is not a cube"
         );
         for (kind, bvh) in [("dynamic", dynamic), ("static", fixed)] {

@@ -35,7 +35,9 @@
 //! on the region's faces, and the overflow spheres meet each other through the root's own
 //! list, which both passes split over the root cell by their clamped ranges. The hysteresis
 //! ([`GROW`], and the power of two above it) lets a world drift by a quarter of its span or
-//! more before the next re-root, so re-roots are amortised like a growing `Vec`'s copies.
+//! more before the next re-root, and a world that moved since the last re-root gets room ahead
+//! of it for as much motion again, so a world in flight re-roots less often the faster it
+//! goes: re-roots are amortised like a growing `Vec`'s copies.
 
 use super::placement::{Grid, depth_for};
 use super::{MAX_DEPTH, NONE, Obj, Placement};
@@ -48,9 +50,9 @@ use glam::Vec3;
 const CELL_DIAMETERS: f32 = 1.25;
 /// A re-rooted region covers the spheres' boxes grown by this factor around their centre,
 /// before rounding its side up to a power of two cells.
-const GROW: f32 = 2.0;
+const GROW: f32 = 1.5;
 /// Loose trees get this many levels below the median sphere's, for smaller spheres.
-const LEVELS_BELOW_TYPICAL: u32 = 2;
+const LEVELS_BELOW_TYPICAL: u32 = 1;
 /// The overflow limit is at least this many spheres.
 const MIN_OVERFLOW: usize = 64;
 /// ...and at least one in this many of the live spheres.
@@ -164,13 +166,21 @@ impl Regrow {
                 }
             }
         }
-        let mut center = span.center();
-        if !center.is_finite() {
+        let span_center = span.center();
+        if !span_center.is_finite() {
             return None;
         }
+        // A world that moved since the last re-root gets room for as much motion again, ahead
+        // of it: re-roots of a world in flight come further apart the faster it flies.
+        let moved = self
+            .last_center
+            .map_or(Vec3::ZERO, |last| span_center - last);
+        let ahead = span.union(&Aabb::new(span.min + moved, span.max + moved));
+        if ahead.is_finite() && fits(wide(&ahead)) {
+            span = ahead;
+        }
+        let center = span.center();
         let side = wide(&span);
-        let span_center = center;
-        let moved = self.last_center.map_or(Vec3::ZERO, |last| center - last);
         // The side's floor: a cube a few float steps wide at the region's distance from the
         // origin, so its corners stay apart.
         let floor = center.abs().max_element().max(1.0) * f32::EPSILON * 64.0;
@@ -182,12 +192,6 @@ impl Regrow {
         } else {
             (side.max(floor), MAX_DEPTH)
         };
-        // Ahead by the world's motion since the last proposal, as far as the region still
-        // covers the span: a world in flight then crosses the whole margin before it leaves.
-        let room = (Vec3::splat(side) - span.extent()) * 0.5;
-        if moved.is_finite() && room.is_finite() {
-            center += moved.clamp(-room.max(Vec3::ZERO), room.max(Vec3::ZERO));
-        }
         let half = Vec3::splat(side * 0.5);
         let bounds = Aabb::new(center - half, center + half);
         geom::check_bounds(&bounds).ok()?;

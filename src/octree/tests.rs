@@ -319,8 +319,8 @@ fn clustered_pair_pass_is_not_quadratic() {
     }
 }
 
-/// The pair pass sorts with a 32-bit radix key up to depth 9 and a comparison sort at depth
-/// 10, and splits long own lists into parts down to the deepest level: every depth, with
+/// The pair pass radix-sorts a 32-bit walk key up to depth 9 and `(walk key, id)` pairs at
+/// depth 10, and splits long own lists into parts down to the deepest level: every depth, with
 /// crowds, big, zero-radius, coincident and outside spheres, must give the brute-force set.
 #[test]
 fn walk_order_pairs_match_brute_force_at_every_depth() {
@@ -358,4 +358,165 @@ fn walk_order_pairs_match_brute_force_at_every_depth() {
             "depth {depth} {p:?}"
         );
     }
+}
+
+/// `n` gas spheres (r = 0.5, 10 % fill) in a cube centred at `center`.
+fn gas_at(center: Vec3, n: usize, seed: u64) -> Gas {
+    let edge = crate::fixtures::scene::cube_edge(n, 0.5, 0.1);
+    Gas::in_box(n, seed, 0.5, center, Vec3::splat(edge))
+}
+
+/// A growing tree's first pass re-roots it around its spheres, wherever they are: none is
+/// left outside, the median sphere's cells are a fixed multiple of its diameter (loose) or
+/// the deepest cells two to four diameters (strict), at the origin as 3 km or 100 km away.
+#[test]
+fn a_growing_tree_roots_around_its_spheres_wherever_they_are() {
+    for p in BOTH {
+        let mut cells = Vec::new();
+        for center in [Vec3::ZERO, Vec3::new(3000.0, 0.0, 0.0), Vec3::splat(1e5)] {
+            let gas = gas_at(center, 4000, 3);
+            let mut t = Octree::growing(p);
+            assert!(t.is_growing());
+            let keys: Vec<_> = gas
+                .centers
+                .iter()
+                .map(|&c| t.insert(c, 0.5).unwrap())
+                .collect();
+            assert_eq!(t.stats().reroots, 0);
+            assert_eq!(sorted_pairs(&mut t), brute::pairs(&proxies(&t)), "{p:?}");
+            t.validate();
+            let st = t.stats();
+            assert_eq!((st.reroots, st.overflow), (1, 0), "{p:?} at {center:?}");
+            let side = t.bounds().extent();
+            assert!(
+                side.max_element() - side.min_element() <= 1e-5 * side.x,
+                "a cube"
+            );
+            assert!(side.x < 200.0, "{p:?}: region {:?}", t.bounds());
+            let cell = match p {
+                Placement::Strict => side.x / (1u32 << t.depth()) as f32,
+                Placement::Loose => side.x / (1u32 << t.level_of(keys[0]).unwrap()) as f32,
+            };
+            cells.push(cell);
+            match p {
+                Placement::Strict => assert!((2.0..4.0).contains(&cell), "{cell}"),
+                Placement::Loose => assert!((1.0..2.0).contains(&cell), "{cell}"),
+            }
+        }
+        // The same cells wherever the world is.
+        assert!(cells.iter().all(|&c| c == cells[0]), "{p:?}: {cells:?}");
+    }
+}
+
+/// One sphere teleported to 1e7 m does not blow the region up to 1e7 m (which would put every
+/// other sphere in one cell): it stays outside, alone; many outliers (more than half the
+/// overflow limit) are covered instead.
+#[test]
+fn one_outlier_does_not_inflate_the_region() {
+    for p in BOTH {
+        let gas = gas_at(Vec3::ZERO, 5000, 4);
+        let mut t = Octree::growing(p);
+        let keys: Vec<_> = gas
+            .centers
+            .iter()
+            .map(|&c| t.insert(c, 0.5).unwrap())
+            .collect();
+        t.maintain();
+        let side = t.bounds().extent().x;
+        t.update(keys[7], Vec3::splat(1e7), 0.5).unwrap();
+        // Force a re-root with the outlier present: more than twice the spheres.
+        for &c in &gas.centers {
+            t.insert(c + Vec3::splat(0.25), 0.5).unwrap();
+        }
+        t.insert(Vec3::ZERO, 0.5).unwrap();
+        let mut pairs = sorted_pairs(&mut t);
+        assert_eq!(t.stats().reroots, 2, "{p:?}");
+        assert_eq!(t.stats().overflow, 1, "{p:?}: the outlier alone is outside");
+        assert!(t.bounds().extent().x <= side, "{p:?}: {:?}", t.bounds());
+        assert_eq!(pairs, brute::pairs(&proxies(&t)));
+        t.validate();
+        // Many outliers: the region covers them all.
+        for (i, &k) in keys[..1000].iter().enumerate() {
+            t.update(k, Vec3::splat(1e7) + Vec3::X * i as f32, 0.5)
+                .unwrap();
+        }
+        pairs.clear();
+        t.pairs_into(&mut pairs);
+        crate::pair::sort_dedup(&mut pairs);
+        assert_eq!(t.stats().overflow, 0, "{p:?}");
+        assert!(t.bounds().extent().x > 1e7, "{p:?}");
+        assert_eq!(pairs, brute::pairs(&proxies(&t)));
+        t.validate();
+    }
+}
+
+/// A world drifting steadily: after every pass the overflow is within the limit, and re-roots
+/// are amortised: far fewer than the steps.
+#[test]
+fn a_drifting_world_keeps_its_overflow_bounded() {
+    for p in BOTH {
+        let mut gas = gas_at(Vec3::ZERO, 6400, 5);
+        let mut t = Octree::growing(p);
+        let keys: Vec<_> = gas
+            .centers
+            .iter()
+            .map(|&c| t.insert(c, 0.5).unwrap())
+            .collect();
+        let steps = 200;
+        for s in 0..steps {
+            gas.step(1.0 / 60.0);
+            let shift = Vec3::new(1.0, -0.5, 0.25) * s as f32;
+            for (&k, &c) in keys.iter().zip(&gas.centers) {
+                t.update(k, c + shift, 0.5).unwrap();
+            }
+            let mut n = 0;
+            t.for_each_pair(|_, _| n += 1);
+            let st = t.stats();
+            assert!(
+                st.overflow as usize <= region::overflow_limit(t.len()),
+                "{p:?} step {s}"
+            );
+        }
+        t.validate();
+        assert_eq!(sorted_pairs(&mut t), brute::pairs(&proxies(&t)));
+        let reroots = t.stats().reroots;
+        assert!(
+            (2..=steps as u32 / 8).contains(&reroots),
+            "{p:?}: {reroots} re-roots"
+        );
+    }
+}
+
+/// When the spheres shrink a hundredfold, an audit notices the cells no longer fit them and
+/// re-roots; a fixed-region tree never re-roots.
+#[test]
+fn an_audit_refits_the_cells_to_shrunk_spheres() {
+    for p in BOTH {
+        let gas = gas_at(Vec3::ZERO, 2000, 6);
+        let mut t = Octree::growing(p);
+        let keys: Vec<_> = gas
+            .centers
+            .iter()
+            .map(|&c| t.insert(c, 0.5).unwrap())
+            .collect();
+        t.maintain();
+        let before = t.grid.typical_cell(0.5);
+        for (&k, &c) in keys.iter().zip(&gas.centers) {
+            t.update(k, c * 0.01, 0.005).unwrap();
+        }
+        for _ in 0..64 {
+            t.maintain();
+        }
+        let after = t.grid.typical_cell(0.005);
+        assert!(after * 20.0 < before, "{p:?}: {before} -> {after}");
+        assert_eq!(t.stats().overflow, 0);
+        assert_eq!(sorted_pairs(&mut t), brute::pairs(&proxies(&t)));
+        t.validate();
+    }
+    let mut fixed = Octree::new(unit(), 3).unwrap();
+    fixed.insert(Vec3::splat(100.0), 1.0).unwrap();
+    fixed.maintain();
+    fixed.pairs_into(&mut Vec::new());
+    assert!(!fixed.is_growing());
+    assert_eq!((fixed.stats().reroots, fixed.bounds()), (0, unit()));
 }
