@@ -192,9 +192,7 @@ mod bvh_benches {
 // Scenes: broadleaf's whole `BroadPhase` step next to rapier's broad phase, same motion.
 // ---------------------------------------------------------------------------------------------
 mod scene_benches {
-    use broadleaf::fixtures::scene::{
-        Bodies, Churn, Feed, Frame, GAS_RADIUS, Gas, Idle, Scene, Spawn,
-    };
+    use broadleaf::fixtures::scene::{Bodies, Churn, Feed, Frame, Gas, Idle, Scene, Spawn};
     use broadleaf::octree::Placement;
     use broadleaf::{BroadPhase, Config};
     use criterion::{BenchmarkId, Criterion, Throughput};
@@ -221,10 +219,7 @@ mod scene_benches {
     /// broadleaf: each iteration advances the scene (untimed) and times applying the frame
     /// plus `step()` — the full step of `benchmarks.md`.
     fn broadleaf(scene: &mut dyn Scene, iters: u64, placement: Placement, skin: f32) -> Duration {
-        let bounds = scene.bounds();
         let mut bp = BroadPhase::new(Config {
-            bounds,
-            octree_depth: placement.depth_for(&bounds, GAS_RADIUS),
             octree_placement: placement,
             skin,
             ..Config::default()

@@ -481,7 +481,7 @@ struct View {
 
 impl View {
     fn new(world: &World, interior: Aabb) -> Self {
-        let bounds = world.broadphase().config().bounds;
+        let bounds = world.broadphase().config().bounds.unwrap_or(interior);
         let pad = 2.0 * RADIUS;
         let min = (bounds.min.x - pad, bounds.min.y - pad);
         let max = (bounds.max.x + pad, interior.max.y + pad);

@@ -148,7 +148,6 @@ fn first(args: &Args) {
 fn step(args: &Args) {
     let mut scene = Bodies::new(args.n, 2);
     let mut bp = BroadPhase::new(Config {
-        bounds: scene.bounds(),
         ..Config::default()
     });
     let mut feed = Feed::new(false);

@@ -133,8 +133,6 @@ fn main() {
         }
         "broadphase" => {
             let mut bp = BroadPhase::new(Config {
-                bounds: gas.bounds,
-                octree_depth: depth,
                 octree_placement: args.placement,
                 ..Config::default()
             });
@@ -159,8 +157,6 @@ fn main() {
                 _ => Box::new(gas.clone()),
             };
             let mut bp = BroadPhase::new(Config {
-                bounds: scene.bounds(),
-                octree_depth: depth,
                 octree_placement: args.placement,
                 ..Config::default()
             });
@@ -234,7 +230,6 @@ fn time_feeding(gas: &Gas, way: Way, steps: usize) -> (f64, f64) {
     let mut gas = gas.clone();
     let n = gas.len().max(1) as f64;
     let mut bp = BroadPhase::new(Config {
-        bounds: gas.bounds,
         ..Config::default()
     });
     let per_object = matches!(way, Way::FeedPerCall);

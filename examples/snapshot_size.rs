@@ -44,7 +44,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let n = cli::or_exit(USAGE, parse(std::env::args().skip(1)));
     let mut gas = Gas::new(n, 1);
     let mut bp = BroadPhase::new(Config {
-        bounds: gas.bounds,
         ..Config::default()
     });
     let (mut insert, mut fresh_step) = (Vec::new(), Vec::new());

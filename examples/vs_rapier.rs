@@ -2,13 +2,17 @@
 //!
 //! ```text
 //! cargo run --release --features profiler --example vs_rapier -- --scene gas --n 100000
-//!     [--steps 30] [--warmup 5] [--placement strict|loose] [--depth D] [--seed 1] [--skin 0]
+//!     [--steps 30] [--warmup 5] [--placement strict|loose] [--seed 1] [--skin 0]
 //!     [--groups G]
 //! ```
 //!
-//! `--scene` is `gas`, `clustered`, `bodies`, `churn`, `pile`, `idle` or `all` (every scene at
-//! its default N: gas, clustered, churn and idle 100 000, bodies and pile 10 000; `--n`
-//! overrides it for all; `all` runs `idle` at 1 % and at 10 % moving). `idle` is the `gas`
+//! `--scene` is `gas`, `clustered`, `bodies`, `churn`, `pile`, `idle`, one of the worlds no
+//! fixed region suits (`far`: the `gas` cube 3 km from the origin; `open`: spheres moving like
+//! `gas` over 4 km × 40 m × 4 km; `sparse`: the same over 1 km × 40 m × 1 km; `large`: r = 5 m
+//! at 10 % fill, an 806 m cube; `flying`: the `gas` cube crossing x = 512 m at 600 m/s;
+//! `fixtures::scene::worlds`) or `all` (every scene at its default N: bodies and pile 10 000,
+//! the others 100 000; `--n` overrides it for all; `all` runs `idle` at 1 % and at 10 %
+//! moving). `idle` is the `gas`
 //! spheres at rest but for a fixed random `--moving P` % of them (default 1) that move like
 //! `gas`; the others are never updated, in broadleaf or in rapier. `bodies --moving P` moves
 //! only a fixed P % of its dynamic boxes (default 100). `--moving` takes a list
@@ -24,9 +28,9 @@
 //! - broadleaf: the frame's removes, inserts and new positions/boxes (one `update_spheres` and
 //!   one `update_bodies` batch; `--per-object` calls `update_sphere` / `update_body` for each
 //!   object instead), then `step()`; spheres go in with `insert_sphere` (into the octree),
-//!   boxes as bodies (into the BVHs). `Config::bounds` is the scene's region; every other
-//!   field is `Config::default()` unless `--placement`, `--depth` (`Config::octree_depth`) or
-//!   `--skin` (`Config::skin`) is given. Timed with `Instant` around all of it.
+//!   boxes as bodies (into the BVHs). The Config is `Config::default()` (no region: the
+//!   octree's follows the spheres) unless `--placement`, `--skin` (`Config::skin`) or
+//!   `--passes` is given. Timed with `Instant` around all of it.
 //! - rapier: kinematic position-based bodies, ball or cuboid colliders with
 //!   `ActiveCollisionTypes::all()`, fixed bodies for static boxes; moved with
 //!   `set_next_kinematic_translation`, then `PhysicsPipeline::step`. Its broad-phase time per
@@ -73,7 +77,9 @@
 
 use broadleaf::fixtures::cli::{self, Flags, Stop};
 use broadleaf::fixtures::rapier_world::{SceneWorld, record_pile};
-use broadleaf::fixtures::scene::{Bodies, Churn, Feed, Frame, Gas, Idle, Rng, Scene, Spawn};
+use broadleaf::fixtures::scene::{
+    Bodies, Churn, Feed, Flying, Frame, Gas, Idle, Rng, Scene, Spawn,
+};
 use broadleaf::rapier::Comparison;
 use broadleaf::{Aabb, BroadPhase, Config, Passes, Placement, ProxyKey, Vec3, brute, geom};
 use plotters::prelude::*;
@@ -91,7 +97,6 @@ struct Args {
     steps: usize,
     warmup: usize,
     placement: Option<Placement>,
-    depth: Option<u32>,
     /// `Config::skin`.
     skin: f32,
     /// `Config::passes`.
@@ -116,8 +121,8 @@ struct Args {
     groups: u32,
 }
 
-const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|idle|all] [--n N] \
-                     [--steps 30] [--warmup 5] [--depth D] \
+const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|idle|far|open|sparse|\
+                     large|flying|all] [--n N] [--steps 30] [--warmup 5] \
                      [--placement strict|loose] [--skin 0] [--passes adaptive|full|incremental] [--seed 1] \
                      [--sizes N1,N2,...] [--moving P1,P2,...] [--plot PATH.svg] [--interleave] \
                      [--per-object] [--queries] [--groups G]";
@@ -129,7 +134,6 @@ fn parse_args(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
         steps: 30,
         warmup: 5,
         placement: None,
-        depth: None,
         skin: 0.0,
         passes: Passes::Adaptive,
         seed: 1,
@@ -187,7 +191,6 @@ fn parse_args(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
                 args.passes = flags.choice(&flag, &passes)?;
             }
             "--skin" => args.skin = flags.parse(&flag)?,
-            "--depth" => args.depth = Some(flags.parse(&flag)?),
             "--placement" => {
                 let placements = [("strict", Placement::Strict), ("loose", Placement::Loose)];
                 args.placement = Some(flags.choice(&flag, &placements)?);
@@ -203,6 +206,20 @@ fn parse_args(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
 
 /// Unrecorded rapier steps that let the `pile` scene settle before its frames are recorded.
 const PILE_SETTLE_STEPS: usize = 240;
+
+/// `--scene all` runs these scenes, then `idle` at each of [`ALL_IDLE_MOVING`].
+const ALL_SCENES: [&str; 10] = [
+    "gas",
+    "clustered",
+    "bodies",
+    "churn",
+    "pile",
+    "far",
+    "open",
+    "sparse",
+    "large",
+    "flying",
+];
 
 /// `--scene all` runs `idle` at each of these percentages of movers.
 const ALL_IDLE_MOVING: [f64; 2] = [1.0, 10.0];
@@ -222,6 +239,11 @@ fn make_scene(
         "bodies" => Box::new(Bodies::with_moving(n, seed, moving)),
         "churn" => Box::new(Churn::new(n, seed)),
         "idle" => Box::new(Idle::new(n, seed, moving)),
+        "far" => Box::new(Gas::far(n, seed)),
+        "open" => Box::new(Gas::open(n, seed)),
+        "sparse" => Box::new(Gas::sparse(n, seed)),
+        "large" => Box::new(Gas::large(n, seed)),
+        "flying" => Box::new(Flying::new(n, seed)),
         _ => return None,
     })
 }
@@ -273,13 +295,11 @@ fn broadleaf_threads() -> usize {
 }
 
 impl Args {
-    /// The broadphase's configuration for a scene in `bounds`: the defaults but for what the
-    /// flags set.
-    fn config(&self, bounds: Aabb) -> Config {
+    /// The broadphase's configuration: the defaults (no region: the octree's follows the
+    /// spheres) but for what the flags set.
+    fn config(&self) -> Config {
         let d = Config::default();
         Config {
-            bounds,
-            octree_depth: self.depth.unwrap_or(d.octree_depth),
             octree_placement: self.placement.unwrap_or(d.octree_placement),
             skin: self.skin,
             passes: self.passes,
@@ -295,9 +315,9 @@ struct Ours {
 }
 
 impl Ours {
-    fn new(bounds: broadleaf::Aabb, args: &Args) -> Self {
+    fn new(args: &Args) -> Self {
         Ours {
-            bp: BroadPhase::new(args.config(bounds)),
+            bp: BroadPhase::new(args.config()),
             feed: Feed::new(false)
                 .per_object(args.per_object)
                 .groups(args.groups),
@@ -329,7 +349,7 @@ struct Row {
 
 /// Both engines with `scene`'s objects inserted and one step taken; also the spawns.
 fn spawn_both(scene: &dyn Scene, args: &Args) -> (Ours, SceneWorld, Vec<Spawn>) {
-    let mut ours = Ours::new(scene.bounds(), args);
+    let mut ours = Ours::new(args);
     let mut theirs = SceneWorld::new().groups(args.groups);
     let mut spawns = Vec::new();
     scene.spawns(&mut spawns);
@@ -448,7 +468,7 @@ fn main() {
         return;
     }
     let names: Vec<(&str, Option<f64>)> = match args.scene.as_str() {
-        "all" => ["gas", "clustered", "bodies", "churn", "pile"]
+        "all" => ALL_SCENES
             .map(|name| (name, None))
             .into_iter()
             .chain(ALL_IDLE_MOVING.map(|p| ("idle", Some(p))))
@@ -459,12 +479,11 @@ fn main() {
         }
         s => cli::fail(USAGE, &format!("unknown scene {s}")),
     };
-    let config = args.config(Aabb::new(Vec3::ZERO, Vec3::ONE));
+    let config = args.config();
     println!(
-        "spheres in the octree (depth {}, {:?} placement), bodies in the BVHs (rebuild at {}× \
+        "spheres in the octree (region and depth follow the spheres, {:?} placement), bodies in the BVHs (rebuild at {}× \
          the built SAH cost), skin {}, passes {:?}, {} measured steps after {} warm-up, seed {}, \
          {}; times: median ns/object/step",
-        config.octree_depth,
         config.octree_placement,
         config.rebuild_threshold,
         config.skin,

@@ -62,8 +62,7 @@ fn setup(scene: &impl Scene, placement: Placement) -> (BroadPhase, Feed) {
 fn setup_with_skin(scene: &impl Scene, placement: Placement, skin: f32) -> (BroadPhase, Feed) {
     let bounds = scene.bounds();
     let mut bp = BroadPhase::new(Config {
-        bounds,
-        octree_depth: placement.depth_for(&bounds, 0.5),
+        bounds: Some(bounds),
         octree_placement: placement,
         skin,
         passes: if skin > 0.0 {

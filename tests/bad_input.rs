@@ -57,8 +57,7 @@ fn skin_of(passes: Passes) -> f32 {
 /// A small world with one of each kind, stepped once.
 fn world((placement, passes): (Placement, Passes)) -> (BroadPhase, Vec<ProxyKey>) {
     let mut bp = BroadPhase::new(Config {
-        bounds: Aabb::new(Vec3::splat(-4.0), Vec3::splat(4.0)),
-        octree_depth: 3,
+        bounds: Some(Aabb::new(Vec3::splat(-4.0), Vec3::splat(4.0))),
         octree_placement: placement,
         skin: skin_of(passes),
         passes,
@@ -212,10 +211,6 @@ fn bad_queries_answer_nothing_and_do_not_panic() {
 fn bad_config_is_refused_by_try_new_and_corrected_by_new() {
     let bad = [
         Config {
-            octree_depth: 11,
-            ..Config::default()
-        },
-        Config {
             margin: -1.0,
             ..Config::default()
         },
@@ -236,15 +231,15 @@ fn bad_config_is_refused_by_try_new_and_corrected_by_new() {
             ..Config::default()
         },
         Config {
-            bounds: Aabb::new(Vec3::ONE, Vec3::ZERO),
+            bounds: Some(Aabb::new(Vec3::ONE, Vec3::ZERO)),
             ..Config::default()
         },
         Config {
-            bounds: Aabb::new(Vec3::ZERO, Vec3::new(1.0, 0.0, 1.0)),
+            bounds: Some(Aabb::new(Vec3::ZERO, Vec3::new(1.0, 0.0, 1.0))),
             ..Config::default()
         },
         Config {
-            bounds: Aabb::new(Vec3::ZERO, Vec3::splat(INF)),
+            bounds: Some(Aabb::new(Vec3::ZERO, Vec3::splat(INF))),
             ..Config::default()
         },
     ];

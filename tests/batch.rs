@@ -315,8 +315,7 @@ proptest! {
             Just(Config::default()),
             Just(Config { margin: 0.2, ..Config::default() }),
             Just(Config {
-                bounds: Aabb::new(Vec3::splat(-8.0), Vec3::splat(8.0)),
-                octree_depth: 3,
+                bounds: Some(Aabb::new(Vec3::splat(-8.0), Vec3::splat(8.0))),
                 skin: 0.1,
                 ..Config::default()
             }),

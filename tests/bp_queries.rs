@@ -159,7 +159,7 @@ fn queries_equal_brute_force_on_moving_worlds() {
     ] {
         let mut rng = Rng::new(seed);
         let mut bp = BroadPhase::new(Config {
-            bounds: Aabb::new(Vec3::splat(-16.0), Vec3::splat(16.0)),
+            bounds: Some(Aabb::new(Vec3::splat(-16.0), Vec3::splat(16.0))),
             margin,
             passes,
             ..Config::default()

@@ -51,8 +51,7 @@ fn scene_hash(unrelated: Unrelated) -> u64 {
 fn scene_hash_with_skin(unrelated: Unrelated, skin: f32) -> u64 {
     let mut gas = Gas::new(1500, 99);
     let mut bp = BroadPhase::new(Config {
-        bounds: gas.bounds,
-        octree_depth: 4,
+        bounds: Some(gas.bounds),
         skin,
         passes: if skin > 0.0 {
             Passes::Incremental
@@ -319,8 +318,7 @@ fn scene_hash_equals_the_models_and_the_golden_values() {
     for config in [
         Config::default(),
         Config {
-            bounds: Aabb::new(Vec3::splat(-8.0), Vec3::splat(8.0)),
-            octree_depth: 3,
+            bounds: Some(Aabb::new(Vec3::splat(-8.0), Vec3::splat(8.0))),
             ..Config::default()
         },
         Config {

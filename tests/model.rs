@@ -285,8 +285,7 @@ fn batch(bp: &mut BroadPhase, model: &mut Model, spheres: bool, entries: &[(usiz
 
 fn bounded(margin: f32, skin: f32) -> Config {
     Config {
-        bounds: Aabb::new(Vec3::splat(-8.0), Vec3::splat(8.0)),
-        octree_depth: 3,
+        bounds: Some(Aabb::new(Vec3::splat(-8.0), Vec3::splat(8.0))),
         margin,
         skin,
         ..Config::default()

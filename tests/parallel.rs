@@ -152,8 +152,10 @@ impl Checked {
 fn run(world: World) -> u64 {
     let mut rng = Rng::new(world.seed);
     let mut bp = BroadPhase::new(Config {
-        bounds: broadleaf::Aabb::new(Vec3::splat(-0.9 * HALF), Vec3::splat(0.9 * HALF)),
-        octree_depth: 6,
+        bounds: Some(broadleaf::Aabb::new(
+            Vec3::splat(-0.9 * HALF),
+            Vec3::splat(0.9 * HALF),
+        )),
         octree_placement: world.placement,
         passes: world.passes,
         margin: world.margin,
@@ -336,7 +338,6 @@ fn allocations_per_step(threads: Option<usize>) -> Vec<usize> {
     let run = || {
         let mut gas = Gas::new(2 * THRESHOLD, 7);
         let mut bp = BroadPhase::new(Config {
-            bounds: gas.bounds(),
             ..Config::default()
         });
         let (mut feed, mut frame, mut spawns) = (Feed::new(false), Frame::default(), Vec::new());

@@ -223,7 +223,6 @@ fn filtered_queries_equal_brute_force_on_moving_worlds() {
     ] {
         let mut rng = Rng::new(seed);
         let mut bp = BroadPhase::new(Config {
-            bounds: Aabb::new(Vec3::splat(-16.0), Vec3::splat(16.0)),
             passes,
             ..Config::default()
         });
@@ -327,10 +326,7 @@ fn check_early_exit(
 fn a_breaking_visitor_stops_every_query() {
     let mut rng = Rng::new(7);
     let bounds = Aabb::new(Vec3::splat(-10.0), Vec3::splat(10.0));
-    let mut bp = BroadPhase::new(Config {
-        bounds,
-        ..Config::default()
-    });
+    let mut bp = BroadPhase::new(Config::default());
     let mut tree = Octree::new(bounds, 5).unwrap();
     let mut bvh = Bvh::new(BvhConfig::default()).unwrap();
     for _ in 0..300 {

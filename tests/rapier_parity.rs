@@ -172,8 +172,10 @@ fn falling_balls_and_boxes_match_rapier_at_every_step() {
     let (mut world, mut balls) = falling_scene(&mut rng);
     assert!(balls.len() >= 2000);
     let mut mirror = Mirror::new(Config {
-        bounds: Aabb::new(Vec3::new(-10.0, -2.0, -10.0), Vec3::new(10.0, 30.0, 10.0)),
-        octree_depth: 4,
+        bounds: Some(Aabb::new(
+            Vec3::new(-10.0, -2.0, -10.0),
+            Vec3::new(10.0, 30.0, 10.0),
+        )),
         ..Config::default()
     });
     // A second mirror synced after the step (one step late), to show what that timing gives.
@@ -338,8 +340,10 @@ fn collision_groups_filter_like_rapier_at_every_step() {
         }
     }
     let mut mirror = Mirror::new(Config {
-        bounds: Aabb::new(Vec3::new(-10.0, -2.0, -10.0), Vec3::new(10.0, 30.0, 10.0)),
-        octree_depth: 4,
+        bounds: Some(Aabb::new(
+            Vec3::new(-10.0, -2.0, -10.0),
+            Vec3::new(10.0, 30.0, 10.0),
+        )),
         ..Config::default()
     });
     let (mut filtered, mut dropped_or, mut regrouped, mut or_mode, mut max_exact) = (0, 0, 0, 0, 0);

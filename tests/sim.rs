@@ -226,16 +226,32 @@ fn octree_and_bvh_paths_give_the_same_pairs_at_every_step() {
 }
 
 #[test]
-fn the_drop_scene_sizes_the_octree_for_its_placement() {
-    // 4000 spheres: the container is 20.75 m wide and 24.75 m tall (walls included), so strict
-    // cells of at least two diameters along the tallest side stop at level 3 (3.1 m), and
-    // loose cells of at least one diameter along the narrowest at level 4 (1.3 m).
-    for (placement, depth) in [(Placement::Strict, 3), (Placement::Loose, 4)] {
+fn the_drop_scenes_octree_follows_its_spheres() {
+    // 4000 spheres of radius 0.5 in a container about 21 m wide and 25 m tall (the Config's
+    // region hint): after the first step every sphere is inside the octree's region, and the
+    // cells fit the spheres for either placement (loose: every sphere at a level whose cells
+    // are between one and four diameters; strict: the deepest cells at least two diameters).
+    for placement in [Placement::Strict, Placement::Loose] {
         let mut config = DropConfig::new(4000, RADIUS, SEED);
         config.world.broadphase.octree_placement = placement;
-        let scene = config.build().unwrap();
-        let c = scene.world.broadphase().config();
-        assert_eq!(c.octree_depth, depth, "{placement:?}");
-        assert_eq!(c.octree_depth, placement.depth_for(&c.bounds, RADIUS));
+        let mut scene = config.build().unwrap();
+        scene.world.step(DT).unwrap();
+        let octree = scene.world.broadphase().octree();
+        let stats = octree.stats();
+        assert_eq!(stats.overflow, 0, "{placement:?}: {stats:?}");
+        let side = octree.bounds().extent().x;
+        let cell = |level: u32| side / (1u32 << level) as f32;
+        match placement {
+            Placement::Strict => {
+                let deepest = cell(octree.depth());
+                assert!((4.0 * RADIUS..8.0 * RADIUS).contains(&deepest), "{deepest}");
+            }
+            Placement::Loose => {
+                for &key in scene.world.sphere_keys() {
+                    let c = cell(octree.level_of(key).unwrap());
+                    assert!((2.0 * RADIUS..8.0 * RADIUS).contains(&c), "{c}");
+                }
+            }
+        }
     }
 }

@@ -269,8 +269,7 @@ const FOLLOW: usize = 50;
 
 fn run(seed: u64, passes: Passes, margin: f32, placement: Placement) {
     let config = Config {
-        bounds: Aabb::new(Vec3::splat(-8.0), Vec3::splat(8.0)),
-        octree_depth: 3,
+        bounds: Some(Aabb::new(Vec3::splat(-8.0), Vec3::splat(8.0))),
         octree_placement: placement,
         margin,
         passes,
@@ -345,8 +344,7 @@ fn restored_broadphase_continues_bit_identically() {
 /// pending update.
 fn small() -> BroadPhase {
     let mut bp = BroadPhase::new(Config {
-        bounds: Aabb::new(Vec3::splat(-4.0), Vec3::splat(4.0)),
-        octree_depth: 2,
+        bounds: Some(Aabb::new(Vec3::splat(-4.0), Vec3::splat(4.0))),
         margin: 0.1,
         ..Config::default()
     });
@@ -603,7 +601,7 @@ fn each_broken_rule_is_refused_with_its_reason() {
     };
     refused_with(&edit(&|e| e["format"] = json!(2)), "format 2");
     refused_with(
-        &edit(&|e| e["config"]["octree_depth"] = json!(11)),
+        &edit(&|e| e["config"]["bounds"] = json!({ "min": [1, 1, 1], "max": [0, 0, 0] })),
         "config",
     );
     refused_with(&edit(&|e| e["config"]["margin"] = json!(-1.0)), "config");

@@ -1,19 +1,19 @@
 //! The broadphase's own structures hold what it says they hold: after every `step()` of random
 //! operation sequences (insert sphere / dynamic body / static body, move, teleport, resize,
-//! remove, steps where most things move), under Configs crossing octree depths 0, 3, 7, 10,
-//! both placements, margins 0 and 0.1, skins 0 and 0.05, rebuild thresholds 1, 1.5 and 4, and
+//! remove, steps where most things move), under Configs crossing both placements, margins 0 and 0.1, skins 0 and 0.05, rebuild thresholds 1, 1.5 and 4, and
 //! each `Passes`:
 //! - every live sphere is in `octree()` under its key and in neither BVH, every body in the
 //!   BVH of its kind only, removed keys in none, and the lengths are the live counts;
 //! - every stored box covers the shape grown by the margin (it may be larger: fat boxes);
 //! - `octree().stats().per_level` is the histogram of `level_of` over the live spheres, and
 //!   `overflow` is at most `per_level[0]`;
-//! - `octree()` has the Config's depth, placement and bounds, each BVH its rebuild threshold;
+//! - `octree()` has the Config's placement, a cubic region (it follows the spheres: derived
+//!   state, read from the tree) and a depth up to `MAX_DEPTH`, each BVH its rebuild threshold;
 //! - with `Passes::Full` (the octree then holds exactly `center ± (radius + margin)`) every
 //!   sphere's level is the one the test derives from the placement rule with its own
-//!   arithmetic (strict: the deepest level whose cell grid has the box's two corners in one
-//!   cell; loose: the deepest level whose cells, along the bounds' shortest axis, are at least
-//!   the diameter), spheres that do not fit are at level 0 and counted in `overflow`; cases
+//!   arithmetic over the tree's current region and depth (strict: the deepest level whose cell
+//!   grid has the box's two corners in one cell; loose: the deepest level whose cells, along
+//!   the region's shortest axis, are at least the diameter), spheres that do not fit are at level 0 and counted in `overflow`; cases
 //!   within 1e-3 cell of a deciding plane or cell size are skipped. Under any `Passes`, a
 //!   strict sphere is no deeper than its exact box allows and at the level its stored box
 //!   gives;
@@ -21,11 +21,12 @@
 
 mod common;
 
+use broadleaf::octree::MAX_DEPTH;
 use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Passes, Placement, ProxyKey, Vec3};
 use common::{Model, ModelShape, Rng};
 
-/// The octree's bounds: off the origin and longer on x than on z than on y, so the root's
-/// split planes are at 2 on every axis and the shortest axis (y) is not the first.
+/// Where the spheres live (and the Config's region hint): off the origin and longer on x than
+/// on z than on y.
 const BOUNDS: Aabb = Aabb {
     min: Vec3::new(-30.0, -14.0, -22.0),
     max: Vec3::new(34.0, 18.0, 26.0),
@@ -97,9 +98,9 @@ fn covers(outer: &Aabb, inner: &Aabb) -> bool {
     (0..3).all(|a| outer.min[a] <= inner.min[a] && inner.max[a] <= outer.max[a])
 }
 
-/// Where a coordinate lies along `axis` of the bounds, as a fraction: 0 at `min`, 1 at `max`.
-fn fraction(x: f32, axis: usize) -> f64 {
-    let (lo, hi) = (f64::from(BOUNDS.min[axis]), f64::from(BOUNDS.max[axis]));
+/// Where a coordinate lies along `axis` of `region`, as a fraction: 0 at `min`, 1 at `max`.
+fn fraction(x: f32, axis: usize, region: &Aabb) -> f64 {
+    let (lo, hi) = (f64::from(region.min[axis]), f64::from(region.max[axis]));
     (f64::from(x) - lo) / (hi - lo)
 }
 
@@ -115,17 +116,17 @@ struct Expected {
     overflow: bool,
 }
 
-/// Strict placement of a box in an octree over `BOUNDS` of `depth`, from the definition: a box
+/// Strict placement of a box in an octree over `region` of `depth`, from the definition: a box
 /// that leaves the bounds is overflow at level 0; otherwise its level is the deepest `L` whose
 /// grid of `2^L` cells per axis has the box's two corners in the same cell on every axis.
 /// `None` if a face is within `CLEAR` deepest cell of the bounds, or a corner within `CLEAR`
 /// level-`L` cell of a level-`L` plane for a level up to one below the answer.
-fn strict_placement(b: &Aabb, depth: u32) -> Option<Expected> {
+fn strict_placement(b: &Aabb, region: &Aabb, depth: u32) -> Option<Expected> {
     let deepest = f64::from(1u32 << depth);
     let (mut lo, mut hi) = ([0.0; 3], [0.0; 3]);
     for a in 0..3 {
-        lo[a] = fraction(b.min[a], a);
-        hi[a] = fraction(b.max[a], a);
+        lo[a] = fraction(b.min[a], a, region);
+        hi[a] = fraction(b.max[a], a, region);
         for t in [lo[a] * deepest, hi[a] * deepest] {
             if t.abs() < CLEAR || (t - deepest).abs() < CLEAR {
                 return None;
@@ -159,22 +160,22 @@ fn strict_placement(b: &Aabb, depth: u32) -> Option<Expected> {
 }
 
 /// Loose placement of a sphere of centre `c` and (margin-grown) radius `r` in an octree over
-/// `BOUNDS` of `depth`: a centre outside the bounds, or a diameter above the bounds' shortest
+/// `region` of `depth`: a centre outside the bounds, or a diameter above the bounds' shortest
 /// side, is overflow at level 0; otherwise the level is the deepest `L <= depth` whose cell
 /// edge along the shortest axis (`shortest / 2^L`) is at least the diameter. `None` if the
 /// centre is within `CLEAR` deepest cell of a face of the bounds, or the diameter within
 /// `CLEAR` (relative) of a cell edge.
-fn loose_placement(c: Vec3, r: f32, depth: u32) -> Option<Expected> {
+fn loose_placement(c: Vec3, r: f32, region: &Aabb, depth: u32) -> Option<Expected> {
     let deepest = f64::from(1u32 << depth);
     let mut outside = false;
     for a in 0..3 {
-        let t = fraction(c[a], a) * deepest;
+        let t = fraction(c[a], a, region) * deepest;
         if (t.abs() < CLEAR) || ((t - deepest).abs() < CLEAR) {
             return None;
         }
         outside |= t < 0.0 || t > deepest;
     }
-    let extent = BOUNDS.max - BOUNDS.min;
+    let extent = region.max - region.min;
     let shortest = (0..3)
         .map(|a| f64::from(extent[a]))
         .fold(f64::INFINITY, f64::min);
@@ -323,13 +324,19 @@ impl World {
             bp.bvh(BodyKind::Dynamic),
             bp.bvh(BodyKind::Static),
         );
-        assert_eq!(oct.depth(), config.octree_depth, "{context}: octree depth");
+        let (region, depth) = (oct.bounds(), oct.depth());
+        assert!(depth <= MAX_DEPTH, "{context}: octree depth {depth}");
         assert_eq!(
             oct.placement(),
             config.octree_placement,
             "{context}: placement"
         );
-        assert_eq!(oct.bounds(), config.bounds, "{context}: octree bounds");
+        assert!(oct.is_growing(), "{context}: the octree's region is fixed");
+        let side = region.extent();
+        assert!(
+            region.is_finite() && side.x > 0.0 && side.x == side.y && side.y == side.z,
+            "{context}: the octree's region {region:?} is not a cube"
+        );
         for (kind, bvh) in [("dynamic", dynamic), ("static", fixed)] {
             assert_eq!(
                 bvh.config().rebuild_threshold,
@@ -357,7 +364,7 @@ impl World {
                         "{context}: sphere {key:?}'s octree box {stored:?} misses {want:?}"
                     );
                     let level = oct.level_of(key).expect("a live sphere has a level");
-                    assert!(level <= config.octree_depth, "{context}: level {level}");
+                    assert!(level <= depth, "{context}: level {level}");
                     histogram[level as usize] += 1;
                     let sphere = Placed {
                         key,
@@ -367,7 +374,7 @@ impl World {
                         stored,
                         level,
                     };
-                    match check_level(config, tally, &sphere, context) {
+                    match check_level(config, (&region, depth), tally, &sphere, context) {
                         Some(true) => overflow_sure += 1,
                         Some(false) => {}
                         None => overflow_maybe += 1,
@@ -453,8 +460,14 @@ struct Placed {
 
 /// Checks one sphere's level against the placement rule (module docs) and returns whether it
 /// overflows, `None` if that is too close to call (or not derivable under this `Passes`).
-fn check_level(config: &Config, tally: &mut Tally, s: &Placed, context: &str) -> Option<bool> {
-    let (depth, full) = (config.octree_depth, config.passes == Passes::Full);
+fn check_level(
+    config: &Config,
+    (region, depth): (&Aabb, u32),
+    tally: &mut Tally,
+    s: &Placed,
+    context: &str,
+) -> Option<bool> {
+    let full = config.passes == Passes::Full;
     let Placed {
         key,
         center,
@@ -475,7 +488,7 @@ fn check_level(config: &Config, tally: &mut Tally, s: &Placed, context: &str) ->
             if !full {
                 // A box at least as large as the exact one is placed no deeper than the exact
                 // one, and where its own corners say.
-                if let Some(e) = strict_placement(&exact, depth) {
+                if let Some(e) = strict_placement(&exact, region, depth) {
                     assert!(
                         level <= e.level,
                         "{context}: sphere {key:?} at level {level}, deeper than its exact box \
@@ -483,7 +496,7 @@ fn check_level(config: &Config, tally: &mut Tally, s: &Placed, context: &str) ->
                         e.level
                     );
                 }
-                if let Some(e) = strict_placement(&stored, depth) {
+                if let Some(e) = strict_placement(&stored, region, depth) {
                     assert_eq!(
                         level, e.level,
                         "{context}: sphere {key:?} (stored box {stored:?}) by the strict rule"
@@ -491,13 +504,13 @@ fn check_level(config: &Config, tally: &mut Tally, s: &Placed, context: &str) ->
                 }
                 return None;
             }
-            strict_placement(&exact, depth)
+            strict_placement(&exact, region, depth)
         }
         Placement::Loose => {
             if !full {
                 return None;
             }
-            loose_placement(center, r, depth)
+            loose_placement(center, r, region, depth)
         }
     };
     let Some(e) = expected else {
@@ -520,15 +533,14 @@ fn check_level(config: &Config, tally: &mut Tally, s: &Placed, context: &str) ->
     Some(e.overflow)
 }
 
-/// The runs' Configs for one `Passes` (`p` its index): every depth under both placements and
-/// both margins, with skins and thresholds crossed so that every value of each comes up.
+/// The runs' Configs for one `Passes` (`p` its index): both placements, both margins, with and
+/// without a region hint, with skins and thresholds crossed so that every value of each comes
+/// up.
 fn configs(passes: Passes, p: usize) -> Vec<Config> {
-    const DEPTHS: [u32; 4] = [0, 3, 7, 10];
     const THRESHOLDS: [f32; 3] = [1.0, 1.5, 4.0];
     (0..16)
         .map(|j| Config {
-            bounds: BOUNDS,
-            octree_depth: DEPTHS[j % 4],
+            bounds: [None, Some(BOUNDS)][j % 2],
             octree_placement: [Placement::Strict, Placement::Loose][j / 4 % 2],
             margin: [0.0, 0.1][j / 8],
             skin: [0.0, 0.05][(j / 2 + j / 8 + p) % 2],
@@ -562,22 +574,18 @@ fn run(passes: Passes, p: usize) {
     }
 }
 
-/// The clear cases the run was built to reach were checked at least once.
+/// The clear cases the run was built to reach were checked at least once (overflow is not
+/// among them: the region follows the spheres, so a sphere is outside it only between a
+/// teleport and the next re-root).
 fn expect_reached(w: &World, name: &str) {
     let (c, t) = (&w.config, &w.tally);
-    assert!(t.overflow > 0, "{name}: no overflow case checked: {t:?}");
-    if c.octree_depth == 0 {
-        return;
+    if c.octree_placement == Placement::Strict {
+        assert!(t.root_inside > 0, "{name}: no level-0 case inside: {t:?}");
     }
-    assert!(t.root_inside > 0, "{name}: no level-0 case inside: {t:?}");
-    let extent = BOUNDS.max - BOUNDS.min;
-    let cell = extent.min_element() / (1u32 << c.octree_depth) as f32;
-    if 2.0 * (1e-3 + c.margin) * 4.0 < cell {
-        assert!(
-            t.deepest > 0,
-            "{name}: no deepest-level case checked: {t:?}"
-        );
-    }
+    assert!(
+        t.deepest > 0,
+        "{name}: no deepest-level case checked: {t:?}"
+    );
 }
 
 #[test]
@@ -602,7 +610,7 @@ fn the_tests_placement_rules_on_known_cases() {
     // Strict, depth 3 (cells 8 × 4 × 6 m): a box across the root's x plane is at level 0.
     let across = Aabb::new(m - Vec3::new(0.5, -1.0, -1.0), m + Vec3::new(0.5, 2.0, 2.0));
     assert_eq!(
-        strict_placement(&across, 3),
+        strict_placement(&across, &BOUNDS, 3),
         Some(Expected {
             level: 0,
             overflow: false
@@ -612,46 +620,58 @@ fn the_tests_placement_rules_on_known_cases() {
     // (Inside deepest cell (16, 32, 21) of a depth-10 tree, 0.3 cell or more from its faces.)
     let c = Vec3::new(-28.97, -12.98, -20.99);
     let small = Aabb::new(c - 0.005, c + 0.005);
-    assert_eq!(strict_placement(&small, 3).map(|e| e.level), Some(3));
-    assert_eq!(strict_placement(&small, 10).map(|e| e.level), Some(10));
+    assert_eq!(
+        strict_placement(&small, &BOUNDS, 3).map(|e| e.level),
+        Some(3)
+    );
+    assert_eq!(
+        strict_placement(&small, &BOUNDS, 10).map(|e| e.level),
+        Some(10)
+    );
     // 2 m boxes in the first octant: inside one level-2 cell (16 × 8 × 12) but across a
     // level-3 plane on x (x = -22).
     let mid_size = Aabb::new(
         Vec3::new(-23.0, -13.0, -21.0),
         Vec3::new(-21.0, -11.0, -19.0),
     );
-    assert_eq!(strict_placement(&mid_size, 7).map(|e| e.level), Some(2));
+    assert_eq!(
+        strict_placement(&mid_size, &BOUNDS, 7).map(|e| e.level),
+        Some(2)
+    );
     // Leaving the bounds: overflow; touching a face: too close to call.
     let out = Aabb::new(Vec3::new(33.0, 0.5, 0.5), Vec3::new(35.0, 1.5, 1.5));
     assert_eq!(
-        strict_placement(&out, 7),
+        strict_placement(&out, &BOUNDS, 7),
         Some(Expected {
             level: 0,
             overflow: true
         })
     );
     let touching = Aabb::new(Vec3::new(33.0, 0.5, 0.5), Vec3::new(34.0, 1.5, 1.5));
-    assert_eq!(strict_placement(&touching, 7), None);
+    assert_eq!(strict_placement(&touching, &BOUNDS, 7), None);
     // Loose, shortest side 32 m: radius 1 (diameter 2) fits cells of 2 m at level 4.
     assert_eq!(
-        loose_placement(Vec3::new(1.3, 0.7, 0.2), 0.9, 7).map(|e| e.level),
+        loose_placement(Vec3::new(1.3, 0.7, 0.2), 0.9, &BOUNDS, 7).map(|e| e.level),
         Some(4)
     );
-    assert_eq!(loose_placement(Vec3::new(1.3, 0.7, 0.2), 1.0, 7), None);
     assert_eq!(
-        loose_placement(Vec3::new(1.3, 0.7, 0.2), 0.9, 3).map(|e| e.level),
+        loose_placement(Vec3::new(1.3, 0.7, 0.2), 1.0, &BOUNDS, 7),
+        None
+    );
+    assert_eq!(
+        loose_placement(Vec3::new(1.3, 0.7, 0.2), 0.9, &BOUNDS, 3).map(|e| e.level),
         Some(3)
     );
     // Too big for the root, or centred outside: overflow.
     assert_eq!(
-        loose_placement(Vec3::ZERO, 17.0, 7),
+        loose_placement(Vec3::ZERO, 17.0, &BOUNDS, 7),
         Some(Expected {
             level: 0,
             overflow: true
         })
     );
     assert_eq!(
-        loose_placement(Vec3::new(40.0, 0.0, 0.0), 0.1, 7),
+        loose_placement(Vec3::new(40.0, 0.0, 0.0), 0.1, &BOUNDS, 7),
         Some(Expected {
             level: 0,
             overflow: true

@@ -3,20 +3,18 @@
 use crate::bvh::BvhConfig;
 use crate::geom;
 use crate::octree::Placement;
-use crate::{Aabb, Error, Vec3};
+use crate::{Aabb, Error};
 
 /// Settings of a [`BroadPhase`](super::BroadPhase). Every field has a default, and the defaults are the fast
 /// choice for every kind of world: nothing here needs tuning for speed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Config {
-    /// The region the octree subdivides, in metres; finite with `min < max`. Spheres outside
-    /// it are kept (in the octree's root) and paired like any other, only less efficiently.
-    pub bounds: Aabb,
-    /// Levels of the octree below the root, `0..=octree::MAX_DEPTH`: the deepest cells are
-    /// `bounds / 2^depth` wide. With the default [`Placement::Loose`] a sphere lives at the
-    /// deepest level whose cells are at least its diameter, so the depth only caps how small
-    /// a cell gets: spheres smaller than the deepest cells share them.
-    pub octree_depth: u32,
+    /// A hint of the region the spheres will occupy, in metres (finite, `min < max`), or
+    /// `None` (the default): the octree's region follows the spheres either way
+    /// ([`Octree::growing`](crate::Octree::growing)), and its depth follows their radii. A
+    /// right hint spares the re-roots of a world that spreads into it; a wrong one costs at
+    /// most a re-root (a hint too wide for the spheres' cells, or far from them, is ignored).
+    pub bounds: Option<Aabb>,
     /// Which node of the octree a sphere lives in ([`Placement`]).
     pub octree_placement: Placement,
     /// Every box is grown by this many metres on each side before pairing; `>= 0`. With the
@@ -47,12 +45,11 @@ pub enum Passes {
 }
 
 impl Default for Config {
-    /// Bounds ±512 m, octree depth 9 (deepest cells 2 m), loose placement, margin 0, rebuild
-    /// threshold 1.5, adaptive fat margins (skin 0), adaptive passes.
+    /// No region hint, loose placement, margin 0, rebuild threshold 1.5, adaptive fat margins
+    /// (skin 0), adaptive passes.
     fn default() -> Self {
         Self {
-            bounds: Aabb::new(Vec3::splat(-512.0), Vec3::splat(512.0)),
-            octree_depth: 9,
+            bounds: None,
             octree_placement: Placement::Loose,
             margin: 0.0,
             rebuild_threshold: 1.5,
@@ -65,12 +62,8 @@ impl Default for Config {
 impl Config {
     /// `Ok` if every field is in its documented range, else the first offending field.
     pub fn validate(&self) -> Result<(), Error> {
-        geom::check_bounds(&self.bounds)?;
-        if self.octree_depth > crate::octree::MAX_DEPTH {
-            return Err(Error::DepthOutOfRange {
-                depth: self.octree_depth,
-                max: crate::octree::MAX_DEPTH,
-            });
+        if let Some(hint) = &self.bounds {
+            geom::check_bounds(hint)?;
         }
         if !(self.margin.is_finite() && self.margin >= 0.0) {
             return Err(Error::InvalidConfig {

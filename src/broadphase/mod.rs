@@ -163,7 +163,7 @@ pub struct StepStats {
     pub candidates: usize,
     /// Pairs reported.
     pub pairs: usize,
-    /// Spheres per octree level (`[0]` is the root, with the spheres outside the bounds).
+    /// Spheres per octree level (`[0]` is the root, with the spheres outside its region).
     pub octree_per_level: [u32; crate::octree::MAX_DEPTH as usize + 1],
     /// The dynamic BVH's SAH cost over its cost at its last build (1 when just built).
     pub dynamic_cost_ratio: f32,
@@ -232,19 +232,16 @@ pub struct BroadPhase {
 
 impl BroadPhase {
     /// A broadphase with `config`. Fields out of range are replaced by their nearest valid
-    /// value (depth clamped, bad bounds by the default bounds, a bad margin or skin by 0, a
-    /// bad threshold by 1.5); use [`BroadPhase::try_new`] to be told instead.
+    /// value (a bad region hint by none, a bad margin or skin by 0, a bad threshold by 1.5);
+    /// use [`BroadPhase::try_new`] to be told instead.
     #[must_use]
     pub fn new(config: Config) -> Self {
         let d = Config::default();
         let nonneg = |x: f32| if x.is_finite() && x >= 0.0 { x } else { 0.0 };
         Self::build(Config {
-            bounds: if geom::check_bounds(&config.bounds).is_ok() {
-                config.bounds
-            } else {
-                d.bounds
-            },
-            octree_depth: config.octree_depth.min(crate::octree::MAX_DEPTH),
+            bounds: config
+                .bounds
+                .filter(|hint| geom::check_bounds(hint).is_ok()),
             octree_placement: config.octree_placement,
             margin: nonneg(config.margin),
             rebuild_threshold: if config.rebuild_threshold.is_finite()
@@ -267,8 +264,10 @@ impl BroadPhase {
 
     /// Builds from a validated config: every structure's constructor accepts it.
     fn build(config: Config) -> Self {
-        let octree =
-            Octree::with_placement(config.bounds, config.octree_depth, config.octree_placement);
+        let octree = match config.bounds {
+            Some(hint) => Octree::growing_with_hint(config.octree_placement, hint),
+            None => Ok(Octree::growing(config.octree_placement)),
+        };
         let bvh = config.bvh_config();
         let (Ok(octree), Ok(dynamic), Ok(statics)) = (octree, Bvh::new(bvh), Bvh::new(bvh)) else {
             unreachable!("Config::validate checks every field the structures check");
@@ -376,7 +375,7 @@ impl BroadPhase {
     }
 
     /// Adds a sphere; it pairs from the next [`BroadPhase::step`] on. `Err` on a non-finite
-    /// centre or radius or a negative radius. A sphere outside `Config::bounds` is accepted.
+    /// centre or radius or a negative radius. Any finite position is accepted: the octree's region follows the spheres.
     pub fn insert_sphere(&mut self, center: Vec3, radius: f32) -> Result<ProxyKey, Error> {
         check_sphere(center, radius)?;
         self.insert(Shape::Sphere { center, radius })
@@ -639,6 +638,8 @@ impl BroadPhase {
     /// them may look proxies up ([`BroadPhase::shape`], [`BroadPhase::groups`]). Steady state
     /// allocates nothing: every list is kept and reused.
     pub fn step(&mut self) {
+        // The octree's region follows the spheres: re-rooted here, before any pass or query.
+        self.octree.maintain();
         let plan = self.plan();
         self.run(plan);
         self.now = self.now.wrapping_add(1);

@@ -319,8 +319,8 @@ impl BroadPhase {
     /// It allocates only to grow `out`, which also holds each round's candidates: a buffer
     /// kept across calls stops allocating once it has held the largest round.
     ///
-    /// An expanding search: from the distance to `Config::bounds` plus a part of the spacing
-    /// `k` proxies spread evenly over the bounds would have, each round takes every proxy
+    /// An expanding search: from the distance to the octree's region plus a part of the
+    /// spacing `k` proxies spread evenly over it would have, each round takes every proxy
     /// whose held box is within the radius and doubles the radius until `k` that pass the
     /// filter are within it by their exact distance (or every proxy was seen). A proxy not
     /// seen is farther than the radius.
@@ -336,7 +336,7 @@ impl BroadPhase {
         if k == 0 || n == 0 || !point.is_finite() {
             return;
         }
-        let start = nearest_start(point, &self.config.bounds, k, n);
+        let start = nearest_start(point, &self.octree.bounds(), k, n);
         nearest_expanding(k, n, start, out, |radius, out| {
             let reach = radius + geom::distance_pad(point, radius);
             let mut seen = 0;

@@ -1,13 +1,65 @@
-//! Least-significant-digit radix sorts of packed integer keys, reusing caller-owned buffers.
+//! Least-significant-digit radix sorts of packed slot pairs, reusing caller-owned buffers.
+//!
+//! A packed pair holds two slot indices, one in each 32-bit half (see `step::pack`). With
+//! `slots` slots each index fits in `s = bits_of(slots - 1)` bits, so the sort reads a pair as the
+//! `2s`-bit number `high half << s | low half` ([`PairBits::compact`]): it orders pairs as the
+//! full keys do, and its digits cover only bits that vary (10 000 slots: 28 bits, three passes
+//! instead of five over the 64-bit key). All digit counts are taken in one read of the keys.
 
-/// Bits per counting pass: 2048 counters (8 KiB) stay in L1.
-const DIGIT_BITS: u32 = 11;
-const BUCKETS: usize = 1 << DIGIT_BITS;
+/// The widest digit: 2048 counters (8 KiB) stay in L1.
+const MAX_DIGIT_BITS: u32 = 11;
+const MAX_BUCKETS: usize = 1 << MAX_DIGIT_BITS;
+/// Passes enough for two 32-bit slot indices.
+const MAX_PASSES: usize = 64usize.div_ceil(MAX_DIGIT_BITS as usize);
 
-/// Sorts `keys` ascending, looking only at their low `bits` bits (the rest must be zero or
-/// already in order, i.e. equal for all keys). Stable, O(n · bits / 11); `scratch` is resized
-/// as needed and keeps its capacity.
-pub(super) fn sort_u64(keys: &mut Vec<u64>, scratch: &mut Vec<u64>, bits: u32) {
+/// How the sort reads the pairs of a store of a given number of slots: the slot bits and
+/// the digits that cover the `2 × slot_bits` bits of the compact key.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct PairBits {
+    slot_bits: u32,
+    digit_bits: u32,
+    passes: u32,
+}
+
+impl PairBits {
+    /// The layout for slot indices below `slots` (at most `2³¹`): `ceil(2s / 11)` passes of
+    /// equal digits.
+    pub(super) fn for_slots(slots: usize) -> PairBits {
+        let slot_bits = bits_of(slots.saturating_sub(1) as u64).max(1);
+        let total = 2 * slot_bits;
+        let passes = total.div_ceil(MAX_DIGIT_BITS);
+        PairBits {
+            slot_bits,
+            digit_bits: total.div_ceil(passes),
+            passes,
+        }
+    }
+
+    /// `high half << slot_bits | low half` of a packed pair both of whose slots are below
+    /// `1 << slot_bits`: a bijection onto `2 × slot_bits` bits that keeps the keys' order.
+    #[inline]
+    fn compact(self, k: u64) -> u64 {
+        debug_assert!(k >> 32 >> self.slot_bits == 0 && (k as u32) >> self.slot_bits == 0);
+        (k & 0xFFFF_FFFF) | ((k >> 32) << self.slot_bits)
+    }
+
+    /// The packed pair of a compact key: the inverse of [`PairBits::compact`].
+    #[inline]
+    fn expand(self, c: u64) -> u64 {
+        ((c >> self.slot_bits) << 32) | (c & ((1 << self.slot_bits) - 1))
+    }
+
+    /// The digit of compact key `c` at `shift`, below [`MAX_BUCKETS`] by construction.
+    #[inline]
+    fn digit(self, c: u64, shift: u32) -> usize {
+        ((c >> shift) as usize) & ((1 << self.digit_bits) - 1) & (MAX_BUCKETS - 1)
+    }
+}
+
+/// Sorts `keys` (packed pairs of slots below the layout's bound) ascending. Stable, one read
+/// for the counts and one scatter per digit that varies; `scratch` is resized as needed and
+/// keeps its capacity.
+pub(super) fn sort_u64(keys: &mut Vec<u64>, scratch: &mut Vec<u64>, layout: PairBits) {
     let n = keys.len();
     if n < 2 {
         return;
@@ -18,13 +70,39 @@ pub(super) fn sort_u64(keys: &mut Vec<u64>, scratch: &mut Vec<u64>, bits: u32) {
     }
     scratch.clear();
     scratch.resize(n, 0);
-    let mut shift = 0;
-    while shift < bits {
-        if digit_pass(keys, scratch, shift) {
-            core::mem::swap(keys, scratch);
-        }
-        shift += DIGIT_BITS;
+    if sort_in(keys, scratch, layout) {
+        core::mem::swap(keys, scratch);
     }
+}
+
+/// The sort of [`sort_u64`] over `keys` with `tmp` (of the same length) as the second buffer;
+/// true if the sorted keys end in `tmp`. The counts pass also rewrites the keys in compact
+/// form, which the scatters then read with a shift and a mask, and the last scatter (or a
+/// final loop if it had nothing to move) writes them back in packed form.
+fn sort_in(keys: &mut [u64], tmp: &mut [u64], layout: PairBits) -> bool {
+    let mut counts = [[0u32; MAX_BUCKETS]; MAX_PASSES];
+    count_digits(keys, layout, &mut counts);
+    let mut in_tmp = false;
+    let mut expanded = false;
+    for (pass, c) in (0..layout.passes).zip(&mut counts) {
+        let last = pass + 1 == layout.passes;
+        let shift = pass * layout.digit_bits;
+        let (src, dst): (&[u64], &mut [u64]) = if in_tmp { (tmp, keys) } else { (keys, tmp) };
+        let moved = if last {
+            scatter::<true>(src, dst, layout, shift, c)
+        } else {
+            scatter::<false>(src, dst, layout, shift, c)
+        };
+        in_tmp ^= moved;
+        expanded = last && moved;
+    }
+    if !expanded {
+        let out = if in_tmp { &mut *tmp } else { &mut *keys };
+        for k in out {
+            *k = layout.expand(*k);
+        }
+    }
+    in_tmp
 }
 
 /// Writes to `splitters` the first keys of parts `1..parts` of a cut of the key range into
@@ -54,7 +132,7 @@ pub(super) fn part_of(splitters: &[u64], key: u64) -> usize {
 /// rayon's current pool: `buckets[i][p]` holds producer `i`'s keys of part `p`. Each part is
 /// copied into its stretch of `out` and radix sorted there by its own task, with `tmp[p]` as
 /// its second buffer; `bounds` gets the parts' first positions and the key count last. The
-/// keys (distinct, zero above their low `bits` bits) end sorted whatever the cut.
+/// keys (distinct packed pairs of slots below `layout`'s bound) end sorted whatever the cut.
 #[cfg(feature = "parallel")]
 pub(super) fn sort_parts(
     buckets: &[Vec<Vec<u64>>],
@@ -62,7 +140,7 @@ pub(super) fn sort_parts(
     out: &mut Vec<u64>,
     tmp: &mut Vec<Vec<u64>>,
     bounds: &mut Vec<usize>,
-    bits: u32,
+    layout: PairBits,
 ) {
     bounds.clear();
     bounds.push(0);
@@ -77,7 +155,7 @@ pub(super) fn sort_parts(
     let job = Gather {
         buckets,
         bounds,
-        bits,
+        layout,
     };
     job.fill(0, &mut tmp[..parts], out);
 }
@@ -87,7 +165,7 @@ pub(super) fn sort_parts(
 struct Gather<'a> {
     buckets: &'a [Vec<Vec<u64>>],
     bounds: &'a [usize],
-    bits: u32,
+    layout: PairBits,
 }
 
 #[cfg(feature = "parallel")]
@@ -102,7 +180,7 @@ impl Gather<'_> {
                 out[at..at + keys.len()].copy_from_slice(keys);
                 at += keys.len();
             }
-            sort_slice(out, tmp, self.bits);
+            sort_slice(out, tmp, self.layout);
             return;
         }
         let mid = tmp.len() / 2;
@@ -116,10 +194,9 @@ impl Gather<'_> {
     }
 }
 
-/// [`sort_u64`] of a slice: the passes alternate between `keys` and `tmp`, and the keys are
-/// copied back if they end in `tmp`.
+/// [`sort_u64`] of a slice: the keys are copied back if they end in `tmp`.
 #[cfg(feature = "parallel")]
-fn sort_slice(keys: &mut [u64], tmp: &mut Vec<u64>, bits: u32) {
+fn sort_slice(keys: &mut [u64], tmp: &mut Vec<u64>, layout: PairBits) {
     let n = keys.len();
     if n < 64 {
         keys.sort_unstable();
@@ -127,55 +204,80 @@ fn sort_slice(keys: &mut [u64], tmp: &mut Vec<u64>, bits: u32) {
     }
     tmp.clear();
     tmp.resize(n, 0);
-    let mut in_tmp = false;
-    let mut shift = 0;
-    while shift < bits {
-        let moved = if in_tmp {
-            digit_pass(tmp, keys, shift)
-        } else {
-            digit_pass(keys, tmp, shift)
-        };
-        in_tmp ^= moved;
-        shift += DIGIT_BITS;
-    }
-    if in_tmp {
+    if sort_in(keys, tmp, layout) {
         keys.copy_from_slice(tmp);
     }
 }
 
-/// One counting pass on the digit at `shift`: `dst` gets `src` stably sorted by it. Returns
-/// false, leaving `dst` as it was, if every key has the same digit there: the pass would move
-/// nothing.
+/// The counts of every digit of every pass, in one read of the keys, which it leaves in
+/// compact form.
 #[inline]
-fn digit_pass(src: &[u64], dst: &mut [u64], shift: u32) -> bool {
-    let mut counts = [0u32; BUCKETS];
-    for &k in src {
-        counts[digit(k, shift)] += 1;
+fn count_digits(keys: &mut [u64], layout: PairBits, counts: &mut [[u32; MAX_BUCKETS]; MAX_PASSES]) {
+    let b = layout.digit_bits;
+    match layout.passes {
+        // The common layouts, unrolled: up to 2¹¹ slots in two passes, up to 2¹⁶ in three.
+        2 => {
+            let [c0, c1, ..] = counts;
+            for k in keys {
+                let c = layout.compact(*k);
+                *k = c;
+                c0[layout.digit(c, 0)] += 1;
+                c1[layout.digit(c, b)] += 1;
+            }
+        }
+        3 => {
+            let [c0, c1, c2, ..] = counts;
+            for k in keys {
+                let c = layout.compact(*k);
+                *k = c;
+                c0[layout.digit(c, 0)] += 1;
+                c1[layout.digit(c, b)] += 1;
+                c2[layout.digit(c, 2 * b)] += 1;
+            }
+        }
+        passes => {
+            for k in keys {
+                let c = layout.compact(*k);
+                *k = c;
+                for (p, counts) in counts[..passes as usize].iter_mut().enumerate() {
+                    counts[layout.digit(c, p as u32 * b)] += 1;
+                }
+            }
+        }
     }
-    if counts.iter().any(|&c| c as usize == src.len()) {
+}
+
+/// One scatter of compact keys on the digit at `shift`, whose counts are `counts`: `dst` gets
+/// `src` stably sorted by it, in packed form with `EXPAND`. Returns false, leaving `dst` as it
+/// was, if every key has the same digit there: the pass would move nothing.
+#[inline]
+fn scatter<const EXPAND: bool>(
+    src: &[u64],
+    dst: &mut [u64],
+    layout: PairBits,
+    shift: u32,
+    counts: &mut [u32; MAX_BUCKETS],
+) -> bool {
+    let used = &mut counts[..1 << layout.digit_bits];
+    if used.iter().any(|&c| c as usize == src.len()) {
         return false;
     }
     let mut sum = 0u32;
-    for c in counts.iter_mut() {
+    for c in used.iter_mut() {
         let here = *c;
         *c = sum;
         sum += here;
     }
-    for &k in src {
-        let d = digit(k, shift);
-        dst[counts[d] as usize] = k;
+    for &c in src {
+        let d = layout.digit(c, shift);
+        dst[counts[d] as usize] = if EXPAND { layout.expand(c) } else { c };
         counts[d] += 1;
     }
     true
 }
 
-#[inline]
-fn digit(k: u64, shift: u32) -> usize {
-    ((k >> shift) as usize) & (BUCKETS - 1)
-}
-
 /// Bits needed to write `x`.
-pub(super) fn bits_of(x: u64) -> u32 {
+fn bits_of(x: u64) -> u32 {
     u64::BITS - x.leading_zeros()
 }
 
@@ -183,23 +285,64 @@ pub(super) fn bits_of(x: u64) -> u32 {
 mod tests {
     use super::*;
 
+    /// A random packed pair of two distinct slots below `slots` (at least 2), the smaller in
+    /// the high half, as `step::pack` makes them.
+    fn random_pair(next: &mut impl FnMut() -> u64, slots: u64) -> u64 {
+        let a = next() % slots;
+        let b = (a + 1 + next() % (slots - 1)) % slots;
+        (a.min(b) << 32) | a.max(b)
+    }
+
+    fn xorshift(mut s: u64) -> impl FnMut() -> u64 {
+        move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        }
+    }
+
     #[test]
     fn sorts_like_sort_unstable() {
-        let mut s = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = xorshift(0x9E37_79B9_7F4A_7C15);
         for n in [0, 1, 5, 63, 64, 65, 1000, 5000] {
-            for bits in [3, 11, 22, 34, 63] {
-                let mut keys: Vec<u64> = (0..n)
-                    .map(|_| {
-                        s ^= s << 7;
-                        s ^= s >> 9;
-                        s & ((1u64 << bits) - 1)
-                    })
-                    .collect();
+            for slots in [2, 3, 100, 2048, 2049, 10_000, 70_000, 1 << 22, 1 << 31] {
+                let mut keys: Vec<u64> = (0..n).map(|_| random_pair(&mut next, slots)).collect();
+                // Repeats too: the sort is stable and keeps them.
+                if n > 10 {
+                    keys[n / 2] = keys[n / 3];
+                }
                 let mut want = keys.clone();
                 want.sort_unstable();
-                sort_u64(&mut keys, &mut Vec::new(), bits);
-                assert_eq!(keys, want, "n {n} bits {bits}");
+                sort_u64(
+                    &mut keys,
+                    &mut Vec::new(),
+                    PairBits::for_slots(slots as usize),
+                );
+                assert_eq!(keys, want, "n {n} slots {slots}");
             }
+        }
+    }
+
+    /// The compact key orders pairs as the full keys do, at the extremes of every layout.
+    #[test]
+    fn compact_keys_keep_the_order() {
+        for slots in [1usize, 2, 5, 2048, 2049, 1 << 16, (1 << 16) + 1, 1 << 31] {
+            let layout = PairBits::for_slots(slots);
+            let top = slots.saturating_sub(1) as u64;
+            let mut keys: Vec<u64> = [0, 1, top / 2, top.saturating_sub(1), top]
+                .iter()
+                .flat_map(|&a| [0, 1, top / 2, top].map(move |b| (a << 32) | b))
+                .collect();
+            keys.sort_unstable();
+            keys.dedup();
+            assert!(layout.passes as usize <= MAX_PASSES);
+            assert!(layout.digit_bits * layout.passes >= 2 * layout.slot_bits);
+            assert!(
+                keys.windows(2)
+                    .all(|w| layout.compact(w[0]) < layout.compact(w[1]))
+            );
+            assert!(layout.compact(*keys.last().unwrap()) >> (2 * layout.slot_bits) == 0);
         }
     }
 
@@ -209,24 +352,23 @@ mod tests {
     #[cfg(feature = "parallel")]
     #[test]
     fn sorting_in_parts_gives_the_sorted_union() {
-        let mut s = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            s
-        };
+        let mut next = xorshift(0x2545_F491_4F6C_DD1D);
         let (mut splitters, mut tmp, mut bounds) = (Vec::new(), Vec::new(), Vec::new());
         for threads in [1, 2, 3] {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
                 .build()
                 .unwrap();
-            for (n, producers, bits) in [(0, 3, 40), (5, 2, 40), (1000, 1, 40), (30_000, 9, 49)] {
-                let mut all: Vec<u64> = (0..n).map(|_| next() & ((1u64 << bits) - 1)).collect();
+            for (n, producers, slots) in [
+                (0, 3, 500),
+                (5, 2, 500),
+                (1000, 1, 9000),
+                (30_000, 9, 1 << 20),
+            ] {
+                let mut all: Vec<u64> = (0..n).map(|_| random_pair(&mut next, slots)).collect();
                 all.sort_unstable();
                 all.dedup();
-                let other: Vec<u64> = (0..64).map(|i| i << (bits - 6)).collect();
+                let other: Vec<u64> = (0..64).map(|i| (i * slots / 64) << 32).collect();
                 for (parts, by) in [
                     (1, &all[..]),
                     (2, &all[..]),
@@ -245,7 +387,8 @@ mod tests {
                     }
                     let mut out = vec![7; 3];
                     pool.install(|| {
-                        sort_parts(&buckets, np, &mut out, &mut tmp, &mut bounds, bits);
+                        let layout = PairBits::for_slots(slots as usize);
+                        sort_parts(&buckets, np, &mut out, &mut tmp, &mut bounds, layout);
                     });
                     assert_eq!(out, all, "n {n} parts {parts} threads {threads}");
                 }

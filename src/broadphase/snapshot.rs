@@ -88,9 +88,8 @@ struct Groups {
 #[derive(Serialize, Deserialize)]
 #[serde(remote = "Config", deny_unknown_fields)]
 struct ConfigDef {
-    #[serde(with = "AabbDef")]
-    bounds: Aabb,
-    octree_depth: u32,
+    #[serde(with = "opt_aabb")]
+    bounds: Option<Aabb>,
     #[serde(with = "PlacementDef")]
     octree_placement: Placement,
     margin: f32,
@@ -98,15 +97,6 @@ struct ConfigDef {
     skin: f32,
     #[serde(with = "PassesDef")]
     passes: Passes,
-}
-
-#[derive(Serialize, Deserialize)]
-#[serde(remote = "Aabb", deny_unknown_fields)]
-struct AabbDef {
-    #[serde(with = "vec3")]
-    min: Vec3,
-    #[serde(with = "vec3")]
-    max: Vec3,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -122,6 +112,36 @@ enum PassesDef {
     Adaptive,
     Full,
     Incremental,
+}
+
+/// An optional `Aabb` as `null` or `{ min, max }`.
+mod opt_aabb {
+    use crate::{Aabb, Vec3};
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    #[derive(Serialize, Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct Wire {
+        #[serde(with = "super::vec3")]
+        min: Vec3,
+        #[serde(with = "super::vec3")]
+        max: Vec3,
+    }
+
+    pub(super) fn serialize<S: Serializer>(
+        v: &Option<Aabb>,
+        serializer: S,
+    ) -> Result<S::Ok, S::Error> {
+        v.map(|b| Wire {
+            min: b.min,
+            max: b.max,
+        })
+        .serialize(serializer)
+    }
+
+    pub(super) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Aabb>, D::Error> {
+        Ok(Option::<Wire>::deserialize(d)?.map(|w| Aabb::new(w.min, w.max)))
+    }
 }
 
 /// A `Vec3` as `[x, y, z]`.

@@ -34,7 +34,7 @@
 use super::fat::LOOKAHEAD_STEPS;
 #[cfg(feature = "parallel")]
 use super::radix;
-use super::radix::{bits_of, sort_u64};
+use super::radix::{PairBits, sort_u64};
 use super::*;
 
 /// Set on a candidate whose exact boxes overlapped at the last step.
@@ -310,14 +310,14 @@ impl BroadPhase {
             }
         }
         self.refit(true);
-        let bits = 32 + bits_of(self.store.slots() as u64);
+        let layout = PairBits::for_slots(self.store.slots());
         match tasks {
             #[cfg(feature = "parallel")]
-            2.. => self.sorted_pairs_par(tasks, bits),
+            2.. => self.sorted_pairs_par(tasks, layout),
             _ => {
                 self.fresh.clear();
                 self.structure_pairs();
-                sort_u64(&mut self.fresh, &mut self.sort_buf, bits);
+                sort_u64(&mut self.fresh, &mut self.sort_buf, layout);
             }
         }
         self.packed.clear();
@@ -406,7 +406,7 @@ impl BroadPhase {
     /// resemble; one part if there were few), and each part is then sorted into `fresh` by its
     /// own task. `fresh` ends as the serial path leaves it.
     #[cfg(feature = "parallel")]
-    fn sorted_pairs_par(&mut self, tasks: usize, bits: u32) {
+    fn sorted_pairs_par(&mut self, tasks: usize, layout: PairBits) {
         let par = &mut self.par;
         let parts = tasks.min(self.prev_packed.len() / MIN_PART_PAIRS).max(1);
         radix::split_points(&self.prev_packed, parts, &mut par.splitters);
@@ -445,7 +445,7 @@ impl BroadPhase {
             &mut self.fresh,
             &mut par.sort_tmp,
             &mut par.sort_bounds,
-            bits,
+            layout,
         );
         for list in par.found[..tasks + 1].iter_mut().flatten() {
             ahead(list);
@@ -459,8 +459,11 @@ impl BroadPhase {
         self.refit(false);
         self.fresh.clear();
         self.query_escaped();
-        let bits = 32 + bits_of(self.store.slots() as u64);
-        sort_u64(&mut self.fresh, &mut self.sort_buf, bits);
+        sort_u64(
+            &mut self.fresh,
+            &mut self.sort_buf,
+            PairBits::for_slots(self.store.slots()),
+        );
         self.fresh.dedup();
         self.merge_candidates();
         self.emit();

@@ -33,13 +33,17 @@
 //!   ancestor, so once. Only then are the runs recorded in a per-node slot of the paged node
 //!   storage (and cleared after the pass), for the descent to find them.
 //!
-//! Overflow spheres sit in the root, whose 27-cell neighbourhood is the root itself: they are
-//! tested against the whole tree pruned by their clamped ranges, which overlap the range of
-//! everything their boxes overlap.
+//! Overflow spheres sit in the root, whose 27-cell neighbourhood is the root itself: each is
+//! tested against the whole tree pruned by its own clamped range, which overlaps the range of
+//! everything its box overlaps (outside the region, a face of the grid: few nodes), and the
+//! root's spheres are paired among themselves by the strict pass's subdivision of a long own
+//! list over the root cell (`strict::Parts`), so overflow spheres bunched on one face of the
+//! region do not meet each other in one sweep.
 
 use super::cell::Cell;
 use super::placement::LooseKey;
-use super::walk::{self, Hot, SHORT_CROSS, Sweeps, Tester, Walk, runs};
+use super::strict::Parts;
+use super::walk::{self, Hot, SHORT_CROSS, SHORT_SELF, Sweeps, Tester, Walk, runs};
 use super::{MAX_DEPTH, Octree, PassCost};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
@@ -76,6 +80,8 @@ pub(super) struct Scratch {
     /// The neighbours of a crowded run that reach its union box, as positions in the
     /// sorted spheres.
     dense: Vec<u32>,
+    /// The subdivision of the root's own list.
+    parts: Parts,
     /// Per task of a chunked pass: its own scratch.
     #[cfg(feature = "parallel")]
     chunks: Vec<Chunk>,
@@ -90,6 +96,7 @@ pub(super) struct Scratch {
 struct Chunk {
     sweeps: Sweeps,
     dense: Vec<u32>,
+    parts: Parts,
 }
 
 /// The state of one loose pass over the sorted spheres.
@@ -102,6 +109,7 @@ struct Pass<'a, F> {
     t: Tester<'a, F>,
     sweeps: &'a mut Sweeps,
     dense: &'a mut Vec<u32>,
+    parts: &'a mut Parts,
     /// Per forward row: the first run at or after its lowest cell, and the first after its
     /// highest cell, looked for last.
     first: [usize; ROWS.len()],
@@ -141,6 +149,7 @@ impl Octree {
             run_start,
             run_of,
             dense,
+            parts,
             ..
         } = s;
         let runs = run_key.len() - 1;
@@ -153,6 +162,7 @@ impl Octree {
             t,
             sweeps,
             dense,
+            parts,
             first: [0; ROWS.len()],
             past: [0; ROWS.len()],
             at_level: u32::MAX,
@@ -219,7 +229,11 @@ impl Octree {
             .enumerate()
             .map(|(c, (chunk, out))| {
                 let (lo, hi) = (first_run(c), first_run(c + 1));
-                let Chunk { sweeps, dense } = chunk;
+                let Chunk {
+                    sweeps,
+                    dense,
+                    parts,
+                } = chunk;
                 let mut pass = Pass {
                     tree: self,
                     hot,
@@ -233,6 +247,7 @@ impl Octree {
                     },
                     sweeps,
                     dense,
+                    parts,
                     first: [0; ROWS.len()],
                     past: [0; ROWS.len()],
                     at_level: u32::MAX,
@@ -277,6 +292,7 @@ impl Scratch {
         (self.run_key.capacity()) * 8
             + (self.run_start.capacity() + self.run_slot.capacity() + self.dense.capacity()) * 4
             + self.run_of.capacity() * 8
+            + self.parts.heap_bytes()
     }
 
     /// Lists the runs of `node_key` (and, for a pass with cross-level pairs, records each in
@@ -488,20 +504,27 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
         let (hot, run_start) = (self.hot, self.run_start);
         let key = LooseKey(self.run_key[r]);
         let own = &hot[run_start[r] as usize..run_start[r + 1] as usize];
-        if own.len() > 1 {
+        let (level, xyz) = key.cell(self.tree.grid.depth);
+        if level == 0 && own.len() > SHORT_SELF {
+            let bits = self.tree.grid.bits;
+            self.parts
+                .own_pairs(&mut self.t, own, [0; 3], bits, self.sweeps);
+        } else if own.len() > 1 {
             self.t.within(own, self.sweeps);
         }
-        let (level, xyz) = key.cell(self.tree.grid.depth);
         let stretches = self.forward(r, key, level, xyz);
         if own.len() <= NEAR_OWN {
             self.near_few(own, &stretches);
         } else {
             self.near_many(own, &stretches);
         }
-        if deeper[level as usize] {
-            self.descend(level, xyz, own)
-        } else {
+        if !deeper[level as usize] {
             0
+        } else if level == 0 {
+            // One descent per root sphere, each pruned by its own range.
+            own.chunks(1).map(|one| self.descend(0, xyz, one)).sum()
+        } else {
+            self.descend(level, xyz, own)
         }
     }
 

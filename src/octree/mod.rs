@@ -56,6 +56,7 @@ mod loose;
 mod nodes;
 mod placement;
 mod query;
+mod region;
 mod strict;
 mod validate;
 mod walk;
@@ -69,6 +70,7 @@ use cell::level_of;
 use glam::Vec3;
 use nodes::Nodes;
 use placement::Grid;
+use region::Regrow;
 use slotmap::{Key as _, SlotMap};
 
 /// The deepest octree accepted by `Octree::new`: levels `0..=MAX_DEPTH`. At depth 10 a cell's
@@ -156,6 +158,8 @@ pub struct OctreeStats {
     pub overflow: u32,
     /// AABB overlap tests done by the last pair pass (0 before the first).
     pub aabb_tests: u64,
+    /// Times a growing tree ([`Octree::growing`]) re-rooted so far (0 for a fixed region).
+    pub reroots: u32,
     /// Nodes visited by the last pair pass (0 before the first).
     pub nodes_visited: u32,
 }
@@ -207,6 +211,18 @@ pub struct Octree {
     passes: Passes,
     /// The cost of the last pair pass.
     last_pass: PassCost,
+    /// The region follows the spheres ([`Octree::growing`]); else it is fixed.
+    growing: bool,
+    /// A growing tree's region hint: covered by every region that still gives the typical
+    /// sphere its cells.
+    hint: Option<Aabb>,
+    /// A growing tree's re-root policy state (module `region`).
+    regrow: Regrow,
+    /// Overflow spheres right after the last re-root: the next re-root waits for twice as
+    /// many (or the limit, whichever is more), so re-roots stay amortised even when no region
+    /// covers the world.
+    overflow_after: u32,
+    reroots: u32,
 }
 
 impl Octree {
@@ -226,8 +242,36 @@ impl Octree {
             });
         }
         geom::check_bounds(&bounds)?;
-        Ok(Octree {
-            grid: Grid::new(bounds, depth, placement),
+        Ok(Octree::build(Grid::new(bounds, depth, placement), false))
+    }
+
+    /// An empty octree whose region follows its spheres: a cube re-rooted (every sphere placed
+    /// again) by [`Octree::maintain`] when spheres leave it, when the tree has doubled since
+    /// its last re-root (the first spheres included), or when the spheres' sizes call for
+    /// other cells; its depth follows the spheres' radii. No world is outside it: a world far
+    /// from the origin, kilometres wide or spread by a teleport is paired at the speed of a
+    /// well-placed one. See [`Octree::maintain`] for when it runs.
+    #[must_use]
+    pub fn growing(placement: Placement) -> Octree {
+        let start = Aabb::new(Vec3::splat(-1.0), Vec3::ONE);
+        Octree::build(Grid::new(start, 0, placement), true)
+    }
+
+    /// [`Octree::growing`] with a hint of the region the spheres will occupy: each region the
+    /// tree picks also covers `hint` as long as that keeps the typical sphere's cells (a hint
+    /// far too wide or far away is ignored). `Err(InvalidBounds)` if the hint is not finite
+    /// or has no volume.
+    pub fn growing_with_hint(placement: Placement, hint: Aabb) -> Result<Octree, Error> {
+        geom::check_bounds(&hint)?;
+        let mut t = Octree::growing(placement);
+        t.hint = Some(hint);
+        Ok(t)
+    }
+
+    fn build(grid: Grid, growing: bool) -> Octree {
+        let depth = grid.depth;
+        Octree {
+            grid,
             objs: Vec::new(),
             links: Vec::new(),
             keys: Vec::new(),
@@ -238,7 +282,85 @@ impl Octree {
             overflow: 0,
             passes: Passes::default(),
             last_pass: PassCost::default(),
-        })
+            growing,
+            hint: None,
+            regrow: Regrow::default(),
+            overflow_after: 0,
+            reroots: 0,
+        }
+    }
+
+    /// True if the region follows the spheres ([`Octree::growing`]).
+    #[must_use]
+    pub fn is_growing(&self) -> bool {
+        self.growing
+    }
+
+    /// A growing tree re-roots here if it needs to (see [`Octree::growing`]): when more
+    /// spheres lie outside its region than `max(64, len / 64)` (and than twice as many as
+    /// right after its last re-root), when it holds more than twice the spheres it held at its
+    /// last re-root, or when a periodic audit (its period doubling while audits find nothing,
+    /// up to 1024 calls) finds cells that no longer fit the spheres. O(1) otherwise; a re-root
+    /// places every sphere again, O(n), and may allocate. The pair passes call it first; a
+    /// caller that moves spheres and only queries should call it after each batch of moves
+    /// (queries stay exact without it, but pay for every sphere outside the region). Does
+    /// nothing for a tree with a fixed region.
+    pub fn maintain(&mut self) {
+        if !self.growing {
+            return;
+        }
+        if self.live == 0 {
+            self.regrow.rooted = 0;
+            return;
+        }
+        let limit = region::overflow_limit(self.live).max(2 * self.overflow_after as usize);
+        if self.overflow as usize > limit || self.live > 2 * self.regrow.rooted {
+            match self
+                .regrow
+                .propose(&self.objs, self.live, self.hint, self.grid.placement)
+            {
+                Some(p) => self.reroot(&p),
+                None => {
+                    // No finite region covers the world: keep this one, and wait for twice
+                    // the overflow (or spheres) before trying again.
+                    self.regrow.rooted(self.live, None);
+                    self.overflow_after = self.overflow;
+                }
+            }
+            return;
+        }
+        if self.regrow.tick() {
+            match self
+                .regrow
+                .propose(&self.objs, self.live, self.hint, self.grid.placement)
+            {
+                Some(p) if region::worth_it(&self.grid, &p) => self.reroot(&p),
+                _ => self.regrow.back_off(),
+            }
+        }
+    }
+
+    /// Places every sphere again in a tree over the proposal's region and depth.
+    #[inline(never)]
+    fn reroot(&mut self, p: &region::Proposal) {
+        self.grid = Grid::new(p.bounds, p.depth, self.grid.placement);
+        self.nodes.reset(cell::node_count(p.depth));
+        self.per_level = [0; MAX_DEPTH as usize + 1];
+        self.overflow = 0;
+        for id in 0..self.objs.len() as u32 {
+            let o = &mut self.objs[id as usize];
+            if o.node == NONE {
+                continue;
+            }
+            let at = self.grid.locate(o.center, o.radius);
+            (o.aabb, o.qmin, o.qmax) = (at.aabb, at.qmin, at.qmax);
+            self.per_level[level_of(at.node) as usize] += 1;
+            self.overflow += u32::from(at.outside);
+            self.link(id, at.node);
+        }
+        self.regrow.rooted(self.live, Some(p.span_center));
+        self.overflow_after = self.overflow;
+        self.reroots += 1;
     }
 
     /// Inserts a sphere and returns its new key. `Err` on a non-finite centre or radius or a
@@ -289,6 +411,7 @@ impl Octree {
             + self.keys.capacity() * 8
             + self.nodes.heap_bytes()
             + self.passes.heap_bytes()
+            + self.regrow.heap_bytes()
     }
 
     /// Moves and/or resizes a sphere. `Err(UnknownProxy)` for a stale or foreign key, `Err`
@@ -408,20 +531,21 @@ impl Octree {
     }
 
     /// The level (0 = root) of the node holding the sphere, or `None` for a stale key.
-    /// Spheres outside the bounds are at level 0.
+    /// Spheres outside the region ([`Octree::bounds`]) are at level 0.
     #[must_use]
     pub fn level_of(&self, key: ProxyKey) -> Option<u32> {
         self.id_of(key)
             .map(|id| level_of(self.objs[id as usize].node))
     }
 
-    /// The world bounds given to [`Octree::new`].
+    /// The region the levels subdivide: the bounds given to [`Octree::new`], or a growing
+    /// tree's current region (a cube; before its first re-root, `±1` m).
     #[must_use]
     pub fn bounds(&self) -> Aabb {
         self.grid.bounds
     }
 
-    /// The deepest level: the tree has levels `0..=depth`.
+    /// The deepest level: the tree has levels `0..=depth` (a growing tree's current depth).
     #[must_use]
     pub fn depth(&self) -> u32 {
         self.grid.depth
@@ -436,7 +560,9 @@ impl Octree {
 
     /// Calls `f(a, b)` once for every pair of spheres whose AABBs overlap (closed: touching
     /// boxes overlap), in no particular order and with no particular key order inside a pair.
+    /// A growing tree first [maintains](Octree::maintain) its region.
     pub fn for_each_pair(&mut self, f: impl FnMut(ProxyKey, ProxyKey)) {
+        self.maintain();
         let mut p = core::mem::take(&mut self.passes);
         self.last_pass = match self.grid.placement {
             Placement::Strict => self.strict_pairs(&mut p.walk, &mut p.strict, f),
@@ -456,6 +582,7 @@ impl Octree {
         E: Fn(&mut S, ProxyKey, ProxyKey) + Sync,
         A: FnOnce(&Octree) + Send,
     {
+        self.maintain();
         let mut p = core::mem::take(&mut self.passes);
         let tree = &*self;
         let pass = || match tree.grid.placement {
@@ -491,6 +618,7 @@ impl Octree {
         OctreeStats {
             per_level: self.per_level,
             overflow: self.overflow,
+            reroots: self.reroots,
             aabb_tests: self.last_pass.tests,
             nodes_visited: self.last_pass.nodes_visited,
         }

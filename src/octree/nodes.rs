@@ -54,6 +54,14 @@ impl Nodes {
         }
     }
 
+    /// Empties the arrays for a tree of `count` nodes, keeping their capacity (a re-root).
+    pub(super) fn reset(&mut self, count: u32) {
+        self.table.clear();
+        self.table.resize((count as usize).div_ceil(PAGE), 0);
+        self.head.clear();
+        self.mask.clear();
+    }
+
     /// Position of `node` in `head`/`mask`, if its page exists.
     #[inline]
     pub(super) fn slot(&self, node: u32) -> Option<usize> {

@@ -339,6 +339,17 @@ impl Grid {
         Some(l)
     }
 
+    /// The cell size a sphere of `radius` gets: its loose level's cells (the root's if it
+    /// fits no level), or a strict tree's deepest cells (where spheres of a typical radius
+    /// live when the depth follows them).
+    pub(super) fn typical_cell(&self, radius: f32) -> f32 {
+        let level = match self.placement {
+            Placement::Strict => self.depth,
+            Placement::Loose => self.loose_level(radius).unwrap_or(0),
+        };
+        self.bounds.extent().max_element() / (1u32 << level) as f32
+    }
+
     /// The grid cell of a point, clamped to the grid: `floor((p − min)·scale)` clamped to
     /// `[0, top]` (`floor` commutes with the clamp to integer limits).
     #[inline]

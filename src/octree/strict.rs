@@ -80,9 +80,9 @@ struct Part {
     end: u32,
 }
 
-/// Buffers of the subdivision of long own lists.
+/// Buffers of the subdivision of long own lists (also the loose pass's, for its root).
 #[derive(Clone, Debug, Default)]
-struct Parts {
+pub(super) struct Parts {
     stack: Vec<Part>,
     buf: Vec<Hot>,
     octs: Vec<u8>,
@@ -110,11 +110,20 @@ impl Scratch {
         use core::mem::size_of;
         self.group.capacity()
             + self.path.capacity() * size_of::<Level>()
-            + (self.anc.capacity() + self.parts.buf.capacity()) * size_of::<Hot>()
+            + self.anc.capacity() * size_of::<Hot>()
             + self.anc_oct.capacity()
             + self.hot_oct.capacity()
-            + self.parts.stack.capacity() * size_of::<Part>()
-            + self.parts.octs.capacity()
+            + self.parts.heap_bytes()
+    }
+}
+
+impl Parts {
+    /// Heap bytes held (capacities).
+    pub(super) fn heap_bytes(&self) -> usize {
+        use core::mem::size_of;
+        self.buf.capacity() * size_of::<Hot>()
+            + self.stack.capacity() * size_of::<Part>()
+            + self.octs.capacity()
     }
 }
 
@@ -311,7 +320,7 @@ fn cross_pairs<F: FnMut(ProxyKey, ProxyKey)>(
 impl Parts {
     /// Every pair within `list`, whose cell ranges lie in the cell at `lo` of size `2^shift`,
     /// by the virtual subdivision of the module docs.
-    fn own_pairs<F: FnMut(ProxyKey, ProxyKey)>(
+    pub(super) fn own_pairs<F: FnMut(ProxyKey, ProxyKey)>(
         &mut self,
         t: &mut Tester<'_, F>,
         list: &[Hot],

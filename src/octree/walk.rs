@@ -76,8 +76,10 @@ pub(super) struct Scratch {
     /// `(walk key << 32) | id`, sorted, and the radix sort's second buffer.
     items: Vec<u64>,
     items_tmp: Vec<u64>,
-    /// `(walk key, id)` for trees too deep for a 32-bit key (depth 10).
+    /// `(walk key, id)` for trees too deep for a 32-bit key (depth 10), and the radix sort's
+    /// second buffer for them.
     wide: Vec<(u64, u32)>,
+    wide_tmp: Vec<(u64, u32)>,
     counts: Vec<u32>,
     /// By sphere id: its position in walk order.
     rank: Vec<u32>,
@@ -143,7 +145,7 @@ impl Scratch {
         use core::mem::size_of_val;
         let v = |n: usize, one: usize| n * one;
         v(self.items.capacity() + self.items_tmp.capacity(), 8)
-            + v(self.wide.capacity(), 16)
+            + v(self.wide.capacity() + self.wide_tmp.capacity(), 16)
             + v(self.counts.capacity() + self.rank.capacity(), 4)
             + v(self.hot.capacity(), size_of_val(&Hot::EMPTY))
             + v(self.node_key.capacity() + self.keys.capacity(), 8)
@@ -177,19 +179,34 @@ pub(super) fn runs(keys: &[u64]) -> impl Iterator<Item = (u64, usize, usize)> + 
 /// LSD radix sort of `items` by bits `lo..lo + bits`, stable; `tmp` and `counts` are scratch.
 /// Digits every item shares are skipped.
 fn radix_sort(items: &mut Vec<u64>, tmp: &mut Vec<u64>, counts: &mut Vec<u32>, lo: u32, bits: u32) {
+    radix_sort_by(items, tmp, counts, |&x| x, lo, bits);
+}
+
+/// [`radix_sort`] of any items by bits `lo..lo + bits` of `key(item)`: the walk order of trees
+/// too deep for a 32-bit walk key sorts `(walk key, id)` pairs this way.
+#[inline]
+fn radix_sort_by<T: Copy + Default>(
+    items: &mut Vec<T>,
+    tmp: &mut Vec<T>,
+    counts: &mut Vec<u32>,
+    key: impl Fn(&T) -> u64,
+    lo: u32,
+    bits: u32,
+) {
     let n = items.len();
     let radix = 1usize << RADIX_BITS;
     let mask = (radix - 1) as u64;
     let passes = bits.div_ceil(RADIX_BITS) as usize;
     counts.clear();
     counts.resize(radix * passes, 0);
-    for &x in items.iter() {
+    for x in items.iter() {
+        let x = key(x);
         for p in 0..passes {
             let d = ((x >> (lo + p as u32 * RADIX_BITS)) & mask) as usize;
             counts[p * radix + d] += 1;
         }
     }
-    tmp.resize(n, 0);
+    tmp.resize(n, T::default());
     for p in 0..passes {
         let c = &mut counts[p * radix..(p + 1) * radix];
         if c.iter().any(|&k| k as usize == n) {
@@ -202,9 +219,9 @@ fn radix_sort(items: &mut Vec<u64>, tmp: &mut Vec<u64>, counts: &mut Vec<u32>, l
             sum += here;
         }
         let shift = lo + p as u32 * RADIX_BITS;
-        for &x in items.iter() {
-            let d = ((x >> shift) & mask) as usize;
-            tmp[c[d] as usize] = x;
+        for x in items.iter() {
+            let d = ((key(x) >> shift) & mask) as usize;
+            tmp[c[d] as usize] = *x;
             c[d] += 1;
         }
         core::mem::swap(items, tmp);
@@ -332,6 +349,7 @@ impl Octree {
             items,
             items_tmp,
             wide,
+            wide_tmp,
             counts,
             hot,
             node_key,
@@ -366,7 +384,9 @@ impl Octree {
                     .filter(|(_, o)| o.node != NONE)
                     .map(|(id, o)| (o.walk_key, id as u32)),
             );
-            wide.sort_unstable();
+            // Ids are unique and listed in increasing order, so the stable sort by walk key
+            // alone gives the `(walk key, id)` order.
+            radix_sort_by(wide, wide_tmp, counts, |&(key, _)| key, 0, key_bits);
             self.scatter(wide.iter().copied(), rank, hot, node_key, keys);
         }
     }

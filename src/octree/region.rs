@@ -1,0 +1,252 @@
+//! The growing region of [`Octree::growing`]: when a tree re-roots, and over which cube.
+//!
+//! A growing tree's root region is a cube derived from the spheres it holds, and is replaced
+//! (the tree *re-roots*: every sphere is placed again, O(n), which may allocate) by
+//! [`Octree::maintain`], which the pair passes call first and a caller that only queries calls
+//! itself. It re-roots when
+//! - more spheres are *overflow* (outside the region, kept in the root) than [`overflow_limit`]
+//!   allows: the world moved or grew;
+//! - the tree holds more than twice the spheres it held at its last re-root (the first fill
+//!   included): its region was chosen for another world;
+//! - an audit, run every so many calls to `maintain` (the period doubles each time an audit
+//!   finds nothing to gain, up to [`MAX_AUDIT_PERIOD`]), finds that a fresh region would give
+//!   the typical sphere cells at least [`AUDIT_GAIN`] times smaller (or, strict, larger): the
+//!   spheres shrank, grew, or gathered in a corner of a region chosen for a wider world.
+//!
+//! The cube. Let `r` be the median radius of the spheres and `c = CELL_DIAMETERS · 2r` the
+//! cell a sphere of that radius should get. The cube's side is `c · 2^k` for the least `k` that
+//! covers the spheres' boxes grown by [`GROW`], so that level `k`'s cells are `c` wherever the
+//! world is and however wide it is, as long as `k <= MAX_DEPTH`; a wider world gets a side of
+//! its span and cells wider than `c`. Loose trees get levels down to `k +`
+//! [`LEVELS_BELOW_TYPICAL`] (capped at `MAX_DEPTH`) for the spheres smaller than typical;
+//! strict trees [`depth_for`] the region and `r`.
+//!
+//! Outliers. If covering every box would need cells wider than `c` at `MAX_DEPTH` (one sphere
+//! teleported to 1e7 m would put a whole world of small spheres in one cell), the cube covers
+//! instead, per axis, the boxes between the `q`-th lowest minimum and the `q`-th highest
+//! maximum, `q = min(overflow_limit / 16, n / 16)`, when that is at most half as wide; the at
+//! most `6q <= 3/8 · overflow_limit` spheres left out stay overflow, fewer than half the limit.
+//!
+//! Why no pass between two re-roots is quadratic: after a re-root at most `3/8` of the limit
+//! is overflow (none, unless outliers were left out), and `maintain` runs before every pass,
+//! so a pass sees at most [`overflow_limit`] overflow spheres: `max(64, n / 64)`. Each meets
+//! the tree through its own clamped cell range (the strict pass's filtered ancestor stack, the
+//! loose pass's per-sphere descent from the root), which an overflow sphere's box reaches only
+//! on the region's faces, and the overflow spheres meet each other through the root's own
+//! list, which both passes split over the root cell by their clamped ranges. The hysteresis
+//! ([`GROW`], and the power of two above it) lets a world drift by a quarter of its span or
+//! more before the next re-root, so re-roots are amortised like a growing `Vec`'s copies.
+
+use super::placement::{Grid, depth_for};
+use super::{MAX_DEPTH, NONE, Obj, Placement};
+use crate::geom::{self, Aabb};
+use glam::Vec3;
+
+/// Cells of the level the median sphere lives at span this many of its diameters. Below 2, so
+/// the median sphere is placed at that level; above 1 by enough that a fat margin on its
+/// radius does not lift it a level.
+const CELL_DIAMETERS: f32 = 1.25;
+/// A re-rooted region covers the spheres' boxes grown by this factor around their centre,
+/// before rounding its side up to a power of two cells.
+const GROW: f32 = 2.0;
+/// Loose trees get this many levels below the median sphere's, for smaller spheres.
+const LEVELS_BELOW_TYPICAL: u32 = 2;
+/// The overflow limit is at least this many spheres.
+const MIN_OVERFLOW: usize = 64;
+/// ...and at least one in this many of the live spheres.
+const OVERFLOW_SHARE: usize = 64;
+/// The first audit comes after this many calls to `maintain`, as does the first after a
+/// re-root.
+const FIRST_AUDIT_PERIOD: u32 = 16;
+/// Audits that find nothing to gain double their period up to this many calls.
+const MAX_AUDIT_PERIOD: u32 = 1024;
+/// An audit re-roots when a fresh region changes the median sphere's cell by this factor.
+const AUDIT_GAIN: f32 = 2.0;
+
+/// The most overflow spheres a growing tree of `live` spheres keeps before it re-roots.
+#[must_use]
+pub(super) fn overflow_limit(live: usize) -> usize {
+    MIN_OVERFLOW.max(live / OVERFLOW_SHARE)
+}
+
+/// A region and depth to re-root at, from [`propose`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Proposal {
+    pub(super) bounds: Aabb,
+    pub(super) depth: u32,
+    /// The cell size the median sphere gets.
+    pub(super) typical_cell: f32,
+    /// The median radius.
+    pub(super) typical_radius: f32,
+    /// The centre of the spheres' span the region was built around.
+    pub(super) span_center: Vec3,
+}
+
+/// The growing policy's state: when to audit, and the scratch of [`propose`].
+#[derive(Clone, Debug, Default)]
+pub(super) struct Regrow {
+    /// Live spheres at the last re-root (0 before the first).
+    pub(super) rooted: usize,
+    /// The centre of the spheres' span at the last re-root, if any: a world that moved since
+    /// gets its next region shifted ahead of its motion.
+    last_center: Option<Vec3>,
+    /// Calls to `maintain` left until the next audit, and the current period.
+    countdown: u32,
+    period: u32,
+    /// One value per live sphere, for the median and the quantiles.
+    scratch: Vec<f32>,
+}
+
+impl Regrow {
+    /// Heap bytes held (capacities).
+    pub(super) fn heap_bytes(&self) -> usize {
+        self.scratch.capacity() * 4
+    }
+
+    /// Resets the audit clock after a re-root of `live` spheres around `span_center` (`None`:
+    /// no region was found, the tree kept its own).
+    pub(super) fn rooted(&mut self, live: usize, span_center: Option<Vec3>) {
+        self.rooted = live;
+        if span_center.is_some() {
+            self.last_center = span_center;
+        }
+        self.period = FIRST_AUDIT_PERIOD;
+        self.countdown = FIRST_AUDIT_PERIOD;
+    }
+
+    /// Counts one call to `maintain`; true when an audit is due.
+    pub(super) fn tick(&mut self) -> bool {
+        self.countdown = self.countdown.saturating_sub(1);
+        self.countdown == 0
+    }
+
+    /// An audit found nothing to gain: waits twice as long for the next.
+    pub(super) fn back_off(&mut self) {
+        self.period = (self.period.max(1) * 2).min(MAX_AUDIT_PERIOD);
+        self.countdown = self.period;
+    }
+
+    /// The region and depth a tree of `placement` holding `objs` (holes included) should
+    /// re-root at, covering `hint` too where that keeps the typical cells, or `None` if it
+    /// holds nothing or no finite region covers enough of it.
+    pub(super) fn propose(
+        &mut self,
+        objs: &[Obj],
+        live: usize,
+        hint: Option<Aabb>,
+        placement: Placement,
+    ) -> Option<Proposal> {
+        if live == 0 {
+            return None;
+        }
+        let s = &mut self.scratch;
+        let r = median(s, objs.iter().filter(|o| o.node != NONE).map(|o| o.radius));
+        let cell = CELL_DIAMETERS * 2.0 * r;
+        let mut full = Aabb::EMPTY;
+        for o in objs.iter().filter(|o| o.node != NONE) {
+            full = full.union(&o.aabb);
+        }
+        let wide = |b: &Aabb| b.extent().max_element() * GROW;
+        let fits = |side: f32| side.is_finite() && side <= cell * (1u32 << MAX_DEPTH) as f32;
+        let mut span = full;
+        if let Some(h) = hint {
+            let both = full.union(&h);
+            if fits(wide(&both)) {
+                span = both;
+            }
+        }
+        if !fits(wide(&span)) {
+            let q = (overflow_limit(live) / 16).min(live / 16);
+            if q > 0 {
+                let robust = quantile_box(s, objs, q);
+                if robust.is_finite() && wide(&robust) <= 0.5 * wide(&full) {
+                    span = robust;
+                }
+            }
+        }
+        let mut center = span.center();
+        if !center.is_finite() {
+            return None;
+        }
+        let side = wide(&span);
+        let span_center = center;
+        let moved = self.last_center.map_or(Vec3::ZERO, |last| center - last);
+        // The side's floor: a cube a few float steps wide at the region's distance from the
+        // origin, so its corners stay apart.
+        let floor = center.abs().max_element().max(1.0) * f32::EPSILON * 64.0;
+        let (side, k) = if cell > 0.0 && cell.is_finite() && side <= cell {
+            (cell.max(floor), 0)
+        } else if fits(side) && cell > 0.0 {
+            let k = (side / cell).log2().ceil().clamp(0.0, MAX_DEPTH as f32) as u32;
+            ((cell * (1u32 << k) as f32).max(floor), k)
+        } else {
+            (side.max(floor), MAX_DEPTH)
+        };
+        // Ahead by the world's motion since the last proposal, as far as the region still
+        // covers the span: a world in flight then crosses the whole margin before it leaves.
+        let room = (Vec3::splat(side) - span.extent()) * 0.5;
+        if moved.is_finite() && room.is_finite() {
+            center += moved.clamp(-room.max(Vec3::ZERO), room.max(Vec3::ZERO));
+        }
+        let half = Vec3::splat(side * 0.5);
+        let bounds = Aabb::new(center - half, center + half);
+        geom::check_bounds(&bounds).ok()?;
+        let depth = match placement {
+            Placement::Strict => depth_for(&bounds, r),
+            Placement::Loose => (k + LEVELS_BELOW_TYPICAL).min(MAX_DEPTH),
+        };
+        let grid = Grid::new(bounds, depth, placement);
+        Some(Proposal {
+            bounds,
+            depth,
+            typical_cell: grid.typical_cell(r),
+            typical_radius: r,
+            span_center,
+        })
+    }
+}
+
+/// True if an audit's `fresh` proposal is worth a re-root of a tree on `current`: it changes
+/// the median sphere's cell by [`AUDIT_GAIN`] (loose: only a smaller cell counts; a loose
+/// sphere's level follows its radius, so a wider region only costs where it caps the depth).
+pub(super) fn worth_it(current: &Grid, fresh: &Proposal) -> bool {
+    let now = current.typical_cell(fresh.typical_radius);
+    let finer = now > AUDIT_GAIN * fresh.typical_cell;
+    let coarser = fresh.typical_cell > AUDIT_GAIN * now;
+    finer || (current.placement == Placement::Strict && coarser)
+}
+
+/// The median of `values` (the upper one of an even count), 0 for none; `s` is scratch.
+fn median(s: &mut Vec<f32>, values: impl Iterator<Item = f32>) -> f32 {
+    s.clear();
+    s.extend(values);
+    if s.is_empty() {
+        return 0.0;
+    }
+    let mid = s.len() / 2;
+    *s.select_nth_unstable_by(mid, f32::total_cmp).1
+}
+
+/// Per axis, from the `q`-th lowest box minimum to the `q`-th highest box maximum of the live
+/// spheres (`q` counted from 0, so `q` boxes lie below and `q` above); `s` is scratch.
+fn quantile_box(s: &mut Vec<f32>, objs: &[Obj], q: usize) -> Aabb {
+    let mut b = Aabb::EMPTY;
+    for axis in 0..3 {
+        s.clear();
+        s.extend(
+            objs.iter()
+                .filter(|o| o.node != NONE)
+                .map(|o| o.aabb.min[axis]),
+        );
+        b.min[axis] = *s.select_nth_unstable_by(q, f32::total_cmp).1;
+        s.clear();
+        s.extend(
+            objs.iter()
+                .filter(|o| o.node != NONE)
+                .map(|o| o.aabb.max[axis]),
+        );
+        let hi = s.len() - 1 - q;
+        b.max[axis] = *s.select_nth_unstable_by(hi, f32::total_cmp).1;
+    }
+    b
+}
