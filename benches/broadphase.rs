@@ -339,7 +339,8 @@ mod scene_benches {
         }
     }
 
-    /// `pile/10000`: broadleaf without and with the pair cache (loose, skin 0.05), and rapier.
+    /// `pile/10000`: broadleaf in both placements with adaptive fat margins, with a fixed skin
+    /// of 0.05 m (loose), and rapier.
     #[cfg(feature = "profiler")]
     fn register_pile(c: &mut Criterion) {
         let recorded = pile::record();

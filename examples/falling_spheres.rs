@@ -1,4 +1,4 @@
-//! The demo: a few thousand spheres fall into a box and settle, driven by `broadleaf::sim`.
+//! The demo: a few thousand spheres fall into a box and settle, driven by `broadleaf::fixtures::sim`.
 //! It prints a progress bar and a summary table, and writes an animated GIF: a side view
 //! (x–y) with every sphere coloured by the octree level it lives at and the occupied octree
 //! cells outlined.
@@ -8,6 +8,7 @@
 //! cargo run --release --example falling_spheres -- --n 2000 --steps 300 --index bvh --verify
 //! ```
 
+use broadleaf::fixtures::cli::{self, Flags, Stop};
 use broadleaf::fixtures::sim::{DropConfig, IndexKind, World};
 use broadleaf::octree::Placement;
 use broadleaf::{Aabb, Pair, Vec3, brute};
@@ -56,7 +57,7 @@ struct Args {
     seed: u64,
 }
 
-fn parse_args() -> Result<Args, String> {
+fn parse_args(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
     let mut args = Args {
         n: 4000,
         steps: 480,
@@ -69,54 +70,38 @@ fn parse_args() -> Result<Args, String> {
         frames: 60,
         seed: 1,
     };
-    let mut it = std::env::args().skip(1);
-    while let Some(flag) = it.next() {
-        let mut value = || it.next().ok_or_else(|| format!("{flag} needs a value"));
-        let number = |v: String| v.parse::<u64>().map_err(|e| format!("{flag} {v}: {e}"));
+    let mut flags = Flags::new(argv);
+    while let Some(flag) = flags.next_flag()? {
         match flag.as_str() {
-            "--n" => args.n = number(value()?)? as usize,
-            "--steps" => args.steps = number(value()?)? as usize,
-            "--frames" => args.frames = (number(value()?)? as usize).max(1),
-            "--seed" => args.seed = number(value()?)?,
+            "--n" => args.n = flags.parse(&flag)?,
+            "--steps" => args.steps = flags.parse(&flag)?,
+            "--frames" => args.frames = flags.parse::<usize>(&flag)?.max(1),
+            "--seed" => args.seed = flags.parse(&flag)?,
             "--index" => {
-                args.index = match value()?.as_str() {
-                    "octree" => IndexKind::Octree,
-                    "bvh" => IndexKind::Bvh,
-                    other => return Err(format!("--index {other}: expected octree or bvh")),
-                }
+                let kinds = [("octree", IndexKind::Octree), ("bvh", IndexKind::Bvh)];
+                args.index = flags.choice(&flag, &kinds)?;
             }
             "--placement" => {
-                args.placement = Some(match value()?.as_str() {
-                    "strict" => Placement::Strict,
-                    "loose" => Placement::Loose,
-                    other => return Err(format!("--placement {other}: expected strict or loose")),
-                })
+                let placements = [("strict", Placement::Strict), ("loose", Placement::Loose)];
+                args.placement = Some(flags.choice(&flag, &placements)?);
             }
             "--verify" => args.verify = true,
             "--skin" => {
-                let v = value()?;
-                args.skin = v.parse().map_err(|e| format!("--skin {v}: {e}"))?;
+                args.skin = flags.parse(&flag)?;
+                if !(args.skin.is_finite() && args.skin >= 0.0) {
+                    return Err(Stop::Error(format!("--skin {}: a length >= 0", args.skin)));
+                }
             }
-            "--out" => args.out = PathBuf::from(value()?),
-            "--png" => args.png = Some(PathBuf::from(value()?)),
-            "--help" | "-h" => return Err(String::new()),
-            other => return Err(format!("unknown argument {other}")),
+            "--out" => args.out = PathBuf::from(flags.value(&flag)?),
+            "--png" => args.png = Some(PathBuf::from(flags.value(&flag)?)),
+            _ => return Err(Stop::unknown(&flag)),
         }
     }
     Ok(args)
 }
 
 fn main() -> ExitCode {
-    let args = match parse_args() {
-        Ok(a) => a,
-        Err(e) => {
-            if !e.is_empty() {
-                eprintln!("error: {e}");
-            }
-            eprintln!("{USAGE}");
-            return ExitCode::from(2);
-        }
-    };
+    let args = cli::or_exit(USAGE, parse_args(std::env::args().skip(1)));
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -13,46 +13,59 @@
 //! run (and not timed) first.
 
 use broadleaf::bvh::{Bvh, BvhConfig};
+use broadleaf::fixtures::cli::{self, Flags, Stop};
 use broadleaf::fixtures::scene::{Bodies, Feed, Frame, Rng, Scene};
 use broadleaf::{Aabb, BroadPhase, Config};
 use std::time::Instant;
+
+const USAGE: &str = "\
+usage: profile_bvh [--what build|first|step|pairs] [--n N] [--steps S] [--warmup W]
+                   [--trav C] [--leaf L] [--shuffle true|false]
+  --what W       what to time (default step; see the file's docs)
+  --n N          boxes (default 10000)
+  --steps S      timed repetitions (default 30)
+  --warmup W     untimed steps first, for step and pairs (default 5)
+  --trav C       BvhConfig::traversal_cost of the trees built
+  --leaf L       BvhConfig::max_leaf_size of the trees built
+  --shuffle B    build: hand the keys a random permutation before each rebuild (default false)";
 
 struct Args {
     n: usize,
     steps: usize,
     warmup: usize,
-    what: String,
+    what: &'static str,
     shuffle: bool,
     config: BvhConfig,
 }
 
-fn parse() -> Args {
+fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
     let mut args = Args {
         n: 10_000,
         steps: 30,
         warmup: 5,
-        what: "step".into(),
+        what: "step",
         shuffle: false,
         config: BvhConfig::default(),
     };
-    let mut it = std::env::args().skip(1);
-    while let Some(flag) = it.next() {
-        let value = it.next().unwrap_or_else(|| panic!("{flag} needs a value"));
+    let mut flags = Flags::new(argv);
+    while let Some(flag) = flags.next_flag()? {
         match flag.as_str() {
-            "--n" => args.n = value.parse().expect("--n N"),
-            "--steps" => args.steps = value.parse().expect("--steps S"),
-            "--warmup" => args.warmup = value.parse().expect("--warmup W"),
-            "--what" => args.what = value,
-            "--trav" => args.config.traversal_cost = value.parse().expect("--trav C"),
-            "--leaf" => args.config.max_leaf_size = value.parse().expect("--leaf L"),
-            "--shuffle" => args.shuffle = value.parse().expect("--shuffle true|false"),
-            _ => panic!(
-                "unknown flag {flag}; use --n, --steps, --warmup, --what build|step|pairs, \
-                 --trav, --leaf, --shuffle"
-            ),
+            "--n" => args.n = flags.parse(&flag)?,
+            "--steps" => args.steps = flags.parse(&flag)?,
+            "--warmup" => args.warmup = flags.parse(&flag)?,
+            "--what" => {
+                let whats = ["build", "first", "step", "pairs"].map(|w| (w, w));
+                args.what = flags.choice(&flag, &whats)?;
+            }
+            "--trav" => args.config.traversal_cost = flags.parse(&flag)?,
+            "--leaf" => args.config.max_leaf_size = flags.parse(&flag)?,
+            "--shuffle" => args.shuffle = flags.parse(&flag)?,
+            _ => return Err(Stop::unknown(&flag)),
         }
     }
-    args
+    // The trees are built with this config: refuse it here rather than in a build.
+    Bvh::new(args.config).map_err(|e| Stop::Error(format!("--trav / --leaf: {e}")))?;
+    Ok(args)
 }
 
 /// Nanoseconds this thread has run on a CPU (Linux `schedstat`), or `None` elsewhere: unlike the
@@ -211,12 +224,11 @@ fn pairs(args: &Args) {
 }
 
 fn main() {
-    let args = parse();
-    match args.what.as_str() {
+    let args = cli::or_exit(USAGE, parse(std::env::args().skip(1)));
+    match args.what {
         "build" => build(&args),
         "first" => first(&args),
         "step" => step(&args),
-        "pairs" => pairs(&args),
-        other => panic!("--what {other}: use build, first, step or pairs"),
+        _ => pairs(&args),
     }
 }

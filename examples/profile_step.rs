@@ -15,52 +15,71 @@
 //! to `Config::default()`'s, the depth to `depth_for` (strict) or `depth_for_loose` (loose). Under callgrind,
 //! `--toggle-collect=*measured*` counts only the measured steps.
 
+use broadleaf::fixtures::cli::{self, Flags, Stop};
 use broadleaf::fixtures::scene::{Churn, DT, Feed, Frame, Gas, Scene};
-use broadleaf::octree::{Octree, Placement};
+use broadleaf::octree::{MAX_DEPTH, Octree, Placement};
 use broadleaf::{BroadPhase, Config, Pair, ProxyKey, Vec3};
 use std::hint::black_box;
 use std::time::Instant;
 
 const WARMUP: usize = 5;
 
+const USAGE: &str = "\
+usage: profile_step [--scene gas|clustered|churn] [--n N] [--steps S] [--depth D]
+                    [--what octree|broadphase|feed|batch] [--placement strict|loose]
+  --scene S      the scene (default gas)
+  --n N          spheres (default 100000)
+  --steps S      measured steps after 5 warm-up ones (default 30)
+  --depth D      the octree's depth (default: depth_for / depth_for_loose of the scene)
+  --what W       what to time (default octree; see the file's docs)
+  --placement P  the octree's placement (default: Config::default()'s)";
+
 struct Args {
-    scene: String,
+    scene: &'static str,
     n: usize,
     steps: usize,
     depth: Option<u32>,
-    what: String,
+    what: &'static str,
     placement: Placement,
 }
 
-fn parse() -> Args {
+fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
     let mut a = Args {
-        scene: "gas".into(),
+        scene: "gas",
         n: 100_000,
         steps: 30,
         depth: None,
-        what: "octree".into(),
+        what: "octree",
         placement: Config::default().octree_placement,
     };
-    let argv: Vec<String> = std::env::args().skip(1).collect();
-    for kv in argv.chunks(2) {
-        let v = kv.get(1).map(String::as_str).unwrap_or_default();
-        match kv[0].as_str() {
-            "--scene" => a.scene = v.into(),
-            "--n" => a.n = v.parse().expect("--n takes a count"),
-            "--steps" => a.steps = v.parse().expect("--steps takes a count"),
-            "--depth" => a.depth = Some(v.parse().expect("--depth takes a level")),
-            "--what" => a.what = v.into(),
-            "--placement" => {
-                a.placement = match v {
-                    "strict" => Placement::Strict,
-                    "loose" => Placement::Loose,
-                    other => panic!("--placement takes strict or loose, not {other}"),
-                }
+    let mut flags = Flags::new(argv);
+    while let Some(flag) = flags.next_flag()? {
+        match flag.as_str() {
+            "--scene" => {
+                let scenes = ["gas", "clustered", "churn"].map(|s| (s, s));
+                a.scene = flags.choice(&flag, &scenes)?;
             }
-            other => panic!("unknown argument {other}"),
+            "--n" => a.n = flags.parse(&flag)?,
+            "--steps" => a.steps = flags.parse(&flag)?,
+            "--depth" => {
+                let depth: u32 = flags.parse(&flag)?;
+                if depth > MAX_DEPTH {
+                    return Err(Stop::Error(format!("--depth {depth}: at most {MAX_DEPTH}")));
+                }
+                a.depth = Some(depth);
+            }
+            "--what" => {
+                let whats = ["octree", "broadphase", "feed", "batch"].map(|w| (w, w));
+                a.what = flags.choice(&flag, &whats)?;
+            }
+            "--placement" => {
+                let placements = [("strict", Placement::Strict), ("loose", Placement::Loose)];
+                a.placement = flags.choice(&flag, &placements)?;
+            }
+            _ => return Err(Stop::unknown(&flag)),
         }
     }
-    a
+    Ok(a)
 }
 
 /// One measured step; a separate function so callgrind can toggle collection on it.
@@ -70,11 +89,10 @@ fn measured_step(run: &mut dyn FnMut() -> usize) -> usize {
 }
 
 fn main() {
-    let args = parse();
-    let mut gas = match args.scene.as_str() {
-        "gas" | "churn" => Gas::new(args.n, 1),
+    let args = cli::or_exit(USAGE, parse(std::env::args().skip(1)));
+    let mut gas = match args.scene {
         "clustered" => Gas::clustered(args.n, 1),
-        other => panic!("unknown scene {other}"),
+        _ => Gas::new(args.n, 1),
     };
     let depth = args
         .depth
@@ -92,7 +110,7 @@ fn main() {
         }
     };
     let mut stats = None;
-    match args.what.as_str() {
+    match args.what {
         "octree" => {
             let mut tree = Octree::with_placement(gas.bounds, depth, args.placement)
                 .expect("scene bounds are valid");
@@ -134,7 +152,7 @@ fn main() {
             });
         }
         "feed" => {
-            let mut scene: Box<dyn Scene> = match args.scene.as_str() {
+            let mut scene: Box<dyn Scene> = match args.scene {
                 "churn" => Box::new(Churn::new(args.n, 1)),
                 _ => Box::new(gas.clone()),
             };
@@ -165,7 +183,7 @@ fn main() {
                 bp.stats()
             );
         }
-        "batch" => {
+        _ => {
             for way in [Way::Batch, Way::PerCall, Way::FeedBatch, Way::FeedPerCall] {
                 let (apply, total) = time_feeding(&gas, way, args.steps);
                 println!(
@@ -175,7 +193,6 @@ fn main() {
             }
             return;
         }
-        other => panic!("unknown --what {other}"),
     }
     times.sort_by(f64::total_cmp);
     let median = times.get(times.len() / 2).copied().unwrap_or(f64::NAN);

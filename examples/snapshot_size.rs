@@ -6,13 +6,30 @@
 //! once. Each is the median of several runs. The restored broadphase's lists are checked
 //! against the original's on that step.
 //!
-//! `cargo run --release --features serde --example snapshot_size -- [N]` (default 100000).
+//! `cargo run --release --features serde --example snapshot_size -- [--n N]` (default 100000).
 
+use broadleaf::fixtures::cli::{self, Flags, Stop};
 use broadleaf::fixtures::scene::Gas;
 use broadleaf::{BroadPhase, Config, ProxyKey};
 use std::time::{Duration, Instant};
 
 const RUNS: usize = 7;
+
+const USAGE: &str = "\
+usage: snapshot_size [--n N]
+  --n N          spheres of the gas scene (default 100000)";
+
+fn parse(argv: impl IntoIterator<Item = String>) -> Result<usize, Stop> {
+    let mut n = 100_000;
+    let mut flags = Flags::new(argv);
+    while let Some(flag) = flags.next_flag()? {
+        match flag.as_str() {
+            "--n" => n = flags.parse(&flag)?,
+            _ => return Err(Stop::unknown(&flag)),
+        }
+    }
+    Ok(n)
+}
 
 fn median(mut t: Vec<Duration>) -> Duration {
     t.sort_unstable();
@@ -24,10 +41,7 @@ fn ms(d: Duration) -> f64 {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let n: usize = match std::env::args().nth(1) {
-        Some(arg) => arg.parse()?,
-        None => 100_000,
-    };
+    let n = cli::or_exit(USAGE, parse(std::env::args().skip(1)));
     let mut gas = Gas::new(n, 1);
     let mut bp = BroadPhase::new(Config {
         ..Config::default()

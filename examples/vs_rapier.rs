@@ -75,6 +75,7 @@
 //! or, in a tie, one whose scene sphere gives that value. Its own table; the last line is
 //! `queries mismatches=<n>`.
 
+use broadleaf::fixtures::cli::{self, Flags, Stop};
 use broadleaf::fixtures::rapier_world::{SceneWorld, record_pile};
 use broadleaf::fixtures::scene::{
     Bodies, Churn, Feed, Flying, Frame, Gas, Idle, Rng, Scene, Spawn,
@@ -88,7 +89,6 @@ use rapier3d::parry::query::{Ray, ShapeCastOptions};
 use rapier3d::parry::shape::Ball;
 use std::collections::HashMap;
 use std::hint::black_box;
-use std::process::exit;
 use std::time::Instant;
 
 struct Args {
@@ -127,7 +127,7 @@ const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|i
                      [--sizes N1,N2,...] [--moving P1,P2,...] [--plot PATH.svg] [--interleave] \
                      [--per-object] [--queries] [--groups G]";
 
-fn parse_args() -> Result<Args, String> {
+fn parse_args(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
     let mut args = Args {
         scene: "gas".into(),
         n: None,
@@ -146,36 +146,19 @@ fn parse_args() -> Result<Args, String> {
         queries: false,
         groups: 0,
     };
-    let mut it = std::env::args().skip(1);
-    while let Some(flag) = it.next() {
-        if flag == "--help" || flag == "-h" {
-            println!("{USAGE}");
-            exit(0);
-        }
+    let mut flags = Flags::new(argv);
+    while let Some(flag) = flags.next_flag()? {
         match flag.as_str() {
-            "--interleave" => {
-                args.interleave = true;
-                continue;
-            }
-            "--per-object" => {
-                args.per_object = true;
-                continue;
-            }
-            "--queries" => {
-                args.queries = true;
-                continue;
-            }
-            _ => {}
-        }
-        let value = it.next().ok_or(format!("{flag} needs a value"))?;
-        let number = |v: &str| v.parse::<usize>().map_err(|e| format!("{flag} {v}: {e}"));
-        match flag.as_str() {
+            "--interleave" => args.interleave = true,
+            "--per-object" => args.per_object = true,
+            "--queries" => args.queries = true,
             "--scene" => {
-                args.scene = value;
+                args.scene = flags.value(&flag)?;
                 args.scene_given = true;
             }
             "--moving" => {
-                args.moving = value
+                args.moving = flags
+                    .value(&flag)?
                     .split(',')
                     .map(|v| match v.parse::<f64>() {
                         Ok(p) if (0.0..=100.0).contains(&p) => Ok(p),
@@ -183,41 +166,36 @@ fn parse_args() -> Result<Args, String> {
                     })
                     .collect::<Result<_, _>>()?;
             }
-            "--n" => args.n = Some(number(&value)?),
-            "--steps" => args.steps = number(&value)?.max(1),
-            "--warmup" => args.warmup = number(&value)?,
-            "--seed" => args.seed = number(&value)? as u64,
+            "--n" => args.n = Some(flags.parse(&flag)?),
+            "--steps" => args.steps = flags.parse::<usize>(&flag)?.max(1),
+            "--warmup" => args.warmup = flags.parse(&flag)?,
+            "--seed" => args.seed = flags.parse(&flag)?,
             "--groups" => {
-                args.groups = match number(&value)? {
-                    g @ 0..=32 => g as u32,
-                    g => return Err(format!("--groups {g}: at most 32 groups")),
+                args.groups = match flags.parse(&flag)? {
+                    g @ 0..=32 => g,
+                    g => return Err(format!("--groups {g}: at most 32 groups").into()),
                 };
             }
             "--sizes" => {
+                let value = flags.value(&flag)?;
+                let number = |v: &str| v.parse::<usize>().map_err(|e| format!("{flag} {v}: {e}"));
                 args.sizes = value.split(',').map(number).collect::<Result<_, _>>()?;
             }
-            "--plot" => args.plot = Some(value),
+            "--plot" => args.plot = Some(flags.value(&flag)?),
             "--passes" => {
-                args.passes = match value.as_str() {
-                    "adaptive" => Passes::Adaptive,
-                    "full" => Passes::Full,
-                    "incremental" => Passes::Incremental,
-                    other => return Err(format!("--passes {other}: adaptive|full|incremental")),
-                };
+                let passes = [
+                    ("adaptive", Passes::Adaptive),
+                    ("full", Passes::Full),
+                    ("incremental", Passes::Incremental),
+                ];
+                args.passes = flags.choice(&flag, &passes)?;
             }
-            "--skin" => {
-                args.skin = value
-                    .parse::<f32>()
-                    .map_err(|e| format!("{flag} {value}: {e}"))?;
-            }
+            "--skin" => args.skin = flags.parse(&flag)?,
             "--placement" => {
-                args.placement = Some(match value.as_str() {
-                    "strict" => Placement::Strict,
-                    "loose" => Placement::Loose,
-                    other => return Err(format!("unknown placement {other}")),
-                })
+                let placements = [("strict", Placement::Strict), ("loose", Placement::Loose)];
+                args.placement = Some(flags.choice(&flag, &placements)?);
             }
-            other => return Err(format!("unknown flag {other}")),
+            _ => return Err(Stop::unknown(&flag)),
         }
     }
     if args.moving.len() > 1 && !args.scene_given {
@@ -483,10 +461,7 @@ fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
 }
 
 fn main() {
-    let args = parse_args().unwrap_or_else(|e| {
-        eprintln!("{e}\n{USAGE}");
-        exit(2);
-    });
+    let args = cli::or_exit(USAGE, parse_args(std::env::args().skip(1)));
     if args.queries {
         let mismatches = run_queries(&args);
         println!("queries mismatches={mismatches}");
@@ -499,16 +474,10 @@ fn main() {
             .chain(ALL_IDLE_MOVING.map(|p| ("idle", Some(p))))
             .collect(),
         s if make_scene(s, 0, 0, 0, 0.0).is_some() => {
-            let moving = moving_for(s, &args).unwrap_or_else(|e| {
-                eprintln!("{e}\n{USAGE}");
-                exit(2);
-            });
+            let moving = moving_for(s, &args).unwrap_or_else(|e| cli::fail(USAGE, &e));
             moving.into_iter().map(|p| (s, p)).collect()
         }
-        s => {
-            eprintln!("unknown scene {s}\n{USAGE}");
-            exit(2);
-        }
+        s => cli::fail(USAGE, &format!("unknown scene {s}")),
     };
     let config = args.config();
     println!(

@@ -50,7 +50,9 @@ pub enum Error {
         /// The value given.
         value: f32,
     },
-    /// The structure holds `u32::MAX - 1` proxies already.
+    /// No room for another entry: an `Octree` holds `u32::MAX - 1` spheres, a `Bvh`
+    /// `u32::MAX - 1` boxes (removed ones count until its next rebuild), or a `BroadPhase`
+    /// has `2^31` slots and none free to reuse.
     Full,
 }
 
@@ -78,7 +80,7 @@ impl fmt::Display for Error {
             Error::InvalidConfig { what, value } => {
                 write!(f, "config field {what} is out of range: {value}")
             }
-            Error::Full => write!(f, "structure is full (u32 index space exhausted)"),
+            Error::Full => write!(f, "structure is full (index space exhausted)"),
         }
     }
 }

@@ -134,6 +134,7 @@ pub mod fixtures;
 pub mod geom;
 pub mod octree;
 pub mod pair;
+mod radix;
 #[cfg(feature = "rapier")]
 pub mod rapier;
 #[cfg(any(test, feature = "fixtures"))]

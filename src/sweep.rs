@@ -207,41 +207,9 @@ fn scan_from<L: Sorted>(
 /// Calls `f(i, j)`, `i < j`, once for every overlapping pair of `boxes`, which must be sorted
 /// by `min[AXIS]` (closed intervals: touching boxes overlap).
 #[inline]
-#[allow(
-    dead_code,
-    reason = "the entry points for boxes stored in sweep order; the structures here sweep `Ordered` lists over boxes left in place, so only the tests call these"
-)]
 pub(crate) fn self_pairs<const AXIS: usize>(boxes: &[SimdBox], f: impl FnMut(usize, usize)) {
     debug_assert!(boxes.is_sorted_by(|p, q| p.min[AXIS] <= q.min[AXIS]));
     self_pairs_of(&Boxes::<AXIS>(boxes), f);
-}
-
-/// Calls `f(i, j)` once for every overlapping pair `a[i]` × `b[j]`; both lists must be sorted
-/// by `min[AXIS]`.
-#[inline]
-#[allow(
-    dead_code,
-    reason = "the entry points for boxes stored in sweep order; the structures here sweep `Ordered` lists over boxes left in place, so only the tests call these"
-)]
-pub(crate) fn cross_pairs<const AXIS: usize>(
-    a: &[SimdBox],
-    b: &[SimdBox],
-    f: impl FnMut(usize, usize),
-) {
-    debug_assert!(a.is_sorted_by(|p, q| p.min[AXIS] <= q.min[AXIS]));
-    debug_assert!(b.is_sorted_by(|p, q| p.min[AXIS] <= q.min[AXIS]));
-    cross_pairs_of(&Boxes::<AXIS>(a), &Boxes::<AXIS>(b), f);
-}
-
-/// Calls `f(k)` for every `rest[k]` overlapping `a`, scanning `rest` (sorted by `min[AXIS]`,
-/// none starting before `a`) until a box starts past `a`'s end.
-#[inline]
-#[allow(
-    dead_code,
-    reason = "the entry points for boxes stored in sweep order; the structures here sweep `Ordered` lists over boxes left in place, so only the tests call these"
-)]
-pub(crate) fn scan<const AXIS: usize>(a: &SimdBox, rest: &[SimdBox], f: impl FnMut(usize)) {
-    scan_from(&Boxes::<AXIS>(rest), 0, a, a.max[AXIS], f);
 }
 
 /// Calls `f(i, a, j, b)` (the indices and the items), `i < j`, for every overlapping pair of
@@ -388,18 +356,6 @@ mod tests {
                 let want: Vec<_> = brute(&v, &v).into_iter().filter(|(i, j)| i < j).collect();
                 assert_eq!(got, want, "seed {seed} axis {axis}");
             }
-        }
-    }
-
-    #[test]
-    fn cross_pairs_equal_all_pairs_once() {
-        for seed in 1..20 {
-            let a = sorted_on::<1>(boxes(150, seed));
-            let b = sorted_on::<1>(boxes(120, seed + 100));
-            let mut got = Vec::new();
-            cross_pairs::<1>(&a, &b, |i, j| got.push((i, j)));
-            got.sort_unstable();
-            assert_eq!(got, brute(&a, &b), "seed {seed}");
         }
     }
 

@@ -2,7 +2,7 @@
 //! counting global allocator (this test binary only; the library itself has no `unsafe`).
 
 use broadleaf::fixtures::scene::{Churn, Feed, Frame, Gas, Scene};
-use broadleaf::{BroadPhase, Config, Placement};
+use broadleaf::{BroadPhase, Config, Pass, Passes, Placement};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicIsize, AtomicUsize, Ordering};
@@ -57,12 +57,19 @@ fn setup(scene: &impl Scene, placement: Placement) -> (BroadPhase, Feed) {
     setup_with_skin(scene, placement, 0.0)
 }
 
+/// With a `skin`, the incremental pass is forced (fat boxes of that fixed margin); without,
+/// the passes are adaptive.
 fn setup_with_skin(scene: &impl Scene, placement: Placement, skin: f32) -> (BroadPhase, Feed) {
     let bounds = scene.bounds();
     let mut bp = BroadPhase::new(Config {
         bounds: Some(bounds),
         octree_placement: placement,
         skin,
+        passes: if skin > 0.0 {
+            Passes::Incremental
+        } else {
+            Passes::Adaptive
+        },
         ..Config::default()
     });
     let mut feed = Feed::new(false);
@@ -82,17 +89,17 @@ fn steady_gas_steps_allocate_nothing_in_a_loose_octree() {
     steady_gas(Placement::Loose);
 }
 
-/// With the pair cache, on gas: most spheres leave their skin within a few steps, so the
-/// candidate list is regenerated often.
+/// The incremental pass, forced, on gas: most spheres leave their fat boxes within a few
+/// steps, so many candidates are found anew each step.
 #[test]
-fn steady_steps_allocate_nothing_with_a_pair_cache() {
+fn steady_incremental_steps_allocate_nothing() {
     steady_gas_with(Placement::Strict, 0.1, 1.0);
 }
 
-/// With the pair cache, on slow gas: a few spheres leave their skin each step, so the list is
-/// patched in place (tombstones and side entries) and compacted now and then.
+/// The incremental pass, forced, on slow gas: a few spheres leave their fat boxes each step,
+/// so the candidate list changes a little every step.
 #[test]
-fn steady_slow_steps_allocate_nothing_with_a_pair_cache() {
+fn steady_slow_incremental_steps_allocate_nothing() {
     steady_gas_with(Placement::Loose, 0.05, 0.02);
 }
 
@@ -154,9 +161,9 @@ fn steady_counts(placement: Placement, skin: f32, speed: f32) -> Vec<usize> {
     }
     let (mut bp, mut feed) = setup_with_skin(&gas, placement, skin);
     let mut frame = Frame::default();
-    // Warm-up: buffers reach their working sizes (and the frame its capacity). The pair
-    // cache's lists take longer: how many proxies leave their skin, and so how large the
-    // patch lists get, varies from step to step, and its peaks come later.
+    // Warm-up: buffers reach their working sizes (and the frame its capacity). The incremental
+    // pass's lists take longer: how many proxies leave their fat boxes, and so how many
+    // candidates are found anew, varies from step to step, and its peaks come later.
     let warmup = if skin > 0.0 { 150 } else { 30 };
     for _ in 0..warmup {
         gas.advance(&mut frame);
@@ -177,8 +184,11 @@ fn steady_counts(placement: Placement, skin: f32, speed: f32) -> Vec<usize> {
         let before = ALLOCATIONS.load(Ordering::Relaxed);
         feed.apply(&mut bp, &frame).unwrap();
         bp.step();
-        assert!(!bp.pairs().is_empty());
         counts.push(ALLOCATIONS.load(Ordering::Relaxed) - before);
+        assert!(!bp.pairs().is_empty());
+        if skin > 0.0 {
+            assert_eq!(bp.stats().pass, Pass::Incremental);
+        }
     }
     counts
 }

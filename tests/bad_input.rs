@@ -2,7 +2,9 @@
 //! leaves the structure exactly as it was: same `len`, same `aabb(key)` for every live key,
 //! same pairs at the next step.
 
-use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Error, Pair, Placement, ProxyKey, Vec3};
+use broadleaf::{
+    Aabb, BodyKind, BroadPhase, Config, Error, Pair, Passes, Placement, ProxyKey, Vec3,
+};
 
 const NAN: f32 = f32::NAN;
 const INF: f32 = f32::INFINITY;
@@ -34,20 +36,31 @@ fn bad_boxes() -> Vec<(Aabb, &'static str)> {
     v
 }
 
-/// Both placements without the pair cache, and both with it (skin 0.25).
-const BOTH: [(Placement, f32); 4] = [
-    (Placement::Strict, 0.0),
-    (Placement::Loose, 0.0),
-    (Placement::Strict, 0.25),
-    (Placement::Loose, 0.25),
+/// Both placements under the full pass, and both under the incremental pass (forced, with
+/// fat boxes of a fixed skin, 0.25 m).
+const BOTH: [(Placement, Passes); 4] = [
+    (Placement::Strict, Passes::Full),
+    (Placement::Loose, Passes::Full),
+    (Placement::Strict, Passes::Incremental),
+    (Placement::Loose, Passes::Incremental),
 ];
 
+/// The fixed skin of the incremental cases.
+fn skin_of(passes: Passes) -> f32 {
+    if passes == Passes::Incremental {
+        0.25
+    } else {
+        0.0
+    }
+}
+
 /// A small world with one of each kind, stepped once.
-fn world((placement, skin): (Placement, f32)) -> (BroadPhase, Vec<ProxyKey>) {
+fn world((placement, passes): (Placement, Passes)) -> (BroadPhase, Vec<ProxyKey>) {
     let mut bp = BroadPhase::new(Config {
         bounds: Some(Aabb::new(Vec3::splat(-4.0), Vec3::splat(4.0))),
         octree_placement: placement,
-        skin,
+        skin: skin_of(passes),
+        passes,
         ..Config::default()
     });
     let keys = vec![

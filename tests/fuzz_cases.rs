@@ -23,8 +23,8 @@ fn sphere(center: [f32; 3], radius: f32) -> ModelShape {
 }
 
 /// A sphere of radius `3e38` has a box (and a fat box) reaching infinity; its query must not
-/// meet the grid's removed entries, whose box is the empty box `+∞..−∞` that an infinite box
-/// would otherwise "overlap".
+/// meet the removed entries of the BVHs (tombstones until the next rebuild), whose box is the
+/// empty box `+∞..−∞` that an infinite box would otherwise "overlap".
 #[test]
 fn an_infinite_box_meets_no_removed_entry() {
     let margin = 0.25;
@@ -51,8 +51,8 @@ fn an_infinite_box_meets_no_removed_entry() {
 }
 
 /// Two bodies touching exactly at `y = 3e38` after growth by the margin (one reaching up to it,
-/// one flat there) pair when the flat one moves and queries the grid: the grid's skip of boxes
-/// that start too early must not lose a box to `f64` rounding of `3e38 − reach`.
+/// one flat there) pair when the flat one leaves its fat box and queries the structures with
+/// its new one: no rounding of the grown boxes near `f32::MAX` may lose the touch.
 #[test]
 fn boxes_touching_at_3e38_pair_incrementally() {
     let margin = 0.75;

@@ -9,23 +9,34 @@
 mod common;
 
 use broadleaf::fixtures::scene::Rng;
-use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Pair, Placement, ProxyKey, Vec3};
+use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Pair, Passes, Placement, ProxyKey, Vec3};
 use common::{Model, ModelShape};
 
-/// Both placements, without and with the pair cache (skin 0.3).
-const BOTH: [(Placement, f32); 4] = [
-    (Placement::Strict, 0.0),
-    (Placement::Loose, 0.0),
-    (Placement::Strict, 0.3),
-    (Placement::Loose, 0.3),
+/// Both placements under the full pass, and both under the incremental pass (forced, with
+/// fat boxes of a fixed skin, 0.3 m).
+const BOTH: [(Placement, Passes); 4] = [
+    (Placement::Strict, Passes::Full),
+    (Placement::Loose, Passes::Full),
+    (Placement::Strict, Passes::Incremental),
+    (Placement::Loose, Passes::Incremental),
 ];
 
+/// The fixed skin of the incremental cases.
+fn skin_of(passes: Passes) -> f32 {
+    if passes == Passes::Incremental {
+        0.3
+    } else {
+        0.0
+    }
+}
+
 /// `hint`: give the octree ±10 m as its region hint, or none.
-fn config(hint: bool, (placement, skin): (Placement, f32)) -> Config {
+fn config(hint: bool, (placement, passes): (Placement, Passes)) -> Config {
     Config {
         bounds: hint.then(|| Aabb::new(Vec3::splat(-10.0), Vec3::splat(10.0))),
         octree_placement: placement,
-        skin,
+        skin: skin_of(passes),
+        passes,
         ..Config::default()
     }
 }
@@ -268,7 +279,8 @@ fn a_sphere_whose_box_overflows_to_infinity_pairs_with_the_bodies_it_overlaps() 
             bounds: Some(Aabb::new(Vec3::splat(-16.0), Vec3::splat(16.0))),
             octree_placement: p.0,
             margin: 0.75,
-            skin: p.1,
+            skin: skin_of(p.1),
+            passes: p.1,
             ..Config::default()
         });
         bp.insert_sphere(Vec3::new(0.0, 0.046_875, 4.5737e-41), tiny);

@@ -4,7 +4,7 @@
 //! previous step's pairs; the octree runs in both placements.
 
 use broadleaf::{
-    Aabb, BodyKind, BroadPhase, Config, Pair, Placement, ProxyKey, Shape, Vec3, brute,
+    Aabb, BodyKind, BroadPhase, Config, Pair, Pass, Passes, Placement, ProxyKey, Shape, Vec3, brute,
 };
 use proptest::prelude::*;
 use std::collections::BTreeSet;
@@ -54,12 +54,13 @@ fn op() -> impl Strategy<Value = Op> {
 
 /// `hint`: give the octree the lattice's central ±8 m as its region hint (spheres also lie
 /// outside it), or none.
-fn config(hint: bool, margin: f32, placement: Placement, skin: f32) -> Config {
+fn config(hint: bool, margin: f32, placement: Placement, skin: f32, passes: Passes) -> Config {
     Config {
         bounds: hint.then(|| Aabb::new(Vec3::splat(-8.0), Vec3::splat(8.0))),
         octree_placement: placement,
         margin,
         skin,
+        passes,
         ..Config::default()
     }
 }
@@ -126,8 +127,8 @@ fn check_step(
     expected
 }
 
-fn run(hint: bool, margin: f32, placement: Placement, skin: f32, ops: &[Op]) {
-    let mut bp = BroadPhase::try_new(config(hint, margin, placement, skin)).unwrap();
+fn run(hint: bool, margin: f32, placement: Placement, skin: f32, passes: Passes, ops: &[Op]) {
+    let mut bp = BroadPhase::try_new(config(hint, margin, placement, skin, passes)).unwrap();
     let mut model: Vec<(ProxyKey, Shape)> = Vec::new();
     let mut prev = Vec::new();
     for op in ops {
@@ -205,9 +206,10 @@ proptest! {
         margin in prop_oneof![3 => Just(0.0f32), 1 => Just(0.25f32), 1 => Just(0.1f32)],
         placement in prop_oneof![Just(Placement::Strict), Just(Placement::Loose)],
         skin in prop_oneof![3 => Just(0.0f32), 1 => Just(0.1f32), 1 => Just(0.6f32)],
+        passes in prop_oneof![Just(Passes::Adaptive), Just(Passes::Full), Just(Passes::Incremental)],
         ops in prop::collection::vec(op(), 0..160),
     ) {
-        run(hint, margin, placement, skin, &ops);
+        run(hint, margin, placement, skin, passes, &ops);
     }
 }
 
@@ -273,13 +275,13 @@ fn cast_ray_hits_spheres_as_spheres_and_bodies_as_boxes() {
 #[test]
 fn query_aabb_equals_brute_force() {
     let settings = [
-        (Placement::Strict, 0.0),
-        (Placement::Loose, 0.0),
-        (Placement::Strict, 0.3),
-        (Placement::Loose, 0.3),
+        (Placement::Strict, 0.0, Passes::Full),
+        (Placement::Loose, 0.0, Passes::Full),
+        (Placement::Strict, 0.3, Passes::Incremental),
+        (Placement::Loose, 0.3, Passes::Incremental),
     ];
-    for (placement, skin) in settings {
-        let mut bp = BroadPhase::new(config(true, 0.0, placement, skin));
+    for (placement, skin, passes) in settings {
+        let mut bp = BroadPhase::new(config(true, 0.0, placement, skin, passes));
         let mut rng = broadleaf::fixtures::scene::Rng::new(11);
         let mut proxies = Vec::new();
         for i in 0..300 {
@@ -322,19 +324,19 @@ fn insert(bp: &mut BroadPhase, shape: Shape) -> ProxyKey {
     .unwrap()
 }
 
-/// With and without a pair cache, after moves small enough to stay inside the skin (so the
-/// structures still hold the old fat boxes) and some that leave it: `query_aabb` equals brute
-/// force over the exact boxes, and `cast_ray` equals the brute-force closest hit (spheres as
-/// balls, bodies as boxes; same key, same `t`).
+/// Under the full pass, and under the incremental pass after moves small enough to stay inside
+/// the skin (so the structures still hold the old fat boxes) and some that leave it:
+/// `query_aabb` equals brute force over the exact boxes, and `cast_ray` equals the brute-force
+/// closest hit (spheres as balls, bodies as boxes; same key, same `t`).
 #[test]
-fn queries_and_rays_see_exact_shapes_with_a_pair_cache() {
-    for (placement, skin) in [
-        (Placement::Strict, 0.0),
-        (Placement::Strict, 0.4),
-        (Placement::Loose, 0.4),
-        (Placement::Loose, 2.0),
+fn queries_and_rays_see_exact_shapes_while_fat_boxes_are_held() {
+    for (placement, skin, passes) in [
+        (Placement::Strict, 0.0, Passes::Full),
+        (Placement::Strict, 0.4, Passes::Incremental),
+        (Placement::Loose, 0.4, Passes::Incremental),
+        (Placement::Loose, 2.0, Passes::Incremental),
     ] {
-        let mut bp = BroadPhase::new(config(true, 0.0, placement, skin));
+        let mut bp = BroadPhase::new(config(true, 0.0, placement, skin, passes));
         let mut rng = broadleaf::fixtures::scene::Rng::new(29);
         let mut model: Vec<(ProxyKey, Shape)> = Vec::new();
         for i in 0..240 {
@@ -406,17 +408,19 @@ fn queries_and_rays_see_exact_shapes_with_a_pair_cache() {
     }
 }
 
-/// The pair cache's incremental path: many proxies, few of them changing per step (so the
-/// cache patches its list instead of regenerating it), small moves inside the skin and jumps
-/// out of it, resizes, inserts and removes; every step equals brute force, events included.
+/// The incremental pass, forced: many proxies, few of them changing per step (so the pass
+/// re-tests candidates instead of running the structures' pair passes), small moves inside
+/// the skin and jumps out of it, resizes, inserts and removes; every step equals brute force,
+/// events included, and every step after the first ran the incremental pass.
 #[test]
-fn pair_cache_patches_equal_brute_force_step_by_step() {
+fn incremental_pass_equals_brute_force_step_by_step() {
     for (placement, skin, margin) in [
         (Placement::Strict, 0.2, 0.0),
         (Placement::Loose, 0.2, 0.1),
         (Placement::Loose, 1.0, 0.0),
     ] {
-        let mut bp = BroadPhase::try_new(config(false, margin, placement, skin)).unwrap();
+        let passes = Passes::Incremental;
+        let mut bp = BroadPhase::try_new(config(false, margin, placement, skin, passes)).unwrap();
         let mut rng = broadleaf::fixtures::scene::Rng::new(41);
         let mut model: Vec<(ProxyKey, Shape)> = Vec::new();
         let add = |bp: &mut BroadPhase, rng: &mut broadleaf::fixtures::scene::Rng| {
@@ -470,6 +474,11 @@ fn pair_cache_patches_equal_brute_force_step_by_step() {
                 model.push(add(&mut bp, &mut rng));
             }
             prev = check_step(&mut bp, &model, &prev, margin);
+            let pass = bp.stats().pass;
+            assert!(
+                matches!(pass, Pass::Incremental | Pass::Unchanged),
+                "{pass:?}"
+            );
         }
     }
 }

@@ -17,7 +17,6 @@
 mod config;
 mod fat;
 mod query;
-mod radix;
 #[cfg(feature = "serde")]
 mod snapshot;
 mod step;

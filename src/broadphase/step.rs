@@ -32,10 +32,10 @@
 //! refits, a BVH pass split no further than one task, and the incremental pass.
 
 use super::fat::LOOKAHEAD_STEPS;
-#[cfg(feature = "parallel")]
-use super::radix;
-use super::radix::{PairBits, sort_u64};
 use super::*;
+#[cfg(feature = "parallel")]
+use crate::radix;
+use crate::radix::{PairBits, ahead, sort_u64};
 
 /// Set on a candidate whose exact boxes overlapped at the last step.
 pub(super) const HIT: u64 = 1 << 63;
@@ -134,15 +134,6 @@ pub(super) fn pack(a: u32, b: u32) -> u64 {
 #[inline]
 fn unpack(p: u64) -> (usize, usize) {
     (((p >> 32) as u32 & !(1 << 31)) as usize, p as u32 as usize)
-}
-
-/// Grows `v` to half again its length once it is within a quarter of its capacity: a list
-/// whose length swings from step to step stops growing after its first few swings.
-fn ahead<T>(v: &mut Vec<T>) {
-    let want = v.len() + v.len() / 2;
-    if v.capacity() < v.len() + v.len() / 4 {
-        v.reserve(want - v.len());
-    }
 }
 
 /// What a step will do.

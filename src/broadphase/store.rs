@@ -37,6 +37,9 @@ pub(super) mod flag {
 pub(super) const MAX_SLOTS: u32 = 1 << 31;
 
 /// The proxies, by slot.
+// The per-slot byte counts of `Store`'s fields.
+const _: () = assert!(core::mem::size_of::<Shape>() == 28);
+
 #[derive(Clone, Debug, Default)]
 pub(super) struct Store {
     /// Odd while live, even while free. 4 bytes per slot.
@@ -45,7 +48,7 @@ pub(super) struct Store {
     pub(super) kind: Vec<Kind>,
     /// `flag::*` bits. 1 byte per slot.
     pub(super) flags: Vec<u8>,
-    /// The shape as the user gave it. 32 bytes per slot.
+    /// The shape as the user gave it. 28 bytes per slot.
     pub(super) shape: Vec<Shape>,
     /// The box pairs are computed on: the shape's box grown by `Config::margin`. 32 bytes.
     pub(super) exact: Vec<SimdBox>,

@@ -4,7 +4,8 @@
 //! Two placements ([`Placement`]), both computed in O(1) from integer cell coordinates; a move
 //! that keeps the node only stores the new sphere.
 //!
-//! - [`Placement::Strict`] (the default, RTCD 7.3): every sphere lives in the deepest node
+//! - [`Placement::Strict`] (RTCD 7.3; the default of a standalone [`Octree`], see
+//!   [`Octree::new`]): every sphere lives in the deepest node
 //!   whose split planes its AABB does not straddle. Spheres on the root's planes stay near the
 //!   root, so a sphere is tested against the filtered straddlers of all its ancestors. Pairs
 //!   come from a pass that radix-sorts the spheres into depth-first node order and streams over
@@ -15,7 +16,9 @@
 //!   node's loose bounds wherever the centre is, so a sphere's level depends only on its radius
 //!   and nothing stays near the root for straddling a plane. Pairs are found between a node and
 //!   its 26 same-level neighbours, and across levels by descending the neighbours' occupied
-//!   subtrees (module `loose`). Use [`depth_for_loose`] for the depth.
+//!   subtrees (module `loose`). Use [`depth_for_loose`] for the depth. The default of
+//!   [`BroadPhase`](crate::BroadPhase) ([`Config::octree_placement`](crate::Config)), whose
+//!   octree holds spheres of every size.
 //!
 //! Queries and rays follow the per-node lists through occupied subtrees, testing nodes by
 //! their cells (strict) or loose bounds (loose) (module `query`); [`Octree::validate`] checks

@@ -12,6 +12,9 @@ use super::placement::walk_key_bits;
 use super::{NONE, Octree};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
+#[cfg(feature = "parallel")]
+use crate::radix::ahead;
+use crate::radix::{sort_bits, sort_bits_by};
 use crate::sweep::{self, Ordered};
 use core::borrow::Borrow;
 
@@ -25,8 +28,6 @@ pub(super) const SHORT_CROSS: usize = 1024;
 /// Two lists with a side of at most this many spheres are tested all against all: each sphere
 /// of the other side then costs at most this many tests, less than its share of a sort.
 pub(super) const SHORT_SIDE: usize = 4;
-/// Bits per radix-sort digit: 2048 counters (8 KB) stay in the first-level cache.
-const RADIX_BITS: u32 = 11;
 
 /// A sphere as the passes read it: box, integer cell range and walk position. 48 bytes.
 #[derive(Clone, Copy, Debug)]
@@ -176,58 +177,6 @@ pub(super) fn runs(keys: &[u64]) -> impl Iterator<Item = (u64, usize, usize)> + 
     })
 }
 
-/// LSD radix sort of `items` by bits `lo..lo + bits`, stable; `tmp` and `counts` are scratch.
-/// Digits every item shares are skipped.
-fn radix_sort(items: &mut Vec<u64>, tmp: &mut Vec<u64>, counts: &mut Vec<u32>, lo: u32, bits: u32) {
-    radix_sort_by(items, tmp, counts, |&x| x, lo, bits);
-}
-
-/// [`radix_sort`] of any items by bits `lo..lo + bits` of `key(item)`: the walk order of trees
-/// too deep for a 32-bit walk key sorts `(walk key, id)` pairs this way.
-#[inline]
-fn radix_sort_by<T: Copy + Default>(
-    items: &mut Vec<T>,
-    tmp: &mut Vec<T>,
-    counts: &mut Vec<u32>,
-    key: impl Fn(&T) -> u64,
-    lo: u32,
-    bits: u32,
-) {
-    let n = items.len();
-    let radix = 1usize << RADIX_BITS;
-    let mask = (radix - 1) as u64;
-    let passes = bits.div_ceil(RADIX_BITS) as usize;
-    counts.clear();
-    counts.resize(radix * passes, 0);
-    for x in items.iter() {
-        let x = key(x);
-        for p in 0..passes {
-            let d = ((x >> (lo + p as u32 * RADIX_BITS)) & mask) as usize;
-            counts[p * radix + d] += 1;
-        }
-    }
-    tmp.resize(n, T::default());
-    for p in 0..passes {
-        let c = &mut counts[p * radix..(p + 1) * radix];
-        if c.iter().any(|&k| k as usize == n) {
-            continue;
-        }
-        let mut sum = 0;
-        for k in c.iter_mut() {
-            let here = *k;
-            *k = sum;
-            sum += here;
-        }
-        let shift = lo + p as u32 * RADIX_BITS;
-        for x in items.iter() {
-            let d = ((key(x) >> shift) & mask) as usize;
-            tmp[c[d] as usize] = *x;
-            c[d] += 1;
-        }
-        core::mem::swap(items, tmp);
-    }
-}
-
 /// A pass's view of the walk order: the sorted spheres and their node keys, the tester that
 /// runs and counts the pass's box tests, and the sweep buffers.
 pub(super) struct Walk<'a, F> {
@@ -367,7 +316,7 @@ impl Octree {
                     .filter(|(_, o)| o.node != NONE)
                     .map(|(id, o)| (o.walk_key << 32) | id as u64),
             );
-            radix_sort(items, items_tmp, counts, 32, key_bits);
+            sort_bits(items, items_tmp, counts, 32, key_bits);
             self.scatter(
                 items.iter().map(|&x| (x >> 32, x as u32)),
                 rank,
@@ -386,7 +335,7 @@ impl Octree {
             );
             // Ids are unique and listed in increasing order, so the stable sort by walk key
             // alone gives the `(walk key, id)` order.
-            radix_sort_by(wide, wide_tmp, counts, |&(key, _)| key, 0, key_bits);
+            sort_bits_by(wide, wide_tmp, counts, |&(key, _)| key, 0, key_bits);
             self.scatter(wide.iter().copied(), rank, hot, node_key, keys);
         }
     }
@@ -533,17 +482,6 @@ impl Octree {
     }
 }
 
-/// Grows `v` to half again its length once it is within a quarter of its capacity: the
-/// parallel sort's lists swing from step to step as the parts' bounds move, and stop growing
-/// after their first few swings.
-#[cfg(feature = "parallel")]
-fn ahead<T>(v: &mut Vec<T>) {
-    let want = v.len() + v.len() / 2;
-    if v.capacity() < v.len() + v.len() / 4 {
-        v.reserve(want - v.len());
-    }
-}
-
 /// What every part of a parallel walk-order sort reads.
 #[cfg(feature = "parallel")]
 struct Parts<'a> {
@@ -603,7 +541,7 @@ impl Parts<'_> {
         ahead(&mut part.items);
         ahead(&mut part.tmp);
         debug_assert_eq!(part.items.len(), hot.len());
-        radix_sort(
+        sort_bits(
             &mut part.items,
             &mut part.tmp,
             &mut part.counts,
@@ -648,7 +586,7 @@ mod tests {
         let mut want = items.clone();
         want.sort_by_key(|x| x >> 32);
         let (mut tmp, mut counts) = (Vec::new(), Vec::new());
-        radix_sort(&mut items, &mut tmp, &mut counts, 32, 22);
+        sort_bits(&mut items, &mut tmp, &mut counts, 32, 22);
         assert_eq!(items, want);
     }
 

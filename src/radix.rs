@@ -1,10 +1,14 @@
-//! Least-significant-digit radix sorts of packed slot pairs, reusing caller-owned buffers.
+//! The one radix sort: least-significant-digit sorts of `u64` keys by a range of their bits,
+//! stable, reusing caller-owned buffers, and how those buffers grow.
 //!
-//! A packed pair holds two slot indices, one in each 32-bit half (see `step::pack`). With
-//! `slots` slots each index fits in `s = bits_of(slots - 1)` bits, so the sort reads a pair as the
-//! `2s`-bit number `high half << s | low half` ([`PairBits::compact`]): it orders pairs as the
-//! full keys do, and its digits cover only bits that vary (10 000 slots: 28 bits, three passes
-//! instead of five over the 64-bit key). All digit counts are taken in one read of the keys.
+//! - [`sort_bits`] / [`sort_bits_by`]: any items by bits `lo..lo + bits` of their key. The
+//!   octree's walk order sorts `(walk key << 32) | id` by the walk key's bits this way.
+//! - [`sort_u64`] / [`sort_parts`]: packed slot pairs (one slot index in each 32-bit half, see
+//!   `broadphase::step::pack`), the broadphase's pair lists. With `slots` slots each index fits
+//!   in `s = bits_of(slots - 1)` bits, so the sort reads a pair as the `2s`-bit number
+//!   `high half << s | low half` ([`PairBits`]): it orders pairs as the full keys do, and its
+//!   digits cover only bits that vary (10 000 slots: 28 bits, three passes instead of five
+//!   over the 64-bit key). All digit counts are taken in one read of the keys.
 
 /// The widest digit: 2048 counters (8 KiB) stay in L1.
 const MAX_DIGIT_BITS: u32 = 11;
@@ -15,7 +19,7 @@ const MAX_PASSES: usize = 64usize.div_ceil(MAX_DIGIT_BITS as usize);
 /// How the sort reads the pairs of a store of a given number of slots: the slot bits and
 /// the digits that cover the `2 × slot_bits` bits of the compact key.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) struct PairBits {
+pub(crate) struct PairBits {
     slot_bits: u32,
     digit_bits: u32,
     passes: u32,
@@ -24,7 +28,7 @@ pub(super) struct PairBits {
 impl PairBits {
     /// The layout for slot indices below `slots` (at most `2³¹`): `ceil(2s / 11)` passes of
     /// equal digits.
-    pub(super) fn for_slots(slots: usize) -> PairBits {
+    pub(crate) fn for_slots(slots: usize) -> PairBits {
         let slot_bits = bits_of(slots.saturating_sub(1) as u64).max(1);
         let total = 2 * slot_bits;
         let passes = total.div_ceil(MAX_DIGIT_BITS);
@@ -59,7 +63,7 @@ impl PairBits {
 /// Sorts `keys` (packed pairs of slots below the layout's bound) ascending. Stable, one read
 /// for the counts and one scatter per digit that varies; `scratch` is resized as needed and
 /// keeps its capacity.
-pub(super) fn sort_u64(keys: &mut Vec<u64>, scratch: &mut Vec<u64>, layout: PairBits) {
+pub(crate) fn sort_u64(keys: &mut Vec<u64>, scratch: &mut Vec<u64>, layout: PairBits) {
     let n = keys.len();
     if n < 2 {
         return;
@@ -109,7 +113,7 @@ fn sort_in(keys: &mut [u64], tmp: &mut [u64], layout: PairBits) -> bool {
 /// `parts` parts (fewer where keys repeat), increasing: the quantiles of `sorted`, a sorted
 /// list like the one about to be sorted, of at least `parts` keys.
 #[cfg(feature = "parallel")]
-pub(super) fn split_points(sorted: &[u64], parts: usize, splitters: &mut Vec<u64>) {
+pub(crate) fn split_points(sorted: &[u64], parts: usize, splitters: &mut Vec<u64>) {
     debug_assert!(sorted.len() >= parts || parts == 1);
     splitters.clear();
     for p in 1..parts {
@@ -124,7 +128,7 @@ pub(super) fn split_points(sorted: &[u64], parts: usize, splitters: &mut Vec<u64
 /// number of them at most `key`, counted without a branch (there are a few dozen at most).
 #[cfg(feature = "parallel")]
 #[inline]
-pub(super) fn part_of(splitters: &[u64], key: u64) -> usize {
+pub(crate) fn part_of(splitters: &[u64], key: u64) -> usize {
     splitters.iter().map(|&s| usize::from(s <= key)).sum()
 }
 
@@ -134,7 +138,7 @@ pub(super) fn part_of(splitters: &[u64], key: u64) -> usize {
 /// its second buffer; `bounds` gets the parts' first positions and the key count last. The
 /// keys (distinct packed pairs of slots below `layout`'s bound) end sorted whatever the cut.
 #[cfg(feature = "parallel")]
-pub(super) fn sort_parts(
+pub(crate) fn sort_parts(
     buckets: &[Vec<Vec<u64>>],
     parts: usize,
     out: &mut Vec<u64>,
@@ -279,6 +283,74 @@ fn scatter<const EXPAND: bool>(
 /// Bits needed to write `x`.
 fn bits_of(x: u64) -> u32 {
     u64::BITS - x.leading_zeros()
+}
+
+/// Sorts `items` by bits `lo..lo + bits`, stable; `tmp` and `counts` are scratch that keeps
+/// its capacity. Digits every item shares are skipped.
+pub(crate) fn sort_bits(
+    items: &mut Vec<u64>,
+    tmp: &mut Vec<u64>,
+    counts: &mut Vec<u32>,
+    lo: u32,
+    bits: u32,
+) {
+    sort_bits_by(items, tmp, counts, |&x| x, lo, bits);
+}
+
+/// [`sort_bits`] of any items by bits `lo..lo + bits` of `key(item)`: the walk order of trees
+/// too deep for a 32-bit walk key sorts `(walk key, id)` pairs this way.
+#[inline]
+pub(crate) fn sort_bits_by<T: Copy + Default>(
+    items: &mut Vec<T>,
+    tmp: &mut Vec<T>,
+    counts: &mut Vec<u32>,
+    key: impl Fn(&T) -> u64,
+    lo: u32,
+    bits: u32,
+) {
+    let n = items.len();
+    let radix = 1usize << MAX_DIGIT_BITS;
+    let mask = (radix - 1) as u64;
+    let passes = bits.div_ceil(MAX_DIGIT_BITS) as usize;
+    counts.clear();
+    counts.resize(radix * passes, 0);
+    for x in items.iter() {
+        let x = key(x);
+        for p in 0..passes {
+            let d = ((x >> (lo + p as u32 * MAX_DIGIT_BITS)) & mask) as usize;
+            counts[p * radix + d] += 1;
+        }
+    }
+    tmp.resize(n, T::default());
+    for p in 0..passes {
+        let c = &mut counts[p * radix..(p + 1) * radix];
+        if c.iter().any(|&k| k as usize == n) {
+            continue;
+        }
+        let mut sum = 0;
+        for k in c.iter_mut() {
+            let here = *k;
+            *k = sum;
+            sum += here;
+        }
+        let shift = lo + p as u32 * MAX_DIGIT_BITS;
+        for x in items.iter() {
+            let d = ((key(x) >> shift) & mask) as usize;
+            tmp[c[d] as usize] = *x;
+            c[d] += 1;
+        }
+        core::mem::swap(items, tmp);
+    }
+}
+
+/// Grows `v` to half again its length once it is within a quarter of its capacity: a sort's
+/// list whose length swings from step to step (the pair lists, the parallel walk-order sort's
+/// parts) stops growing after its first few swings.
+pub(crate) fn ahead<T>(v: &mut Vec<T>) {
+    let want = v.len() + v.len() / 2;
+    if v.capacity() < v.len() + v.len() / 4 {
+        v.reserve(want - v.len());
+    }
 }
 
 #[cfg(test)]
