@@ -54,6 +54,9 @@ use node::Node;
 use slotmap::{Key, SecondaryMap, SlotMap};
 
 pub(crate) use build::BuildScratch;
+pub use pairs::PairScratch;
+#[cfg(feature = "parallel")]
+pub(crate) use pairs::SplitScratch;
 
 /// "No index" in the `u32` side arrays.
 const NONE: u32 = u32::MAX;
@@ -189,10 +192,8 @@ pub struct Bvh {
     refits: u64,
     /// Scratch reused by every build and traversal.
     scratch: BuildScratch,
-    pair_stack: Vec<(u32, u32)>,
-    /// Sweep orders of the pending boxes (`sweep::sort_entries`).
-    sweep_a: Vec<u64>,
-    sweep_b: Vec<u64>,
+    /// Scratch of the `&mut self` pair traversals.
+    pair_scratch: PairScratch,
 }
 
 impl Bvh {
@@ -215,9 +216,7 @@ impl Bvh {
             rebuilds: 0,
             refits: 0,
             scratch: BuildScratch::default(),
-            pair_stack: Vec::new(),
-            sweep_a: Vec::new(),
-            sweep_b: Vec::new(),
+            pair_scratch: PairScratch::default(),
         })
     }
 
@@ -286,8 +285,7 @@ impl Bvh {
             + self.boxes.capacity() * 32
             + self.nodes.capacity() * 32
             + (self.parent.capacity() + self.leaf_of.capacity()) * 4
-            + self.pair_stack.capacity() * 8
-            + (self.sweep_a.capacity() + self.sweep_b.capacity()) * 8
+            + self.pair_scratch.heap_bytes()
             + self.scratch.heap_bytes()
     }
 
@@ -541,8 +539,8 @@ mod tests {
             [
                 (b.nodes.as_ptr() as usize, b.nodes.capacity()),
                 (b.boxes.as_ptr() as usize, b.boxes.capacity()),
-                (b.pair_stack.as_ptr() as usize, b.pair_stack.capacity()),
-                (b.sweep_a.as_ptr() as usize, b.sweep_a.capacity()),
+                b.pair_scratch.fingerprint()[0],
+                b.pair_scratch.fingerprint()[1],
             ]
         };
         let mut pairs = Vec::with_capacity(100_000);

@@ -7,62 +7,76 @@ use crate::geom::SimdBox;
 use crate::pair::{Pair, ProxyKey};
 use crate::sweep::{self, Ordered};
 
+/// Scratch of the pair traversals: the stack of node pairs and the sweep orders of the
+/// pending boxes. [`Bvh::for_each_pair`] uses the tree's own; the `&self` traversals
+/// ([`Bvh::for_each_pair_using`], [`Bvh::for_each_pair_with_using`]) take one from the caller,
+/// so that one tree can be traversed by several threads at once, each with its own. It only
+/// grows, to the deepest traversal so far.
+#[derive(Clone, Debug, Default)]
+pub struct PairScratch {
+    stack: Vec<(u32, u32)>,
+    sweep_a: Vec<u64>,
+    sweep_b: Vec<u64>,
+}
+
+impl PairScratch {
+    /// Heap bytes held (capacities).
+    #[must_use]
+    pub fn heap_bytes(&self) -> usize {
+        self.stack.capacity() * 8 + (self.sweep_a.capacity() + self.sweep_b.capacity()) * 8
+    }
+
+    /// Where the buffers live and how large they are: equal before and after a call that
+    /// neither grew nor moved them (the allocation tests).
+    #[cfg(test)]
+    pub(crate) fn fingerprint(&self) -> [(usize, usize); 2] {
+        [
+            (self.stack.as_ptr() as usize, self.stack.capacity()),
+            (self.sweep_a.as_ptr() as usize, self.sweep_a.capacity()),
+        ]
+    }
+}
+
 impl Bvh {
     /// Calls `f(a, b)` once for every unordered pair of live primitives whose current boxes
     /// overlap (closed: touching counts), in no particular order and with `a`, `b` in no
     /// particular order. Exact between `update` and `refit`. Allocation-free once the scratch
     /// stack has grown to the tree's needs.
-    pub fn for_each_pair(&mut self, mut f: impl FnMut(ProxyKey, ProxyKey)) {
-        // Self-traversal of node pairs. The unordered primitive pairs below a node n split
-        // into the pairs within its first child l, within its second child r, and across
-        // l × r: so (n, n) is replaced by (l, l), (r, r), (l, r), and a leaf (n, n) tests its
-        // own range i < j. A cross item (a, b) names two disjoint subtrees; its pairs are
-        // those of the child pairs of a × b (a leaf standing for itself), so descending
-        // partitions them again, and a cross item whose node boxes do not overlap holds no
-        // pair because node boxes contain their primitives'. Every pair is thus produced by
-        // exactly one leaf-level item, once.
-        let mut stack = core::mem::take(&mut self.pair_stack);
+    pub fn for_each_pair(&mut self, f: impl FnMut(ProxyKey, ProxyKey)) {
+        let mut scratch = core::mem::take(&mut self.pair_scratch);
+        self.for_each_pair_using(&mut scratch, f);
+        self.pair_scratch = scratch;
+    }
+
+    /// [`Bvh::for_each_pair`] of a shared tree, with the caller's scratch.
+    pub fn for_each_pair_using(
+        &self,
+        scratch: &mut PairScratch,
+        mut f: impl FnMut(ProxyKey, ProxyKey),
+    ) {
+        let stack = &mut scratch.stack;
         stack.clear();
         let t = Tree::of(self);
         if !t.nodes.is_empty() {
             stack.push((0, 0));
         }
-        while let Some((a, b)) = stack.pop() {
-            if a != b {
-                cross_step(&t, &t, a, b, &mut stack, &mut f);
-                continue;
-            }
-            let node = &t.nodes[a as usize];
-            if node.is_leaf() {
-                let range = node.range();
-                leaf_self_pairs(&t.boxes[range.clone()], &t.keys[range], &mut f);
-            } else {
-                let (l, r) = node.children(a);
-                if t.nodes[l as usize]
-                    .bounds()
-                    .overlaps(&t.nodes[r as usize].bounds())
-                {
-                    stack.push((l, r));
-                }
-                stack.extend_from_slice(&[(r, r), (l, l)]);
-            }
-        }
-        self.pair_stack = stack;
+        drain_own(&t, stack, &mut f);
+        self.pending_self_pairs(&mut scratch.sweep_a, &mut f);
+    }
 
-        // Pending × tree, then pending × pending.
+    /// Pending × tree, then pending × pending (sort-and-sweep on x with `order` as scratch).
+    fn pending_self_pairs(&self, order: &mut Vec<u64>, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
         for p in self.tree_len..self.boxes.len() {
             self.query_tree(&self.boxes[p], |i| f(self.keys[p], self.keys[i]));
         }
-        let mut order = core::mem::take(&mut self.sweep_a);
         let (boxes, keys) = (self.pending_boxes(), self.pending_keys());
-        sweep::sort_entries(&mut order, boxes, 0);
+        sweep::sort_entries(order, boxes, 0);
         let list = Ordered {
-            order: &order,
+            order,
             items: boxes,
             axis: 0,
         };
         sweep::self_pairs_of(&list, |i, j| f(keys[i], keys[j]));
-        self.sweep_a = order;
     }
 
     /// Appends every overlapping pair of [`Bvh::for_each_pair`], canonical (`a < b`) but
@@ -75,8 +89,20 @@ impl Bvh {
     /// Calls `f(a, b)` once for every live primitive `a` of `self` and `b` of `other` whose
     /// current boxes overlap, in no particular order: tree × tree by simultaneous descent,
     /// pending lists by tree queries and a merged sort-and-sweep. Scratch lives in `self`.
-    pub fn for_each_pair_with(&mut self, other: &Bvh, mut f: impl FnMut(ProxyKey, ProxyKey)) {
-        let mut stack = core::mem::take(&mut self.pair_stack);
+    pub fn for_each_pair_with(&mut self, other: &Bvh, f: impl FnMut(ProxyKey, ProxyKey)) {
+        let mut scratch = core::mem::take(&mut self.pair_scratch);
+        self.for_each_pair_with_using(other, &mut scratch, f);
+        self.pair_scratch = scratch;
+    }
+
+    /// [`Bvh::for_each_pair_with`] of shared trees, with the caller's scratch.
+    pub fn for_each_pair_with_using(
+        &self,
+        other: &Bvh,
+        scratch: &mut PairScratch,
+        mut f: impl FnMut(ProxyKey, ProxyKey),
+    ) {
+        let stack = &mut scratch.stack;
         stack.clear();
         let (ta, tb) = (Tree::of(self), Tree::of(other));
         if let (Some(a), Some(b)) = (ta.nodes.first(), tb.nodes.first())
@@ -84,38 +110,245 @@ impl Bvh {
         {
             stack.push((0, 0));
         }
-        while let Some((a, b)) = stack.pop() {
-            cross_step(&ta, &tb, a, b, &mut stack, &mut f);
-        }
-        self.pair_stack = stack;
+        drain_cross(&ta, &tb, stack, &mut f);
+        self.pending_cross_pairs(other, scratch, &mut f);
+    }
 
+    /// The pairs of `self` × `other` that name a pending primitive: pending × tree both ways
+    /// by tree queries, pending × pending by a merged sort-and-sweep on x.
+    fn pending_cross_pairs(
+        &self,
+        other: &Bvh,
+        scratch: &mut PairScratch,
+        f: &mut impl FnMut(ProxyKey, ProxyKey),
+    ) {
         for p in self.tree_len..self.boxes.len() {
             other.query_tree(&self.boxes[p], |i| f(self.keys[p], other.keys[i]));
         }
         for q in other.tree_len..other.boxes.len() {
             self.query_tree(&other.boxes[q], |i| f(self.keys[i], other.keys[q]));
         }
-        let mut xs = core::mem::take(&mut self.sweep_a);
-        let mut ys = core::mem::take(&mut self.sweep_b);
+        let (xs, ys) = (&mut scratch.sweep_a, &mut scratch.sweep_b);
         let (bx, kx) = (self.pending_boxes(), self.pending_keys());
         let (by, ky) = (other.pending_boxes(), other.pending_keys());
-        sweep::sort_entries(&mut xs, bx, 0);
-        sweep::sort_entries(&mut ys, by, 0);
+        sweep::sort_entries(xs, bx, 0);
+        sweep::sort_entries(ys, by, 0);
         let (lx, ly) = (
             Ordered {
-                order: &xs,
+                order: xs,
                 items: bx,
                 axis: 0,
             },
             Ordered {
-                order: &ys,
+                order: ys,
                 items: by,
                 axis: 0,
             },
         );
         sweep::cross_pairs_of(&lx, &ly, |i, j| f(kx[i], ky[j]));
-        self.sweep_a = xs;
-        self.sweep_b = ys;
+    }
+}
+
+/// Scratch of [`Bvh::for_each_pair_split`], owned by its caller and reused: the items handed
+/// out (each list with a second buffer for its next level), and one [`PairScratch`] per task.
+#[cfg(feature = "parallel")]
+#[derive(Clone, Debug, Default)]
+pub(crate) struct SplitScratch {
+    own: [Vec<(u32, u32)>; 2],
+    cross: [Vec<(u32, u32)>; 2],
+    tasks: Vec<PairScratch>,
+}
+
+#[cfg(feature = "parallel")]
+impl SplitScratch {
+    /// Heap bytes held (capacities).
+    pub(crate) fn heap_bytes(&self) -> usize {
+        (self.own.iter().chain(&self.cross))
+            .map(|v| v.capacity() * 8)
+            .sum::<usize>()
+            + self.tasks.capacity() * core::mem::size_of::<PairScratch>()
+            + self
+                .tasks
+                .iter()
+                .map(PairScratch::heap_bytes)
+                .sum::<usize>()
+    }
+}
+
+/// Items a split pair pass aims to hand each task: the items' sizes differ by orders of
+/// magnitude, and rayon's work stealing evens the threads out only when each has several.
+#[cfg(feature = "parallel")]
+const ITEMS_PER_TASK: usize = 8;
+
+#[cfg(feature = "parallel")]
+impl Bvh {
+    /// The pairs of [`Bvh::for_each_pair`] and of [`Bvh::for_each_pair_with`]`(other)`, found
+    /// in `out.len()` tasks over rayon's current pool: task `c` calls `emit(&mut out[c], a, b)`
+    /// for each pair it finds, `a` in `self` (each pair is found by one task, once; which one
+    /// is unspecified).
+    ///
+    /// The items of both descents are first expanded level by level on the calling thread
+    /// (an item is replaced by its children's items, as the descents themselves do, and
+    /// leaf-level items stay) until there are [`ITEMS_PER_TASK`] per task or nothing left to
+    /// expand. Items partition the pairs, so each task then runs the serial descents from its
+    /// stretch of the items with its own stack. The pending boxes' pairs go to task 0.
+    pub(crate) fn for_each_pair_split<S, E>(
+        &self,
+        other: &Bvh,
+        scratch: &mut SplitScratch,
+        out: &mut [S],
+        emit: &E,
+    ) where
+        S: Send,
+        E: Fn(&mut S, ProxyKey, ProxyKey) + Sync,
+    {
+        use rayon::prelude::*;
+        let tasks = out.len();
+        if tasks == 0 {
+            return;
+        }
+        let (ta, tb) = (Tree::of(self), Tree::of(other));
+        let SplitScratch {
+            own: [own, own_next],
+            cross: [cross, cross_next],
+            tasks: scratches,
+        } = scratch;
+        own.clear();
+        cross.clear();
+        if let Some(root) = ta.nodes.first() {
+            own.push((0, 0));
+            if tb
+                .nodes
+                .first()
+                .is_some_and(|r| r.bounds().overlaps(&root.bounds()))
+            {
+                cross.push((0, 0));
+            }
+        }
+        while own.len() + cross.len() < tasks * ITEMS_PER_TASK {
+            let grew_own = expand_own(&ta, own, own_next);
+            let grew_cross = expand_cross(&ta, &tb, cross, cross_next);
+            if !(grew_own || grew_cross) {
+                break;
+            }
+        }
+        if scratches.len() < tasks {
+            scratches.resize_with(tasks, PairScratch::default);
+        }
+        let (own, cross) = (&own[..], &cross[..]);
+        let total = own.len() + cross.len();
+        let (ta, tb) = (&ta, &tb);
+        out.par_iter_mut()
+            .zip(&mut scratches[..tasks])
+            .enumerate()
+            .for_each(|(c, (o, s))| {
+                let mut f = |a, b| emit(o, a, b);
+                let (lo, hi) = (total * c / tasks, total * (c + 1) / tasks);
+                let split = |at: usize| at.min(own.len());
+                s.stack.clear();
+                s.stack.extend_from_slice(&own[split(lo)..split(hi)]);
+                drain_own(ta, &mut s.stack, &mut f);
+                let past = |at: usize| at.max(own.len()) - own.len();
+                s.stack.extend_from_slice(&cross[past(lo)..past(hi)]);
+                drain_cross(ta, tb, &mut s.stack, &mut f);
+                if c == 0 {
+                    self.pending_self_pairs(&mut s.sweep_a, &mut f);
+                    self.pending_cross_pairs(other, s, &mut f);
+                }
+            });
+    }
+}
+
+/// Replaces the self-traversal items of `cur` by their children's items (see [`drain_own`]),
+/// leaf-level items kept, with `next` as the second buffer; true if any item had children.
+#[cfg(feature = "parallel")]
+fn expand_own(t: &Tree, cur: &mut Vec<(u32, u32)>, next: &mut Vec<(u32, u32)>) -> bool {
+    next.clear();
+    let mut grew = false;
+    for &(a, b) in cur.iter() {
+        let na = &t.nodes[a as usize];
+        if a == b && !na.is_leaf() {
+            own_children(t, a, na, next);
+            grew = true;
+        } else if a != b && !(na.is_leaf() && t.nodes[b as usize].is_leaf()) {
+            cross_children(t, t, a, b, next);
+            grew = true;
+        } else {
+            next.push((a, b));
+        }
+    }
+    core::mem::swap(cur, next);
+    grew
+}
+
+/// [`expand_own`] for the cross items of `ta` × `tb`.
+#[cfg(feature = "parallel")]
+fn expand_cross(
+    ta: &Tree,
+    tb: &Tree,
+    cur: &mut Vec<(u32, u32)>,
+    next: &mut Vec<(u32, u32)>,
+) -> bool {
+    next.clear();
+    let mut grew = false;
+    for &(a, b) in cur.iter() {
+        if ta.nodes[a as usize].is_leaf() && tb.nodes[b as usize].is_leaf() {
+            next.push((a, b));
+        } else {
+            cross_children(ta, tb, a, b, next);
+            grew = true;
+        }
+    }
+    core::mem::swap(cur, next);
+    grew
+}
+
+/// Runs the self-traversal of a tree from the items on `stack` until it is empty. The unordered
+/// primitive pairs below a node n split into the pairs within its first child l, within its
+/// second child r, and across l × r: so the item (n, n) is replaced by (l, l), (r, r),
+/// (l, r), and a leaf (n, n) tests its own range i < j. A cross item (a, b) names two
+/// disjoint subtrees; its pairs are those of the child pairs of a × b (a leaf standing for
+/// itself), so descending partitions them again, and a cross item whose node boxes do not
+/// overlap holds no pair because node boxes contain their primitives'. Every pair below the
+/// items is thus produced by exactly one leaf-level item, once.
+fn drain_own(t: &Tree, stack: &mut Vec<(u32, u32)>, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
+    while let Some((a, b)) = stack.pop() {
+        if a != b {
+            cross_step(t, t, a, b, stack, f);
+            continue;
+        }
+        let node = &t.nodes[a as usize];
+        if node.is_leaf() {
+            let range = node.range();
+            leaf_self_pairs(&t.boxes[range.clone()], &t.keys[range], f);
+        } else {
+            own_children(t, a, node, stack);
+        }
+    }
+}
+
+/// The items that replace the interior self item (n, n): see [`drain_own`].
+#[inline]
+fn own_children(t: &Tree, n: u32, node: &Node, stack: &mut Vec<(u32, u32)>) {
+    let (l, r) = node.children(n);
+    if t.nodes[l as usize]
+        .bounds()
+        .overlaps(&t.nodes[r as usize].bounds())
+    {
+        stack.push((l, r));
+    }
+    stack.extend_from_slice(&[(r, r), (l, l)]);
+}
+
+/// Runs the descent over `ta` × `tb` from the cross items on `stack` until it is empty.
+fn drain_cross(
+    ta: &Tree,
+    tb: &Tree,
+    stack: &mut Vec<(u32, u32)>,
+    f: &mut impl FnMut(ProxyKey, ProxyKey),
+) {
+    while let Some((a, b)) = stack.pop() {
+        cross_step(ta, tb, a, b, stack, f);
     }
 }
 
@@ -138,8 +371,7 @@ impl<'a> Tree<'a> {
 
 /// One item `(a, b)` of a descent over two disjoint subtrees with overlapping boxes, `a` in
 /// `ta` and `b` in `tb`: every overlapping primitive pair if both are leaves, else the items
-/// of the children of both interior nodes (a leaf standing in for itself) whose boxes
-/// overlap (pruned before the push, not after the pop).
+/// of their children ([`cross_children`]).
 #[inline]
 fn cross_step(
     ta: &Tree,
@@ -151,8 +383,21 @@ fn cross_step(
 ) {
     let na = &ta.nodes[a as usize];
     let nb = &tb.nodes[b as usize];
+    if na.is_leaf() && nb.is_leaf() {
+        leaf_pairs(ta, na, tb, nb, f);
+    } else {
+        cross_children(ta, tb, a, b, stack);
+    }
+}
+
+/// The items that replace the cross item `(a, b)` of which at least one node is interior: the
+/// child pairs of both interior nodes (a leaf standing in for itself) whose boxes overlap
+/// (pruned before the push, not after the pop).
+#[inline]
+fn cross_children(ta: &Tree, tb: &Tree, a: u32, b: u32, stack: &mut Vec<(u32, u32)>) {
+    let na = &ta.nodes[a as usize];
+    let nb = &tb.nodes[b as usize];
     match (na.is_leaf(), nb.is_leaf()) {
-        (true, true) => leaf_pairs(ta, na, tb, nb, f),
         (false, true) => {
             let bb = nb.bounds();
             let (l, r) = na.children(a);
@@ -171,7 +416,8 @@ fn cross_step(
                 }
             }
         }
-        (false, false) => {
+        _ => {
+            debug_assert!(!na.is_leaf() && !nb.is_leaf());
             let (al, ar) = na.children(a);
             let (bl, br) = nb.children(b);
             let (bl_box, br_box) = (
@@ -273,4 +519,88 @@ fn bits(mut m: u64) -> impl Iterator<Item = usize> {
             k
         })
     })
+}
+
+#[cfg(all(test, feature = "parallel"))]
+mod tests {
+    use super::super::BvhConfig;
+    use super::*;
+    use crate::geom::Aabb;
+    use crate::rng::Rng;
+    use glam::Vec3;
+    use slotmap::SlotMap;
+
+    /// A tree of `n` random boxes built, then changed so that every kind of primitive is
+    /// there: boxes moved out of their leaves, pending inserts and tombstones.
+    fn changed_tree(rng: &mut Rng, keys: &mut SlotMap<ProxyKey, ()>, n: usize) -> Bvh {
+        let random_box = |rng: &mut Rng| {
+            let c = rng.vec3_in(Vec3::splat(-20.0), Vec3::splat(20.0));
+            Aabb::new(c, c + rng.vec3_in(Vec3::splat(0.1), Vec3::splat(2.5)))
+        };
+        let mut bvh = Bvh::new(BvhConfig {
+            rebuild_after_changes: f32::INFINITY,
+            ..BvhConfig::default()
+        })
+        .unwrap();
+        let mut live = Vec::new();
+        for _ in 0..n {
+            let k = keys.insert(());
+            bvh.insert_keyed(k, random_box(rng)).unwrap();
+            live.push(k);
+        }
+        bvh.rebuild();
+        for &k in live.iter().step_by(7) {
+            bvh.update(k, random_box(rng)).unwrap();
+        }
+        for &k in live.iter().skip(3).step_by(11) {
+            bvh.remove(k).unwrap();
+        }
+        for _ in 0..n / 20 {
+            bvh.insert_keyed(keys.insert(()), random_box(rng)).unwrap();
+        }
+        bvh.validate();
+        bvh
+    }
+
+    /// The split descents find each pair of `a` × `a` and `a` × `b` once, whatever the task
+    /// and thread counts, as brute force over the live boxes does.
+    #[test]
+    fn split_descents_find_every_pair_once() {
+        let mut rng = Rng::new(29);
+        let mut scratch = SplitScratch::default();
+        for (n, m) in [(0, 0), (0, 5), (1, 0), (6, 3), (300, 40), (3000, 400)] {
+            let mut keys = SlotMap::with_key();
+            let a = changed_tree(&mut rng, &mut keys, n);
+            let b = changed_tree(&mut rng, &mut keys, m);
+            let (mut boxes_a, mut boxes_b) = (Vec::new(), Vec::new());
+            a.for_each(|k, x| boxes_a.push((k, x)));
+            b.for_each(|k, x| boxes_b.push((k, x)));
+            let mut want = Vec::new();
+            for (i, (ka, xa)) in boxes_a.iter().enumerate() {
+                for (kb, xb) in boxes_a[i + 1..].iter().chain(&boxes_b) {
+                    if xa.overlaps(xb) {
+                        want.push(Pair::new(*ka, *kb));
+                    }
+                }
+            }
+            want.sort_unstable();
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                for tasks in [1, 2, 3, 8, 33] {
+                    let mut out = vec![Vec::new(); tasks];
+                    pool.install(|| {
+                        a.for_each_pair_split(&b, &mut scratch, &mut out, &|o, x, y| {
+                            o.push(Pair::new(x, y));
+                        });
+                    });
+                    let mut got: Vec<Pair> = out.concat();
+                    got.sort_unstable();
+                    assert_eq!(got, want, "n {n} m {m} threads {threads} tasks {tasks}");
+                }
+            }
+        }
+    }
 }
