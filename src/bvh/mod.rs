@@ -40,6 +40,7 @@
 //!   depth) and allocates nothing.
 
 mod build;
+mod lanes;
 mod node;
 mod pairs;
 mod query;
@@ -50,6 +51,7 @@ mod validate;
 use crate::error::Error;
 use crate::geom::{Aabb, SimdBox, check_aabb};
 use crate::pair::ProxyKey;
+use lanes::Lanes;
 use node::Node;
 use slotmap::{Key, SecondaryMap, SlotMap};
 
@@ -175,6 +177,9 @@ pub struct Bvh {
     keys: Vec<ProxyKey>,
     /// Primitive index → current box; [`Aabb::EMPTY`] for a tombstone.
     boxes: Vec<SimdBox>,
+    /// The tree primitives' boxes (`boxes[..tree_len]`) again, face by face, for the leaf
+    /// kernels of the pair passes.
+    lanes: Lanes,
     /// Primitives covered by the node array (live or tombstones).
     tree_len: usize,
     /// Tombstones among the first `tree_len` primitives.
@@ -206,6 +211,7 @@ impl Bvh {
             ids: SecondaryMap::new(),
             keys: Vec::new(),
             boxes: Vec::new(),
+            lanes: Lanes::default(),
             tree_len: 0,
             tombstones: 0,
             nodes: Vec::new(),
@@ -283,6 +289,7 @@ impl Bvh {
         self.ids.capacity() * 12
             + self.keys.capacity() * 8
             + self.boxes.capacity() * 32
+            + self.lanes.heap_bytes()
             + self.nodes.capacity() * 32
             + (self.parent.capacity() + self.leaf_of.capacity()) * 4
             + self.pair_scratch.heap_bytes()
@@ -324,6 +331,7 @@ impl Bvh {
         let id = *self.ids.get(key).ok_or(Error::UnknownProxy)? as usize;
         self.boxes[id] = *b;
         if id < self.tree_len {
+            self.lanes.set(id, b);
             self.enlarge_ancestors(self.leaf_of[id], b);
         }
         Ok(())
@@ -337,6 +345,7 @@ impl Bvh {
         if id < self.tree_len {
             self.keys[id] = ProxyKey::null();
             self.boxes[id] = SimdBox::EMPTY;
+            self.lanes.set(id, &SimdBox::EMPTY);
             self.tombstones += 1;
         } else {
             // Pending: keep the pending region dense by moving the last one into the hole.

@@ -2,6 +2,7 @@
 //! lists against both (tree queries and sort-and-sweep on x).
 
 use super::Bvh;
+use super::lanes::{GROUP, Group, Lanes, Splat, low_bits};
 use super::node::Node;
 use crate::geom::SimdBox;
 use crate::pair::{Pair, ProxyKey};
@@ -312,15 +313,15 @@ fn expand_cross(
 /// overlap holds no pair because node boxes contain their primitives'. Every pair below the
 /// items is thus produced by exactly one leaf-level item, once.
 fn drain_own(t: &Tree, stack: &mut Vec<(u32, u32)>, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
+    let mut noted = Noted::new();
     while let Some((a, b)) = stack.pop() {
         if a != b {
-            cross_step(t, t, a, b, stack, f);
+            cross_step(t, t, a, b, stack, &mut noted, f);
             continue;
         }
         let node = &t.nodes[a as usize];
         if node.is_leaf() {
-            let range = node.range();
-            leaf_self_pairs(&t.boxes[range.clone()], &t.keys[range], f);
+            leaf_self_pairs(t, node, f);
         } else {
             own_children(t, a, node, stack);
         }
@@ -347,8 +348,9 @@ fn drain_cross(
     stack: &mut Vec<(u32, u32)>,
     f: &mut impl FnMut(ProxyKey, ProxyKey),
 ) {
+    let mut noted = Noted::new();
     while let Some((a, b)) = stack.pop() {
-        cross_step(ta, tb, a, b, stack, f);
+        cross_step(ta, tb, a, b, stack, &mut noted, f);
     }
 }
 
@@ -356,6 +358,7 @@ fn drain_cross(
 struct Tree<'a> {
     nodes: &'a [Node],
     boxes: &'a [SimdBox],
+    lanes: &'a Lanes,
     keys: &'a [ProxyKey],
 }
 
@@ -364,6 +367,7 @@ impl<'a> Tree<'a> {
         Tree {
             nodes: &bvh.nodes,
             boxes: &bvh.boxes[..bvh.tree_len],
+            lanes: &bvh.lanes,
             keys: &bvh.keys[..bvh.tree_len],
         }
     }
@@ -379,12 +383,13 @@ fn cross_step(
     a: u32,
     b: u32,
     stack: &mut Vec<(u32, u32)>,
+    noted: &mut Noted,
     f: &mut impl FnMut(ProxyKey, ProxyKey),
 ) {
     let na = &ta.nodes[a as usize];
     let nb = &tb.nodes[b as usize];
     if na.is_leaf() && nb.is_leaf() {
-        leaf_pairs(ta, na, tb, nb, f);
+        leaf_pairs(ta, na, tb, nb, noted, f);
     } else {
         cross_children(ta, tb, a, b, stack);
     }
@@ -437,21 +442,28 @@ fn cross_children(ta: &Tree, tb: &Tree, a: u32, b: u32, stack: &mut Vec<(u32, u3
     }
 }
 
-/// The most boxes whose tests fit one mask (`u64`) of [`mask_of`].
-const MASK_BITS: usize = u64::BITS as usize;
-
-/// Every overlapping pair within one leaf. Each box's tests against the boxes after it go into a
-/// bit mask and the pairs are read from its set bits (see [`leaf_pairs`]); leaves of more than
-/// `MASK_BITS + 1` boxes, which only a `max_leaf_size` above 64 makes, take the plain loop.
+/// Every overlapping pair within one leaf: each box is tested against the blocks that hold
+/// the boxes after it, [`GROUP`] at a time ([`Lanes`]), and the pairs are read from the set
+/// bits of the result. Leaves too long for one mask, which only a `max_leaf_size` above 61
+/// makes, take the plain loop.
 #[inline]
-fn leaf_self_pairs(boxes: &[SimdBox], keys: &[ProxyKey], f: &mut impl FnMut(ProxyKey, ProxyKey)) {
-    if boxes.len() > MASK_BITS + 1 {
-        sweep::all_pairs(boxes, |i, _, j, _| f(keys[i], keys[j]));
+fn leaf_self_pairs(t: &Tree, node: &Node, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
+    let range = node.range();
+    let keys = &t.keys[range.clone()];
+    let Some(leaf) = t.lanes.leaf(range.start, range.len()) else {
+        sweep::all_pairs(&t.boxes[range], |i, _, j, _| f(keys[i], keys[j]));
         return;
-    }
-    for (i, (bi, &ki)) in boxes.iter().zip(keys).enumerate() {
-        for k in bits(mask_of(&boxes[i + 1..], bi)) {
-            f(ki, keys[i + 1 + k]);
+    };
+    for (i, b) in t.boxes[range].iter().enumerate() {
+        // Lanes after box i's own: bits `off + i + 1..`.
+        let after = leaf.off + i + 1;
+        let later = leaf.valid & !low_bits(after);
+        if later == 0 {
+            break;
+        }
+        let m = leaf.mask_from(after / GROUP, &Splat::of(b)) & later;
+        for k in bits(m) {
+            f(keys[i], keys[k - leaf.off]);
         }
     }
 }
@@ -460,20 +472,30 @@ fn leaf_self_pairs(boxes: &[SimdBox], keys: &[ProxyKey], f: &mut impl FnMut(Prox
 /// box of either leaf that misses the other leaf's box pairs with nothing there, so the boxes
 /// of each leaf that meet the other leaf's box are noted in a bit mask first, and only those
 /// are tested against each other: two leaves that overlap at a corner cost one pass over each,
-/// not the product. Every test's result goes into a bit mask too, and the pairs are read from
-/// the set bits, so the loops branch on their counts, not on the tests (whose outcomes the
-/// branch predictor cannot guess). Leaves of more than [`MASK_BITS`] boxes, which only a
-/// `max_leaf_size` above 64 makes, take the plain loop.
+/// not the product. The tests run [`GROUP`] boxes at a time ([`Lanes`]), a noted box of `na`
+/// against the blocks of `nb` that hold a noted box; their results are bit masks, and the
+/// pairs are read from the set bits, so the loops branch on their counts, not on the tests
+/// (whose outcomes the branch predictor cannot guess). Leaves too long for one mask, which
+/// only a `max_leaf_size` above 61 makes, take the plain loop.
 #[inline]
-fn leaf_pairs(ta: &Tree, na: &Node, tb: &Tree, nb: &Node, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
-    let (a_box, b_box) = (na.bounds(), nb.bounds());
+fn leaf_pairs(
+    ta: &Tree,
+    na: &Node,
+    tb: &Tree,
+    nb: &Node,
+    noted: &mut Noted,
+    f: &mut impl FnMut(ProxyKey, ProxyKey),
+) {
     let (ra, rb) = (na.range(), nb.range());
-    let (boxes_a, keys_a) = (&ta.boxes[ra.clone()], &ta.keys[ra]);
-    let (boxes_b, keys_b) = (&tb.boxes[rb.clone()], &tb.keys[rb]);
-    if boxes_a.len() > MASK_BITS || boxes_b.len() > MASK_BITS {
-        for (bi, &ki) in boxes_a.iter().zip(keys_a) {
+    let (keys_a, keys_b) = (&ta.keys[ra.clone()], &tb.keys[rb.clone()]);
+    let (Some(la), Some(lb)) = (
+        ta.lanes.leaf(ra.start, ra.len()),
+        tb.lanes.leaf(rb.start, rb.len()),
+    ) else {
+        let b_box = nb.bounds();
+        for (bi, &ki) in ta.boxes[ra].iter().zip(keys_a) {
             if bi.overlaps(&b_box) {
-                for (bj, &kj) in boxes_b.iter().zip(keys_b) {
+                for (bj, &kj) in tb.boxes[rb.clone()].iter().zip(keys_b) {
                     if bi.overlaps(bj) {
                         f(ki, kj);
                     }
@@ -481,32 +503,52 @@ fn leaf_pairs(ta: &Tree, na: &Node, tb: &Tree, nb: &Node, f: &mut impl FnMut(Pro
             }
         }
         return;
+    };
+    // The boxes of b near a's box, then those of a near b's box.
+    let near_b = lb.mask(&Splat::of(&na.bounds()));
+    if near_b == 0 {
+        return;
     }
-    let near_a = mask_of(boxes_b, &a_box);
+    let near_a = la.mask(&Splat::of(&nb.bounds()));
     if near_a == 0 {
         return;
     }
-    for i in bits(mask_of(boxes_a, &b_box)) {
-        let bi = &boxes_a[i];
-        let mut hits = 0;
-        for k in bits(near_a) {
-            hits |= u64::from(bi.overlaps(&boxes_b[k])) << k;
-        }
-        for k in bits(hits) {
-            f(keys_a[i], keys_b[k]);
+    // The noted boxes of b, packed into blocks of their own: each noted box of a is then
+    // tested against `ceil(noted / 4)` blocks however the noted boxes lie in b's blocks.
+    let mut n = 0;
+    for k in bits(near_b) {
+        noted.blocks[n / GROUP].set(n, &tb.boxes[rb.start + k - lb.off]);
+        noted.keys[n] = keys_b[k - lb.off];
+        n += 1;
+    }
+    let (blocks, keys) = (&noted.blocks[..n.div_ceil(GROUP)], &noted.keys[..n]);
+    let boxes_a = &ta.boxes[ra];
+    for i in bits(near_a) {
+        let q = Splat::of(&boxes_a[i - la.off]);
+        for (g, block) in blocks.iter().enumerate() {
+            // The last block's lanes past `n` hold boxes of an earlier leaf pair.
+            let live = low_bits(n - GROUP * g);
+            for k in bits(u64::from(block.overlaps(&q)) & live) {
+                f(keys_a[i - la.off], keys[GROUP * g + k]);
+            }
         }
     }
 }
 
-/// Bit `k` set iff `boxes[k]` overlaps `b` (at most [`MASK_BITS`] boxes), computed without
-/// branches.
-#[inline]
-fn mask_of(boxes: &[SimdBox], b: &SimdBox) -> u64 {
-    debug_assert!(boxes.len() <= MASK_BITS);
-    boxes
-        .iter()
-        .enumerate()
-        .fold(0, |m, (k, bk)| m | u64::from(bk.overlaps(b)) << k)
+/// The noted boxes of one leaf of a leaf pair, packed into blocks, and their keys: a
+/// descent's scratch, reused by each of its leaf pairs.
+struct Noted {
+    blocks: [Group; 64 / GROUP],
+    keys: [ProxyKey; 64],
+}
+
+impl Noted {
+    fn new() -> Noted {
+        Noted {
+            blocks: [Group::EMPTY; 64 / GROUP],
+            keys: [ProxyKey::default(); 64],
+        }
+    }
 }
 
 /// The positions of the set bits of `m`, lowest first.
