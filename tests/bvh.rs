@@ -572,13 +572,21 @@ fn a_long_line_builds_refits_and_traverses_iteratively() {
     }
 }
 
-/// Leaves of more than 64 boxes (a `max_leaf_size` above 64) take the leaf × leaf loop
-/// without the bit mask of the boxes near the other leaf: both loops must give brute force's
-/// pairs, self and cross, before and after the boxes move.
+/// Leaves whose masks do not fit 64 bits (more than 61 boxes, or 62–64 starting past a block
+/// boundary of the 4-box lanes) take the leaf × leaf loop without the bit mask of the boxes
+/// near the other leaf: both loops must give brute force's pairs, self and cross, before and
+/// after the boxes move.
 #[test]
 fn big_leaves_pair_like_brute_force() {
     let mut rng = Rng::new(23);
-    for (max_leaf_size, traversal_cost) in [(255, 64.0), (70, 64.0), (64, 64.0), (16, 8.0)] {
+    for (max_leaf_size, traversal_cost) in [
+        (255, 64.0),
+        (70, 64.0),
+        (64, 64.0),
+        (61, 64.0),
+        (33, 16.0),
+        (16, 8.0),
+    ] {
         let cfg = BvhConfig {
             max_leaf_size,
             traversal_cost,

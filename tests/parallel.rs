@@ -6,14 +6,16 @@
 //! groups rule.
 //!
 //! The worlds keep more spheres than the broadphase's parallel threshold
-//! (`PARALLEL_MIN_SPHERES`, 10 000) and enough pairs for its pair sort and diff to split (4096
-//! per part), so the split passes are the ones checked.
+//! (`PARALLEL_MIN_SPHERES`, 10 000), or for the worlds of bodies alone more dynamic bodies than
+//! its other threshold (`PARALLEL_MIN_BODIES`, 4096), and enough pairs for its pair sort and
+//! diff to split (4096 per part), so the split passes are the ones checked: with bodies alone,
+//! the BVH descents handed out in items to many tasks.
 
 mod common;
 
 use broadleaf::fixtures::scene::{Feed, Frame, Gas, Scene};
 use broadleaf::octree::Placement;
-use broadleaf::{BroadPhase, CollisionGroups, Config, Pair, Passes, ProxyKey, Vec3};
+use broadleaf::{BodyKind, BroadPhase, CollisionGroups, Config, Pair, Passes, ProxyKey, Vec3};
 use common::{KeyPair, Model, ModelShape, Rng};
 use slotmap::Key;
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -24,6 +26,11 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 const THRESHOLD: usize = 10_000;
 /// Proxies at the start of every world: four in five are spheres.
 const START: usize = 13_500;
+/// The broadphase's `PARALLEL_MIN_BODIES`: the worlds of bodies alone never have fewer
+/// dynamic bodies.
+const BODY_THRESHOLD: usize = 4096;
+/// Bodies at the start of a world of bodies alone (about 85 % dynamic).
+const BODY_START: usize = 6000;
 
 /// Thread counts every world runs at.
 const THREADS: [usize; 4] = [1, 2, 3, 8];
@@ -62,6 +69,8 @@ struct World {
     placement: Placement,
     passes: Passes,
     margin: f32,
+    /// Bodies only (smaller boxes, no spheres), checked against `BODY_THRESHOLD`.
+    bodies_only: bool,
 }
 
 /// The model's proxies with their groups, and the pairs of the last step.
@@ -79,10 +88,17 @@ const HALF: f32 = 30.0;
 impl Checked {
     /// A random shape: mostly spheres of radii 0.2–2.5 (several octree levels), some
     /// dynamic and some static boxes of half extents 0.2–3.
-    fn random_shape(rng: &mut Rng) -> ModelShape {
+    fn random_shape(rng: &mut Rng, bodies_only: bool) -> ModelShape {
         let center = rng.offset(HALF);
         let roll = rng.unit();
-        if roll < 0.8 {
+        if bodies_only {
+            let half = Vec3::new(
+                rng.range(0.2, 1.2),
+                rng.range(0.2, 1.2),
+                rng.range(0.2, 1.2),
+            );
+            ModelShape::body(center, half, roll > 0.85)
+        } else if roll < 0.8 {
             ModelShape::Sphere {
                 center,
                 radius: if rng.chance(0.1) {
@@ -110,8 +126,8 @@ impl Checked {
         })
     }
 
-    fn insert(&mut self, bp: &mut BroadPhase, rng: &mut Rng) {
-        let key = self.model.insert(bp, Self::random_shape(rng));
+    fn insert(&mut self, bp: &mut BroadPhase, rng: &mut Rng, bodies_only: bool) {
+        let key = self.model.insert(bp, Self::random_shape(rng, bodies_only));
         self.digest.key(key);
         if let Some(g) = Self::random_groups(rng) {
             bp.set_groups(key, g).expect("a live key");
@@ -169,7 +185,7 @@ fn run(world: World) -> u64 {
     };
     c.model.quadratic = false;
     for _ in 0..world.start {
-        c.insert(&mut bp, &mut rng);
+        c.insert(&mut bp, &mut rng, world.bodies_only);
     }
     let moves = |c: &mut Checked, bp: &mut BroadPhase, rng: &mut Rng, p: f32, reach: f32| {
         for key in c.model.keys() {
@@ -186,10 +202,17 @@ fn run(world: World) -> u64 {
     };
     let mut steps = 0;
     let mut step = |c: &mut Checked, bp: &mut BroadPhase, phase: &str| {
-        assert!(
-            bp.len() >= THRESHOLD,
-            "the world shrank below the threshold"
-        );
+        if world.bodies_only {
+            assert!(
+                bp.bvh(BodyKind::Dynamic).len() >= BODY_THRESHOLD,
+                "the world's dynamic bodies fell below the threshold"
+            );
+        } else {
+            assert!(
+                bp.len() >= THRESHOLD,
+                "the world shrank below the threshold"
+            );
+        }
         c.step(bp, &format!("{world:?} step {steps} ({phase})"));
         steps += 1;
     };
@@ -215,7 +238,7 @@ fn run(world: World) -> u64 {
             }
         }
         for _ in 0..keys.len() / 40 {
-            c.insert(&mut bp, &mut rng);
+            c.insert(&mut bp, &mut rng, world.bodies_only);
         }
         for &key in keys.iter().step_by(97) {
             if c.model.shapes.contains_key(&key) {
@@ -230,7 +253,7 @@ fn run(world: World) -> u64 {
     // Growth: a twentieth more proxies each step, everything moving.
     for _ in 0..5 {
         for _ in 0..bp.len() / 20 {
-            c.insert(&mut bp, &mut rng);
+            c.insert(&mut bp, &mut rng, world.bodies_only);
         }
         moves(&mut c, &mut bp, &mut rng, 1.0, 0.3);
         step(&mut c, &mut bp, "grow");
@@ -269,6 +292,7 @@ fn loose_world_is_the_same_at_every_thread_count() {
         placement: Placement::Loose,
         passes: Passes::Adaptive,
         margin: 0.0,
+        bodies_only: false,
     });
 }
 
@@ -280,6 +304,7 @@ fn strict_world_with_a_margin_is_the_same_at_every_thread_count() {
         placement: Placement::Strict,
         passes: Passes::Adaptive,
         margin: 0.05,
+        bodies_only: false,
     });
 }
 
@@ -291,6 +316,31 @@ fn full_passes_only_are_the_same_at_every_thread_count() {
         placement: Placement::Loose,
         passes: Passes::Full,
         margin: 0.0,
+        bodies_only: false,
+    });
+}
+
+#[test]
+fn world_of_bodies_is_the_same_at_every_thread_count() {
+    same_at_every_thread_count(World {
+        seed: 4,
+        start: BODY_START,
+        placement: Placement::Loose,
+        passes: Passes::Adaptive,
+        margin: 0.0,
+        bodies_only: true,
+    });
+}
+
+#[test]
+fn world_of_bodies_in_full_passes_with_a_margin_is_the_same_at_every_thread_count() {
+    same_at_every_thread_count(World {
+        seed: 5,
+        start: BODY_START,
+        placement: Placement::Loose,
+        passes: Passes::Full,
+        margin: 0.05,
+        bodies_only: true,
     });
 }
 

@@ -21,15 +21,16 @@
 //! candidate, never sorted and never diffed.
 //!
 //! **Threads** (feature `parallel`). With more than one thread in rayon's current pool and at
-//! least [`PARALLEL_MIN_SPHERES`] spheres, the full pass runs as one job on the pool, split in
-//! [`TASKS_PER_THREAD`] tasks per thread at each phase: the octree sorts its walk order in
-//! key-range parts and passes its runs in chunks (each with its own pass state), beside one
-//! task for the BVH passes and the sphere × body queries; every producer cuts its pairs into
+//! least [`PARALLEL_MIN_SPHERES`] spheres or [`PARALLEL_MIN_BODIES`] dynamic bodies, the full
+//! pass runs as one job on the pool, split in [`TASKS_PER_THREAD`] tasks per thread at each
+//! phase: the octree sorts its walk order in key-range parts and passes its runs in chunks
+//! (each with its own pass state), the BVH passes hand their descents' items to as many tasks
+//! (each with its own stack), and one task runs the sphere × body queries; every producer cuts its pairs into
 //! the parts of the pair sort as it finds them (at the quantiles of the last step's pairs),
 //! each part is sorted by its own task, and the event diff is split the same way. Each pair is
 //! found by one producer, once, and every part covers a key range, so the lists are the
 //! serial pass's at any thread count. What stays serial: the updates (the caller's), the
-//! refits, a BVH pass split no further than one task, and the incremental pass.
+//! refits, the sphere × body queries (one task), and the incremental pass.
 
 use super::fat::LOOKAHEAD_STEPS;
 use super::*;
@@ -59,12 +60,16 @@ mod cost {
 /// full pass: the margin pays for the rebuild that enters it.
 const ENTER_FRACTION: f64 = 0.5;
 
-/// A full pass splits over rayon's current pool only with at least this many spheres (and
-/// more than one thread): the octree's pass is the work that splits (the BVH passes run as
-/// one task beside it), and below this many spheres handing out its chunks costs about what
-/// the second thread saves (measured on `gas`).
+/// A full pass splits over rayon's current pool only with at least this many spheres or
+/// [`PARALLEL_MIN_BODIES`] dynamic bodies (and more than one thread): below this many spheres
+/// handing out the octree's chunks costs about what the second thread saves (measured on
+/// `gas`).
 #[cfg(feature = "parallel")]
 const PARALLEL_MIN_SPHERES: usize = 10_000;
+/// The dynamic bodies from which a full pass splits over the pool whatever the spheres: a
+/// body costs the pass several times what a sphere does, so fewer of them pay for the split.
+#[cfg(feature = "parallel")]
+const PARALLEL_MIN_BODIES: usize = 4096;
 /// Pairs per part of the parallel pair sort and event diff, at least: a part's fixed costs
 /// (the sort's counters, handing out the task) outweigh the split below it.
 #[cfg(feature = "parallel")]
@@ -86,8 +91,10 @@ pub(super) struct Parallel {
     /// The first keys of the pair sort's parts (see [`radix::split_points`]).
     splitters: Vec<u64>,
     /// Pairs found, packed, per producer and per part of the sort: one producer per chunk of
-    /// the octree's pass, then the bodies' task.
+    /// the octree's pass, one per task of the BVH passes, then the sphere × body queries.
     found: Vec<Vec<Vec<u64>>>,
+    /// The split BVH passes' items and per-task stacks.
+    split: crate::bvh::SplitScratch,
     /// The pair sort's second buffers (one per part) and its parts' bounds.
     sort_tmp: Vec<Vec<u64>>,
     sort_bounds: Vec<usize>,
@@ -111,6 +118,7 @@ impl Parallel {
             + self.cur_at.capacity()
             + self.prev_at.capacity())
             * 8
+            + self.split.heap_bytes()
     }
 }
 
@@ -346,7 +354,9 @@ impl BroadPhase {
     #[cfg(feature = "parallel")]
     fn tasks(&self) -> usize {
         let threads = rayon::current_num_threads();
-        if threads < 2 || self.octree.len() < PARALLEL_MIN_SPHERES {
+        let small =
+            self.octree.len() < PARALLEL_MIN_SPHERES && self.dynamic.len() < PARALLEL_MIN_BODIES;
+        if threads < 2 || small {
             1
         } else {
             (threads * TASKS_PER_THREAD).min(MAX_TASKS)
@@ -391,8 +401,8 @@ impl BroadPhase {
     }
 
     /// [`BroadPhase::structure_pairs`] and the sort, over rayon's current pool in `tasks`
-    /// tasks per split phase: the octree's pass in chunks, beside one task for the BVH
-    /// passes and the sphere × body queries. Each producer cuts its pairs into the sort's
+    /// tasks per split phase: the octree's pass in chunks, beside the BVH passes in as many
+    /// tasks and one task for the sphere × body queries. Each producer cuts its pairs into the sort's
     /// parts as it finds them (at the quantiles of the last step's pairs, which the new ones
     /// resemble; one part if there were few), and each part is then sorted into `fresh` by its
     /// own task. `fresh` ends as the serial path leaves it.
@@ -402,10 +412,11 @@ impl BroadPhase {
         let parts = tasks.min(self.prev_packed.len() / MIN_PART_PAIRS).max(1);
         radix::split_points(&self.prev_packed, parts, &mut par.splitters);
         let parts = par.splitters.len() + 1;
-        if par.found.len() < tasks + 1 {
-            par.found.resize_with(tasks + 1, Vec::new);
+        let producers = 2 * tasks + 1;
+        if par.found.len() < producers {
+            par.found.resize_with(producers, Vec::new);
         }
-        for found in &mut par.found[..tasks + 1] {
+        for found in &mut par.found[..producers] {
             if found.len() < parts {
                 found.resize_with(parts, Vec::new);
             }
@@ -421,24 +432,28 @@ impl BroadPhase {
                 found[radix::part_of(splitters, p)].push(p);
             }
         };
-        let (chunks, rest) = par.found[..tasks + 1].split_at_mut(tasks);
-        let bodies = &mut rest[0];
-        let (dynamic, statics) = (&mut self.dynamic, &self.statics);
+        let (chunks, rest) = par.found[..producers].split_at_mut(tasks);
+        let (body_chunks, rest) = rest.split_at_mut(tasks);
+        let spheres_bodies = &mut rest[0];
+        let (dynamic, statics, split) = (&self.dynamic, &self.statics, &mut par.split);
         self.octree.for_each_pair_chunked(chunks, &emit, |octree| {
-            let mut push = |a, b| emit(bodies, a, b);
-            dynamic.for_each_pair(&mut push);
-            dynamic.for_each_pair_with(statics, &mut push);
-            sphere_body_pairs(octree, dynamic, statics, &mut push);
+            rayon::join(
+                || dynamic.for_each_pair_split(statics, split, body_chunks, &emit),
+                || {
+                    let mut push = |a, b| emit(spheres_bodies, a, b);
+                    sphere_body_pairs(octree, dynamic, statics, &mut push);
+                },
+            );
         });
         radix::sort_parts(
-            &par.found[..tasks + 1],
+            &par.found[..producers],
             parts,
             &mut self.fresh,
             &mut par.sort_tmp,
             &mut par.sort_bounds,
             layout,
         );
-        for list in par.found[..tasks + 1].iter_mut().flatten() {
+        for list in par.found[..producers].iter_mut().flatten() {
             ahead(list);
         }
         par.sort_tmp.iter_mut().for_each(ahead);

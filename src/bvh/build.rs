@@ -65,6 +65,7 @@ impl Bvh {
             &mut self.leaf_of,
         );
         self.renumber(&mut s);
+        self.lanes.fill(&self.boxes[..n]);
         self.tree_len = n;
         self.tombstones = 0;
         self.cost_at_build = self.sah_cost();

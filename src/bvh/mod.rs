@@ -40,6 +40,7 @@
 //!   depth) and allocates nothing.
 
 mod build;
+mod lanes;
 mod node;
 mod pairs;
 mod query;
@@ -50,10 +51,14 @@ mod validate;
 use crate::error::Error;
 use crate::geom::{Aabb, SimdBox, check_aabb};
 use crate::pair::ProxyKey;
+use lanes::Lanes;
 use node::Node;
 use slotmap::{Key, SecondaryMap, SlotMap};
 
 pub(crate) use build::BuildScratch;
+pub use pairs::PairScratch;
+#[cfg(feature = "parallel")]
+pub(crate) use pairs::SplitScratch;
 
 /// "No index" in the `u32` side arrays.
 const NONE: u32 = u32::MAX;
@@ -172,6 +177,9 @@ pub struct Bvh {
     keys: Vec<ProxyKey>,
     /// Primitive index → current box; [`Aabb::EMPTY`] for a tombstone.
     boxes: Vec<SimdBox>,
+    /// The tree primitives' boxes (`boxes[..tree_len]`) again, face by face, for the leaf
+    /// kernels of the pair passes.
+    lanes: Lanes,
     /// Primitives covered by the node array (live or tombstones).
     tree_len: usize,
     /// Tombstones among the first `tree_len` primitives.
@@ -189,10 +197,8 @@ pub struct Bvh {
     refits: u64,
     /// Scratch reused by every build and traversal.
     scratch: BuildScratch,
-    pair_stack: Vec<(u32, u32)>,
-    /// Sweep orders of the pending boxes (`sweep::sort_entries`).
-    sweep_a: Vec<u64>,
-    sweep_b: Vec<u64>,
+    /// Scratch of the `&mut self` pair traversals.
+    pair_scratch: PairScratch,
 }
 
 impl Bvh {
@@ -205,6 +211,7 @@ impl Bvh {
             ids: SecondaryMap::new(),
             keys: Vec::new(),
             boxes: Vec::new(),
+            lanes: Lanes::default(),
             tree_len: 0,
             tombstones: 0,
             nodes: Vec::new(),
@@ -215,9 +222,7 @@ impl Bvh {
             rebuilds: 0,
             refits: 0,
             scratch: BuildScratch::default(),
-            pair_stack: Vec::new(),
-            sweep_a: Vec::new(),
-            sweep_b: Vec::new(),
+            pair_scratch: PairScratch::default(),
         })
     }
 
@@ -284,10 +289,10 @@ impl Bvh {
         self.ids.capacity() * 12
             + self.keys.capacity() * 8
             + self.boxes.capacity() * 32
+            + self.lanes.heap_bytes()
             + self.nodes.capacity() * 32
             + (self.parent.capacity() + self.leaf_of.capacity()) * 4
-            + self.pair_stack.capacity() * 8
-            + (self.sweep_a.capacity() + self.sweep_b.capacity()) * 8
+            + self.pair_scratch.heap_bytes()
             + self.scratch.heap_bytes()
     }
 
@@ -326,6 +331,7 @@ impl Bvh {
         let id = *self.ids.get(key).ok_or(Error::UnknownProxy)? as usize;
         self.boxes[id] = *b;
         if id < self.tree_len {
+            self.lanes.set(id, b);
             self.enlarge_ancestors(self.leaf_of[id], b);
         }
         Ok(())
@@ -339,6 +345,7 @@ impl Bvh {
         if id < self.tree_len {
             self.keys[id] = ProxyKey::null();
             self.boxes[id] = SimdBox::EMPTY;
+            self.lanes.set(id, &SimdBox::EMPTY);
             self.tombstones += 1;
         } else {
             // Pending: keep the pending region dense by moving the last one into the hole.
@@ -541,8 +548,8 @@ mod tests {
             [
                 (b.nodes.as_ptr() as usize, b.nodes.capacity()),
                 (b.boxes.as_ptr() as usize, b.boxes.capacity()),
-                (b.pair_stack.as_ptr() as usize, b.pair_stack.capacity()),
-                (b.sweep_a.as_ptr() as usize, b.sweep_a.capacity()),
+                b.pair_scratch.fingerprint()[0],
+                b.pair_scratch.fingerprint()[1],
             ]
         };
         let mut pairs = Vec::with_capacity(100_000);

@@ -2,67 +2,82 @@
 //! lists against both (tree queries and sort-and-sweep on x).
 
 use super::Bvh;
+use super::lanes::{GROUP, Group, Lanes, Splat, low_bits};
 use super::node::Node;
 use crate::geom::SimdBox;
 use crate::pair::{Pair, ProxyKey};
 use crate::sweep::{self, Ordered};
+
+/// Scratch of the pair traversals: the stack of node pairs and the sweep orders of the
+/// pending boxes. [`Bvh::for_each_pair`] uses the tree's own; the `&self` traversals
+/// ([`Bvh::for_each_pair_using`], [`Bvh::for_each_pair_with_using`]) take one from the caller,
+/// so that one tree can be traversed by several threads at once, each with its own. It only
+/// grows, to the deepest traversal so far.
+#[derive(Clone, Debug, Default)]
+pub struct PairScratch {
+    stack: Vec<(u32, u32)>,
+    sweep_a: Vec<u64>,
+    sweep_b: Vec<u64>,
+}
+
+impl PairScratch {
+    /// Heap bytes held (capacities).
+    #[must_use]
+    pub fn heap_bytes(&self) -> usize {
+        self.stack.capacity() * 8 + (self.sweep_a.capacity() + self.sweep_b.capacity()) * 8
+    }
+
+    /// Where the buffers live and how large they are: equal before and after a call that
+    /// neither grew nor moved them (the allocation tests).
+    #[cfg(test)]
+    pub(crate) fn fingerprint(&self) -> [(usize, usize); 2] {
+        [
+            (self.stack.as_ptr() as usize, self.stack.capacity()),
+            (self.sweep_a.as_ptr() as usize, self.sweep_a.capacity()),
+        ]
+    }
+}
 
 impl Bvh {
     /// Calls `f(a, b)` once for every unordered pair of live primitives whose current boxes
     /// overlap (closed: touching counts), in no particular order and with `a`, `b` in no
     /// particular order. Exact between `update` and `refit`. Allocation-free once the scratch
     /// stack has grown to the tree's needs.
-    pub fn for_each_pair(&mut self, mut f: impl FnMut(ProxyKey, ProxyKey)) {
-        // Self-traversal of node pairs. The unordered primitive pairs below a node n split
-        // into the pairs within its first child l, within its second child r, and across
-        // l × r: so (n, n) is replaced by (l, l), (r, r), (l, r), and a leaf (n, n) tests its
-        // own range i < j. A cross item (a, b) names two disjoint subtrees; its pairs are
-        // those of the child pairs of a × b (a leaf standing for itself), so descending
-        // partitions them again, and a cross item whose node boxes do not overlap holds no
-        // pair because node boxes contain their primitives'. Every pair is thus produced by
-        // exactly one leaf-level item, once.
-        let mut stack = core::mem::take(&mut self.pair_stack);
+    pub fn for_each_pair(&mut self, f: impl FnMut(ProxyKey, ProxyKey)) {
+        let mut scratch = core::mem::take(&mut self.pair_scratch);
+        self.for_each_pair_using(&mut scratch, f);
+        self.pair_scratch = scratch;
+    }
+
+    /// [`Bvh::for_each_pair`] of a shared tree, with the caller's scratch.
+    pub fn for_each_pair_using(
+        &self,
+        scratch: &mut PairScratch,
+        mut f: impl FnMut(ProxyKey, ProxyKey),
+    ) {
+        let stack = &mut scratch.stack;
         stack.clear();
         let t = Tree::of(self);
         if !t.nodes.is_empty() {
             stack.push((0, 0));
         }
-        while let Some((a, b)) = stack.pop() {
-            if a != b {
-                cross_step(&t, &t, a, b, &mut stack, &mut f);
-                continue;
-            }
-            let node = &t.nodes[a as usize];
-            if node.is_leaf() {
-                let range = node.range();
-                leaf_self_pairs(&t.boxes[range.clone()], &t.keys[range], &mut f);
-            } else {
-                let (l, r) = node.children(a);
-                if t.nodes[l as usize]
-                    .bounds()
-                    .overlaps(&t.nodes[r as usize].bounds())
-                {
-                    stack.push((l, r));
-                }
-                stack.extend_from_slice(&[(r, r), (l, l)]);
-            }
-        }
-        self.pair_stack = stack;
+        drain_own(&t, stack, &mut f);
+        self.pending_self_pairs(&mut scratch.sweep_a, &mut f);
+    }
 
-        // Pending × tree, then pending × pending.
+    /// Pending × tree, then pending × pending (sort-and-sweep on x with `order` as scratch).
+    fn pending_self_pairs(&self, order: &mut Vec<u64>, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
         for p in self.tree_len..self.boxes.len() {
             self.query_tree(&self.boxes[p], |i| f(self.keys[p], self.keys[i]));
         }
-        let mut order = core::mem::take(&mut self.sweep_a);
         let (boxes, keys) = (self.pending_boxes(), self.pending_keys());
-        sweep::sort_entries(&mut order, boxes, 0);
+        sweep::sort_entries(order, boxes, 0);
         let list = Ordered {
-            order: &order,
+            order,
             items: boxes,
             axis: 0,
         };
         sweep::self_pairs_of(&list, |i, j| f(keys[i], keys[j]));
-        self.sweep_a = order;
     }
 
     /// Appends every overlapping pair of [`Bvh::for_each_pair`], canonical (`a < b`) but
@@ -75,8 +90,20 @@ impl Bvh {
     /// Calls `f(a, b)` once for every live primitive `a` of `self` and `b` of `other` whose
     /// current boxes overlap, in no particular order: tree × tree by simultaneous descent,
     /// pending lists by tree queries and a merged sort-and-sweep. Scratch lives in `self`.
-    pub fn for_each_pair_with(&mut self, other: &Bvh, mut f: impl FnMut(ProxyKey, ProxyKey)) {
-        let mut stack = core::mem::take(&mut self.pair_stack);
+    pub fn for_each_pair_with(&mut self, other: &Bvh, f: impl FnMut(ProxyKey, ProxyKey)) {
+        let mut scratch = core::mem::take(&mut self.pair_scratch);
+        self.for_each_pair_with_using(other, &mut scratch, f);
+        self.pair_scratch = scratch;
+    }
+
+    /// [`Bvh::for_each_pair_with`] of shared trees, with the caller's scratch.
+    pub fn for_each_pair_with_using(
+        &self,
+        other: &Bvh,
+        scratch: &mut PairScratch,
+        mut f: impl FnMut(ProxyKey, ProxyKey),
+    ) {
+        let stack = &mut scratch.stack;
         stack.clear();
         let (ta, tb) = (Tree::of(self), Tree::of(other));
         if let (Some(a), Some(b)) = (ta.nodes.first(), tb.nodes.first())
@@ -84,38 +111,246 @@ impl Bvh {
         {
             stack.push((0, 0));
         }
-        while let Some((a, b)) = stack.pop() {
-            cross_step(&ta, &tb, a, b, &mut stack, &mut f);
-        }
-        self.pair_stack = stack;
+        drain_cross(&ta, &tb, stack, &mut f);
+        self.pending_cross_pairs(other, scratch, &mut f);
+    }
 
+    /// The pairs of `self` × `other` that name a pending primitive: pending × tree both ways
+    /// by tree queries, pending × pending by a merged sort-and-sweep on x.
+    fn pending_cross_pairs(
+        &self,
+        other: &Bvh,
+        scratch: &mut PairScratch,
+        f: &mut impl FnMut(ProxyKey, ProxyKey),
+    ) {
         for p in self.tree_len..self.boxes.len() {
             other.query_tree(&self.boxes[p], |i| f(self.keys[p], other.keys[i]));
         }
         for q in other.tree_len..other.boxes.len() {
             self.query_tree(&other.boxes[q], |i| f(self.keys[i], other.keys[q]));
         }
-        let mut xs = core::mem::take(&mut self.sweep_a);
-        let mut ys = core::mem::take(&mut self.sweep_b);
+        let (xs, ys) = (&mut scratch.sweep_a, &mut scratch.sweep_b);
         let (bx, kx) = (self.pending_boxes(), self.pending_keys());
         let (by, ky) = (other.pending_boxes(), other.pending_keys());
-        sweep::sort_entries(&mut xs, bx, 0);
-        sweep::sort_entries(&mut ys, by, 0);
+        sweep::sort_entries(xs, bx, 0);
+        sweep::sort_entries(ys, by, 0);
         let (lx, ly) = (
             Ordered {
-                order: &xs,
+                order: xs,
                 items: bx,
                 axis: 0,
             },
             Ordered {
-                order: &ys,
+                order: ys,
                 items: by,
                 axis: 0,
             },
         );
         sweep::cross_pairs_of(&lx, &ly, |i, j| f(kx[i], ky[j]));
-        self.sweep_a = xs;
-        self.sweep_b = ys;
+    }
+}
+
+/// Scratch of [`Bvh::for_each_pair_split`], owned by its caller and reused: the items handed
+/// out (each list with a second buffer for its next level), and one [`PairScratch`] per task.
+#[cfg(feature = "parallel")]
+#[derive(Clone, Debug, Default)]
+pub(crate) struct SplitScratch {
+    own: [Vec<(u32, u32)>; 2],
+    cross: [Vec<(u32, u32)>; 2],
+    tasks: Vec<PairScratch>,
+}
+
+#[cfg(feature = "parallel")]
+impl SplitScratch {
+    /// Heap bytes held (capacities).
+    pub(crate) fn heap_bytes(&self) -> usize {
+        (self.own.iter().chain(&self.cross))
+            .map(|v| v.capacity() * 8)
+            .sum::<usize>()
+            + self.tasks.capacity() * core::mem::size_of::<PairScratch>()
+            + self
+                .tasks
+                .iter()
+                .map(PairScratch::heap_bytes)
+                .sum::<usize>()
+    }
+}
+
+/// Items a split pair pass aims to hand each task: the items' sizes differ by orders of
+/// magnitude, and rayon's work stealing evens the threads out only when each has several.
+#[cfg(feature = "parallel")]
+const ITEMS_PER_TASK: usize = 8;
+
+#[cfg(feature = "parallel")]
+impl Bvh {
+    /// The pairs of [`Bvh::for_each_pair`] and of [`Bvh::for_each_pair_with`]`(other)`, found
+    /// in `out.len()` tasks over rayon's current pool: task `c` calls `emit(&mut out[c], a, b)`
+    /// for each pair it finds, `a` in `self` (each pair is found by one task, once; which one
+    /// is unspecified).
+    ///
+    /// The items of both descents are first expanded level by level on the calling thread
+    /// (an item is replaced by its children's items, as the descents themselves do, and
+    /// leaf-level items stay) until there are [`ITEMS_PER_TASK`] per task or nothing left to
+    /// expand. Items partition the pairs, so each task then runs the serial descents from its
+    /// stretch of the items with its own stack. The pending boxes' pairs go to task 0.
+    pub(crate) fn for_each_pair_split<S, E>(
+        &self,
+        other: &Bvh,
+        scratch: &mut SplitScratch,
+        out: &mut [S],
+        emit: &E,
+    ) where
+        S: Send,
+        E: Fn(&mut S, ProxyKey, ProxyKey) + Sync,
+    {
+        use rayon::prelude::*;
+        let tasks = out.len();
+        if tasks == 0 {
+            return;
+        }
+        let (ta, tb) = (Tree::of(self), Tree::of(other));
+        let SplitScratch {
+            own: [own, own_next],
+            cross: [cross, cross_next],
+            tasks: scratches,
+        } = scratch;
+        own.clear();
+        cross.clear();
+        if let Some(root) = ta.nodes.first() {
+            own.push((0, 0));
+            if tb
+                .nodes
+                .first()
+                .is_some_and(|r| r.bounds().overlaps(&root.bounds()))
+            {
+                cross.push((0, 0));
+            }
+        }
+        while own.len() + cross.len() < tasks * ITEMS_PER_TASK {
+            let grew_own = expand_own(&ta, own, own_next);
+            let grew_cross = expand_cross(&ta, &tb, cross, cross_next);
+            if !(grew_own || grew_cross) {
+                break;
+            }
+        }
+        if scratches.len() < tasks {
+            scratches.resize_with(tasks, PairScratch::default);
+        }
+        let (own, cross) = (&own[..], &cross[..]);
+        let total = own.len() + cross.len();
+        let (ta, tb) = (&ta, &tb);
+        out.par_iter_mut()
+            .zip(&mut scratches[..tasks])
+            .enumerate()
+            .for_each(|(c, (o, s))| {
+                let mut f = |a, b| emit(o, a, b);
+                let (lo, hi) = (total * c / tasks, total * (c + 1) / tasks);
+                let split = |at: usize| at.min(own.len());
+                s.stack.clear();
+                s.stack.extend_from_slice(&own[split(lo)..split(hi)]);
+                drain_own(ta, &mut s.stack, &mut f);
+                let past = |at: usize| at.max(own.len()) - own.len();
+                s.stack.extend_from_slice(&cross[past(lo)..past(hi)]);
+                drain_cross(ta, tb, &mut s.stack, &mut f);
+                if c == 0 {
+                    self.pending_self_pairs(&mut s.sweep_a, &mut f);
+                    self.pending_cross_pairs(other, s, &mut f);
+                }
+            });
+    }
+}
+
+/// Replaces the self-traversal items of `cur` by their children's items (see [`drain_own`]),
+/// leaf-level items kept, with `next` as the second buffer; true if any item had children.
+#[cfg(feature = "parallel")]
+fn expand_own(t: &Tree, cur: &mut Vec<(u32, u32)>, next: &mut Vec<(u32, u32)>) -> bool {
+    next.clear();
+    let mut grew = false;
+    for &(a, b) in cur.iter() {
+        let na = &t.nodes[a as usize];
+        if a == b && !na.is_leaf() {
+            own_children(t, a, na, next);
+            grew = true;
+        } else if a != b && !(na.is_leaf() && t.nodes[b as usize].is_leaf()) {
+            cross_children(t, t, a, b, next);
+            grew = true;
+        } else {
+            next.push((a, b));
+        }
+    }
+    core::mem::swap(cur, next);
+    grew
+}
+
+/// [`expand_own`] for the cross items of `ta` × `tb`.
+#[cfg(feature = "parallel")]
+fn expand_cross(
+    ta: &Tree,
+    tb: &Tree,
+    cur: &mut Vec<(u32, u32)>,
+    next: &mut Vec<(u32, u32)>,
+) -> bool {
+    next.clear();
+    let mut grew = false;
+    for &(a, b) in cur.iter() {
+        if ta.nodes[a as usize].is_leaf() && tb.nodes[b as usize].is_leaf() {
+            next.push((a, b));
+        } else {
+            cross_children(ta, tb, a, b, next);
+            grew = true;
+        }
+    }
+    core::mem::swap(cur, next);
+    grew
+}
+
+/// Runs the self-traversal of a tree from the items on `stack` until it is empty. The unordered
+/// primitive pairs below a node n split into the pairs within its first child l, within its
+/// second child r, and across l × r: so the item (n, n) is replaced by (l, l), (r, r),
+/// (l, r), and a leaf (n, n) tests its own range i < j. A cross item (a, b) names two
+/// disjoint subtrees; its pairs are those of the child pairs of a × b (a leaf standing for
+/// itself), so descending partitions them again, and a cross item whose node boxes do not
+/// overlap holds no pair because node boxes contain their primitives'. Every pair below the
+/// items is thus produced by exactly one leaf-level item, once.
+fn drain_own(t: &Tree, stack: &mut Vec<(u32, u32)>, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
+    let mut noted = Noted::new();
+    while let Some((a, b)) = stack.pop() {
+        if a != b {
+            cross_step(t, t, a, b, stack, &mut noted, f);
+            continue;
+        }
+        let node = &t.nodes[a as usize];
+        if node.is_leaf() {
+            leaf_self_pairs(t, node, f);
+        } else {
+            own_children(t, a, node, stack);
+        }
+    }
+}
+
+/// The items that replace the interior self item (n, n): see [`drain_own`].
+#[inline]
+fn own_children(t: &Tree, n: u32, node: &Node, stack: &mut Vec<(u32, u32)>) {
+    let (l, r) = node.children(n);
+    if t.nodes[l as usize]
+        .bounds()
+        .overlaps(&t.nodes[r as usize].bounds())
+    {
+        stack.push((l, r));
+    }
+    stack.extend_from_slice(&[(r, r), (l, l)]);
+}
+
+/// Runs the descent over `ta` × `tb` from the cross items on `stack` until it is empty.
+fn drain_cross(
+    ta: &Tree,
+    tb: &Tree,
+    stack: &mut Vec<(u32, u32)>,
+    f: &mut impl FnMut(ProxyKey, ProxyKey),
+) {
+    let mut noted = Noted::new();
+    while let Some((a, b)) = stack.pop() {
+        cross_step(ta, tb, a, b, stack, &mut noted, f);
     }
 }
 
@@ -123,6 +358,7 @@ impl Bvh {
 struct Tree<'a> {
     nodes: &'a [Node],
     boxes: &'a [SimdBox],
+    lanes: &'a Lanes,
     keys: &'a [ProxyKey],
 }
 
@@ -131,6 +367,7 @@ impl<'a> Tree<'a> {
         Tree {
             nodes: &bvh.nodes,
             boxes: &bvh.boxes[..bvh.tree_len],
+            lanes: &bvh.lanes,
             keys: &bvh.keys[..bvh.tree_len],
         }
     }
@@ -138,8 +375,7 @@ impl<'a> Tree<'a> {
 
 /// One item `(a, b)` of a descent over two disjoint subtrees with overlapping boxes, `a` in
 /// `ta` and `b` in `tb`: every overlapping primitive pair if both are leaves, else the items
-/// of the children of both interior nodes (a leaf standing in for itself) whose boxes
-/// overlap (pruned before the push, not after the pop).
+/// of their children ([`cross_children`]).
 #[inline]
 fn cross_step(
     ta: &Tree,
@@ -147,12 +383,26 @@ fn cross_step(
     a: u32,
     b: u32,
     stack: &mut Vec<(u32, u32)>,
+    noted: &mut Noted,
     f: &mut impl FnMut(ProxyKey, ProxyKey),
 ) {
     let na = &ta.nodes[a as usize];
     let nb = &tb.nodes[b as usize];
+    if na.is_leaf() && nb.is_leaf() {
+        leaf_pairs(ta, na, tb, nb, noted, f);
+    } else {
+        cross_children(ta, tb, a, b, stack);
+    }
+}
+
+/// The items that replace the cross item `(a, b)` of which at least one node is interior: the
+/// child pairs of both interior nodes (a leaf standing in for itself) whose boxes overlap
+/// (pruned before the push, not after the pop).
+#[inline]
+fn cross_children(ta: &Tree, tb: &Tree, a: u32, b: u32, stack: &mut Vec<(u32, u32)>) {
+    let na = &ta.nodes[a as usize];
+    let nb = &tb.nodes[b as usize];
     match (na.is_leaf(), nb.is_leaf()) {
-        (true, true) => leaf_pairs(ta, na, tb, nb, f),
         (false, true) => {
             let bb = nb.bounds();
             let (l, r) = na.children(a);
@@ -171,7 +421,8 @@ fn cross_step(
                 }
             }
         }
-        (false, false) => {
+        _ => {
+            debug_assert!(!na.is_leaf() && !nb.is_leaf());
             let (al, ar) = na.children(a);
             let (bl, br) = nb.children(b);
             let (bl_box, br_box) = (
@@ -191,21 +442,28 @@ fn cross_step(
     }
 }
 
-/// The most boxes whose tests fit one mask (`u64`) of [`mask_of`].
-const MASK_BITS: usize = u64::BITS as usize;
-
-/// Every overlapping pair within one leaf. Each box's tests against the boxes after it go into a
-/// bit mask and the pairs are read from its set bits (see [`leaf_pairs`]); leaves of more than
-/// `MASK_BITS + 1` boxes, which only a `max_leaf_size` above 64 makes, take the plain loop.
+/// Every overlapping pair within one leaf: each box is tested against the blocks that hold
+/// the boxes after it, [`GROUP`] at a time ([`Lanes`]), and the pairs are read from the set
+/// bits of the result. Leaves too long for one mask, which only a `max_leaf_size` above 61
+/// makes, take the plain loop.
 #[inline]
-fn leaf_self_pairs(boxes: &[SimdBox], keys: &[ProxyKey], f: &mut impl FnMut(ProxyKey, ProxyKey)) {
-    if boxes.len() > MASK_BITS + 1 {
-        sweep::all_pairs(boxes, |i, _, j, _| f(keys[i], keys[j]));
+fn leaf_self_pairs(t: &Tree, node: &Node, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
+    let range = node.range();
+    let keys = &t.keys[range.clone()];
+    let Some(leaf) = t.lanes.leaf(range.start, range.len()) else {
+        sweep::all_pairs(&t.boxes[range], |i, _, j, _| f(keys[i], keys[j]));
         return;
-    }
-    for (i, (bi, &ki)) in boxes.iter().zip(keys).enumerate() {
-        for k in bits(mask_of(&boxes[i + 1..], bi)) {
-            f(ki, keys[i + 1 + k]);
+    };
+    for (i, b) in t.boxes[range].iter().enumerate() {
+        // Lanes after box i's own: bits `off + i + 1..`.
+        let after = leaf.off + i + 1;
+        let later = leaf.valid & !low_bits(after);
+        if later == 0 {
+            break;
+        }
+        let m = leaf.mask_from(after / GROUP, &Splat::of(b)) & later;
+        for k in bits(m) {
+            f(keys[i], keys[k - leaf.off]);
         }
     }
 }
@@ -214,20 +472,30 @@ fn leaf_self_pairs(boxes: &[SimdBox], keys: &[ProxyKey], f: &mut impl FnMut(Prox
 /// box of either leaf that misses the other leaf's box pairs with nothing there, so the boxes
 /// of each leaf that meet the other leaf's box are noted in a bit mask first, and only those
 /// are tested against each other: two leaves that overlap at a corner cost one pass over each,
-/// not the product. Every test's result goes into a bit mask too, and the pairs are read from
-/// the set bits, so the loops branch on their counts, not on the tests (whose outcomes the
-/// branch predictor cannot guess). Leaves of more than [`MASK_BITS`] boxes, which only a
-/// `max_leaf_size` above 64 makes, take the plain loop.
+/// not the product. The tests run [`GROUP`] boxes at a time ([`Lanes`]), a noted box of `na`
+/// against the blocks of `nb` that hold a noted box; their results are bit masks, and the
+/// pairs are read from the set bits, so the loops branch on their counts, not on the tests
+/// (whose outcomes the branch predictor cannot guess). Leaves too long for one mask, which
+/// only a `max_leaf_size` above 61 makes, take the plain loop.
 #[inline]
-fn leaf_pairs(ta: &Tree, na: &Node, tb: &Tree, nb: &Node, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
-    let (a_box, b_box) = (na.bounds(), nb.bounds());
+fn leaf_pairs(
+    ta: &Tree,
+    na: &Node,
+    tb: &Tree,
+    nb: &Node,
+    noted: &mut Noted,
+    f: &mut impl FnMut(ProxyKey, ProxyKey),
+) {
     let (ra, rb) = (na.range(), nb.range());
-    let (boxes_a, keys_a) = (&ta.boxes[ra.clone()], &ta.keys[ra]);
-    let (boxes_b, keys_b) = (&tb.boxes[rb.clone()], &tb.keys[rb]);
-    if boxes_a.len() > MASK_BITS || boxes_b.len() > MASK_BITS {
-        for (bi, &ki) in boxes_a.iter().zip(keys_a) {
+    let (keys_a, keys_b) = (&ta.keys[ra.clone()], &tb.keys[rb.clone()]);
+    let (Some(la), Some(lb)) = (
+        ta.lanes.leaf(ra.start, ra.len()),
+        tb.lanes.leaf(rb.start, rb.len()),
+    ) else {
+        let b_box = nb.bounds();
+        for (bi, &ki) in ta.boxes[ra].iter().zip(keys_a) {
             if bi.overlaps(&b_box) {
-                for (bj, &kj) in boxes_b.iter().zip(keys_b) {
+                for (bj, &kj) in tb.boxes[rb.clone()].iter().zip(keys_b) {
                     if bi.overlaps(bj) {
                         f(ki, kj);
                     }
@@ -235,32 +503,52 @@ fn leaf_pairs(ta: &Tree, na: &Node, tb: &Tree, nb: &Node, f: &mut impl FnMut(Pro
             }
         }
         return;
+    };
+    // The boxes of b near a's box, then those of a near b's box.
+    let near_b = lb.mask(&Splat::of(&na.bounds()));
+    if near_b == 0 {
+        return;
     }
-    let near_a = mask_of(boxes_b, &a_box);
+    let near_a = la.mask(&Splat::of(&nb.bounds()));
     if near_a == 0 {
         return;
     }
-    for i in bits(mask_of(boxes_a, &b_box)) {
-        let bi = &boxes_a[i];
-        let mut hits = 0;
-        for k in bits(near_a) {
-            hits |= u64::from(bi.overlaps(&boxes_b[k])) << k;
-        }
-        for k in bits(hits) {
-            f(keys_a[i], keys_b[k]);
+    // The noted boxes of b, packed into blocks of their own: each noted box of a is then
+    // tested against `ceil(noted / 4)` blocks however the noted boxes lie in b's blocks.
+    let mut n = 0;
+    for k in bits(near_b) {
+        noted.blocks[n / GROUP].set(n, &tb.boxes[rb.start + k - lb.off]);
+        noted.keys[n] = keys_b[k - lb.off];
+        n += 1;
+    }
+    let (blocks, keys) = (&noted.blocks[..n.div_ceil(GROUP)], &noted.keys[..n]);
+    let boxes_a = &ta.boxes[ra];
+    for i in bits(near_a) {
+        let q = Splat::of(&boxes_a[i - la.off]);
+        for (g, block) in blocks.iter().enumerate() {
+            // The last block's lanes past `n` hold boxes of an earlier leaf pair.
+            let live = low_bits(n - GROUP * g);
+            for k in bits(u64::from(block.overlaps(&q)) & live) {
+                f(keys_a[i - la.off], keys[GROUP * g + k]);
+            }
         }
     }
 }
 
-/// Bit `k` set iff `boxes[k]` overlaps `b` (at most [`MASK_BITS`] boxes), computed without
-/// branches.
-#[inline]
-fn mask_of(boxes: &[SimdBox], b: &SimdBox) -> u64 {
-    debug_assert!(boxes.len() <= MASK_BITS);
-    boxes
-        .iter()
-        .enumerate()
-        .fold(0, |m, (k, bk)| m | u64::from(bk.overlaps(b)) << k)
+/// The noted boxes of one leaf of a leaf pair, packed into blocks, and their keys: a
+/// descent's scratch, reused by each of its leaf pairs.
+struct Noted {
+    blocks: [Group; 64 / GROUP],
+    keys: [ProxyKey; 64],
+}
+
+impl Noted {
+    fn new() -> Noted {
+        Noted {
+            blocks: [Group::EMPTY; 64 / GROUP],
+            keys: [ProxyKey::default(); 64],
+        }
+    }
 }
 
 /// The positions of the set bits of `m`, lowest first.
@@ -273,4 +561,88 @@ fn bits(mut m: u64) -> impl Iterator<Item = usize> {
             k
         })
     })
+}
+
+#[cfg(all(test, feature = "parallel"))]
+mod tests {
+    use super::super::BvhConfig;
+    use super::*;
+    use crate::geom::Aabb;
+    use crate::rng::Rng;
+    use glam::Vec3;
+    use slotmap::SlotMap;
+
+    /// A tree of `n` random boxes built, then changed so that every kind of primitive is
+    /// there: boxes moved out of their leaves, pending inserts and tombstones.
+    fn changed_tree(rng: &mut Rng, keys: &mut SlotMap<ProxyKey, ()>, n: usize) -> Bvh {
+        let random_box = |rng: &mut Rng| {
+            let c = rng.vec3_in(Vec3::splat(-20.0), Vec3::splat(20.0));
+            Aabb::new(c, c + rng.vec3_in(Vec3::splat(0.1), Vec3::splat(2.5)))
+        };
+        let mut bvh = Bvh::new(BvhConfig {
+            rebuild_after_changes: f32::INFINITY,
+            ..BvhConfig::default()
+        })
+        .unwrap();
+        let mut live = Vec::new();
+        for _ in 0..n {
+            let k = keys.insert(());
+            bvh.insert_keyed(k, random_box(rng)).unwrap();
+            live.push(k);
+        }
+        bvh.rebuild();
+        for &k in live.iter().step_by(7) {
+            bvh.update(k, random_box(rng)).unwrap();
+        }
+        for &k in live.iter().skip(3).step_by(11) {
+            bvh.remove(k).unwrap();
+        }
+        for _ in 0..n / 20 {
+            bvh.insert_keyed(keys.insert(()), random_box(rng)).unwrap();
+        }
+        bvh.validate();
+        bvh
+    }
+
+    /// The split descents find each pair of `a` × `a` and `a` × `b` once, whatever the task
+    /// and thread counts, as brute force over the live boxes does.
+    #[test]
+    fn split_descents_find_every_pair_once() {
+        let mut rng = Rng::new(29);
+        let mut scratch = SplitScratch::default();
+        for (n, m) in [(0, 0), (0, 5), (1, 0), (6, 3), (300, 40), (3000, 400)] {
+            let mut keys = SlotMap::with_key();
+            let a = changed_tree(&mut rng, &mut keys, n);
+            let b = changed_tree(&mut rng, &mut keys, m);
+            let (mut boxes_a, mut boxes_b) = (Vec::new(), Vec::new());
+            a.for_each(|k, x| boxes_a.push((k, x)));
+            b.for_each(|k, x| boxes_b.push((k, x)));
+            let mut want = Vec::new();
+            for (i, (ka, xa)) in boxes_a.iter().enumerate() {
+                for (kb, xb) in boxes_a[i + 1..].iter().chain(&boxes_b) {
+                    if xa.overlaps(xb) {
+                        want.push(Pair::new(*ka, *kb));
+                    }
+                }
+            }
+            want.sort_unstable();
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                for tasks in [1, 2, 3, 8, 33] {
+                    let mut out = vec![Vec::new(); tasks];
+                    pool.install(|| {
+                        a.for_each_pair_split(&b, &mut scratch, &mut out, &|o, x, y| {
+                            o.push(Pair::new(x, y));
+                        });
+                    });
+                    let mut got: Vec<Pair> = out.concat();
+                    got.sort_unstable();
+                    assert_eq!(got, want, "n {n} m {m} threads {threads} tasks {tasks}");
+                }
+            }
+        }
+    }
 }

@@ -39,6 +39,14 @@ impl Bvh {
         );
         self.check_nodes();
         self.check_primitives();
+        assert_eq!(self.lanes.len(), self.tree_len, "lanes and tree_len differ");
+        for (i, b) in self.boxes[..self.tree_len].iter().enumerate() {
+            assert_eq!(
+                self.lanes.get(i),
+                *b,
+                "primitive {i}: lanes differ from its box"
+            );
+        }
     }
 
     /// Walks the tree from the root: depth-first layout, parent links, boxes containing their
