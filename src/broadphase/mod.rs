@@ -11,12 +11,14 @@
 //! the structures for the proxies that left their fat box.
 //!
 //! The files: this one holds the type and its public API; [`config`] the settings,
-//! [`fat`] the fat-box layer (motion, fat boxes, the marks a step reads), [`step`] the passes,
+//! [`fat`] the fat-box layer (motion, fat boxes, the marks a step reads), [`slack`] what the
+//! incremental pass need not re-test, [`step`] the passes,
 //! [`query`] the queries, [`snapshot`] the serde form and [`validate`] the invariants.
 
 mod config;
 mod fat;
 mod query;
+mod slack;
 #[cfg(feature = "serde")]
 mod snapshot;
 mod step;
@@ -198,6 +200,10 @@ pub struct BroadPhase {
     movers: Vec<u32>,
     /// Slots given a new fat box since the last step, each once (`flag::ESCAPED`).
     escaped: Vec<u32>,
+    /// Slots re-anchored this step, each once (`flag::LOUD`).
+    loud: Vec<u32>,
+    /// Slots to re-anchor at the next incremental step, each once (`flag::PENDING`).
+    pending: Vec<u32>,
     /// Proxies removed since the last step.
     removals: usize,
     /// Proxies updated since the last step that move far enough per step to outgrow the
@@ -206,12 +212,13 @@ pub struct BroadPhase {
     /// Candidate pairs (packed slot pairs, `HIT` set if their exact boxes overlapped at the
     /// last step), sorted.
     cand: Vec<u64>,
+    /// The incremental pass's list patches.
+    patch: slack::Patch,
     /// This step's pairs and the previous step's, packed, sorted.
     packed: Vec<u64>,
     prev_packed: Vec<u64>,
-    /// Scratch of the passes: new candidates, merge output, sort buffer, events.
+    /// Scratch of the passes: new candidates, sort buffer, events.
     fresh: Vec<u64>,
-    next: Vec<u64>,
     sort_buf: Vec<u64>,
     added_packed: Vec<u64>,
     removed_packed: Vec<u64>,
@@ -284,13 +291,15 @@ impl BroadPhase {
             any_groups: false,
             movers: Vec::new(),
             escaped: Vec::new(),
+            loud: Vec::new(),
+            pending: Vec::new(),
             removals: 0,
             fast_movers: 0,
             cand: Vec::new(),
+            patch: slack::Patch::default(),
             packed: Vec::new(),
             prev_packed: Vec::new(),
             fresh: Vec::new(),
-            next: Vec::new(),
             sort_buf: Vec::new(),
             added_packed: Vec::new(),
             removed_packed: Vec::new(),
@@ -344,13 +353,19 @@ impl BroadPhase {
             + self.octree.heap_bytes()
             + self.dynamic.heap_bytes()
             + self.statics.heap_bytes()
-            + v(self.movers.capacity() + self.escaped.capacity(), 4)
+            + v(
+                self.movers.capacity()
+                    + self.escaped.capacity()
+                    + self.loud.capacity()
+                    + self.pending.capacity(),
+                4,
+            )
+            + self.patch.heap_bytes()
             + v(
                 self.cand.capacity()
                     + self.packed.capacity()
                     + self.prev_packed.capacity()
                     + self.fresh.capacity()
-                    + self.next.capacity()
                     + self.sort_buf.capacity()
                     + self.added_packed.capacity()
                     + self.removed_packed.capacity(),

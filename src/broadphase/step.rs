@@ -11,8 +11,9 @@
 //! 1. drops the candidates of proxies that were removed or left their fat box ("escaped"),
 //! 2. queries the octree and both BVHs with each escaped proxy's new fat box for its new
 //!    candidates (a pair of two escaped proxies is found from both sides and kept once),
-//! 3. merges old and new candidates in one pass, re-testing the exact boxes of those that name
-//!    a proxy updated this step and keeping the others' last outcome.
+//! 3. scans old and new candidates in one pass, re-testing the exact boxes of those that name
+//!    a proxy that moved by half the least slack of its candidates (see [`super::slack`]) and
+//!    keeping the others' last outcome, and patches the lists in place with what changed.
 //!
 //! Its cost follows what moved. Each step estimates both costs from what it is about to do
 //! (movers, escapes, candidates) and runs the cheaper pass, so the cost never jumps when a
@@ -124,7 +125,7 @@ impl Parallel {
 
 /// The key pair of a packed slot pair (slots live, or quarantined since their removal).
 #[inline]
-fn key_pair(store: &Store, p: u64) -> Pair {
+pub(super) fn key_pair(store: &Store, p: u64) -> Pair {
     let (a, b) = unpack(p);
     Pair {
         a: store.key(a as u32),
@@ -140,7 +141,7 @@ pub(super) fn pack(a: u32, b: u32) -> u64 {
 }
 
 #[inline]
-fn unpack(p: u64) -> (usize, usize) {
+pub(super) fn unpack(p: u64) -> (usize, usize) {
     (((p >> 32) as u32 & !(1 << 31)) as usize, p as u32 as usize)
 }
 
@@ -163,19 +164,26 @@ const REFIT_FRACTION: f64 = 0.125;
 pub(super) struct Costs {
     /// Candidates per proxy at the last count.
     cand_per_proxy: f64,
+    /// Of the movers of the last incremental step, the fraction that re-tested their
+    /// candidates (see [`super::slack`]).
+    loud_per_mover: f64,
+    /// The last incremental step's estimate was over the full pass's.
+    over: bool,
 }
 
 impl Default for Costs {
     fn default() -> Self {
         Costs {
             cand_per_proxy: 3.0,
+            loud_per_mover: 1.0,
+            over: false,
         }
     }
 }
 
 impl BroadPhase {
     /// Chooses the pass from the work at hand.
-    pub(super) fn plan(&self) -> Plan {
+    pub(super) fn plan(&mut self) -> Plan {
         let movers = self.movers.len();
         if movers == 0 && self.removals == 0 {
             return Plan::Unchanged;
@@ -189,8 +197,13 @@ impl BroadPhase {
         let n = self.store.len() as f64;
         let full = n * cost::FULL + self.packed.len() as f64 * cost::FULL_PAIR;
         if self.cached {
+            // Leaving drops the candidates, which a later return rebuilds with a full pass of
+            // its own: a single step over the full pass's cost (a burst of escapes) does not
+            // leave, two in a row do.
             let inc = self.incremental_cost(movers as f64, self.escaped.len() as f64);
-            if inc > full {
+            let over = inc > full;
+            let was_over = core::mem::replace(&mut self.costs.over, over);
+            if over && was_over {
                 Plan::Full
             } else {
                 Plan::Incremental
@@ -214,8 +227,9 @@ impl BroadPhase {
         } else {
             self.store.len() as f64 * self.costs.cand_per_proxy
         };
+        let loud = movers * self.costs.loud_per_mover;
         cands * cost::CARRY
-            + (movers * self.costs.cand_per_proxy * 2.0).min(cands) * cost::TEST
+            + (loud * self.costs.cand_per_proxy * 2.0).min(cands) * cost::TEST
             + escapes * cost::QUERY
     }
 
@@ -253,6 +267,10 @@ impl BroadPhase {
         for &s in &self.movers {
             self.store.flags[s as usize] &= !(flag::MOVED | flag::ESCAPED);
         }
+        for &s in &self.loud {
+            self.store.flags[s as usize] &= !flag::LOUD;
+        }
+        self.loud.clear();
         self.movers.clear();
         self.escaped.clear();
         self.removals = 0;
@@ -265,12 +283,30 @@ impl BroadPhase {
     /// world in steady state stops allocating after its first few swings.
     fn keep_headroom(&mut self) {
         ahead(&mut self.cand);
-        ahead(&mut self.next);
         ahead(&mut self.fresh);
         ahead(&mut self.packed);
         ahead(&mut self.prev_packed);
         ahead(&mut self.pairs);
         let n = self.store.len();
+        ahead(&mut self.loud);
+        ahead(&mut self.pending);
+        self.patch.keep_headroom(n / 8);
+        // A full pass finds every pair (or candidate) into `fresh`, sorts it, and rotates it
+        // with `packed` and `prev_packed`; the incremental steps fill `fresh` only with the
+        // escaped proxies' new candidates and patch `packed` in place. All four stay ready
+        // for the largest list a full pass can make.
+        let most = self.cand.len().max(self.packed.len());
+        let want = most + most / 4;
+        for v in [
+            &mut self.fresh,
+            &mut self.sort_buf,
+            &mut self.packed,
+            &mut self.prev_packed,
+        ] {
+            if v.capacity() < want {
+                v.reserve(want - v.len());
+            }
+        }
         for v in [&mut self.added_packed, &mut self.removed_packed] {
             if v.capacity() < n / 8 {
                 v.reserve(n / 8);
@@ -335,10 +371,13 @@ impl BroadPhase {
             let n = self.store.len().max(1) as f64;
             self.costs.cand_per_proxy = self.cand.len() as f64 / n;
             self.cached = true;
+            self.anchor_all();
         } else {
             core::mem::swap(&mut self.packed, &mut self.fresh);
             self.cand.clear();
             self.cached = false;
+            self.costs.over = false;
+            self.clear_pending();
         }
         match tasks {
             #[cfg(feature = "parallel")]
@@ -459,9 +498,9 @@ impl BroadPhase {
         par.sort_tmp.iter_mut().for_each(ahead);
     }
 
-    /// The incremental pass (see the module docs).
+    /// The incremental pass (see the module docs and [`super::slack`]): the pair list and the
+    /// key pairs are patched in place, so the previous step's are not kept.
     fn incremental(&mut self) {
-        core::mem::swap(&mut self.prev_packed, &mut self.packed);
         self.refit(false);
         self.fresh.clear();
         self.query_escaped();
@@ -471,8 +510,10 @@ impl BroadPhase {
             PairBits::for_slots(self.store.slots()),
         );
         self.fresh.dedup();
-        self.merge_candidates();
-        self.emit();
+        self.classify();
+        self.scan_candidates();
+        let movers = self.movers.len().max(1) as f64;
+        self.costs.loud_per_mover = (self.loud.len() as f64 / movers).min(1.0);
     }
 
     /// New candidates of each escaped proxy: every held box its own overlaps, in the octree
@@ -497,49 +538,6 @@ impl BroadPhase {
                 self.statics.query_aabb_unchecked(&held, &mut push);
             }
         }
-    }
-
-    /// One pass over the old candidates (minus those of escaped or removed proxies) and the
-    /// new ones, re-testing what moved; writes the candidates and this step's pairs.
-    fn merge_candidates(&mut self) {
-        let (flags, exact) = (&self.store.flags, &self.store.exact);
-        let (next, packed) = (&mut self.next, &mut self.packed);
-        next.clear();
-        packed.clear();
-        let mut tested = 0;
-        let mut emit = |c: u64| {
-            let key = c & !HIT;
-            let (a, b) = unpack(key);
-            let hit = if (flags[a] | flags[b]) & (flag::MOVED | flag::ESCAPED) != 0 {
-                tested += 1;
-                exact[a].overlaps(&exact[b])
-            } else {
-                c & HIT != 0
-            };
-            next.push(key | if hit { HIT } else { 0 });
-            if hit {
-                packed.push(key);
-            }
-        };
-        let drop = flag::ESCAPED | flag::GONE;
-        let (old, new) = (&self.cand, &self.fresh);
-        let mut j = 0;
-        for &c in old {
-            let (a, b) = unpack(c & !HIT);
-            if (flags[a] | flags[b]) & drop != 0 {
-                continue;
-            }
-            while j < new.len() && new[j] < c & !HIT {
-                emit(new[j]);
-                j += 1;
-            }
-            emit(c);
-        }
-        for &c in &new[j..] {
-            emit(c);
-        }
-        core::mem::swap(&mut self.cand, &mut self.next);
-        self.stats.candidates_tested = tested;
     }
 
     /// [`BroadPhase::emit`] over rayon's current pool: the current list is cut into `parts`

@@ -26,11 +26,16 @@ pub(super) enum Kind {
 pub(super) mod flag {
     /// Updated since the last step (its exact box must be re-tested against its candidates).
     pub(crate) const MOVED: u8 = 1;
+    /// Re-anchored this step: its candidates are re-tested (see `slack`).
+    pub(crate) const LOUD: u8 = 2;
     /// Its fat box was replaced since the last step: its candidates are found again.
     pub(crate) const ESCAPED: u8 = 4;
     /// Removed: its candidates are dropped at the next step; the slot is not reused before
     /// the next step.
     pub(crate) const GONE: u8 = 8;
+    /// Its candidates' recorded status may differ from the status at the anchors: it is
+    /// re-anchored at the next incremental step (see `slack`).
+    pub(crate) const PENDING: u8 = 16;
 }
 
 /// The highest slot index: slots are packed two to a `u64` pair with the top bit spare.
@@ -56,6 +61,14 @@ pub(super) struct Store {
     /// fat box around the exact one (outside that regime the structure holds the exact box and
     /// this is stale, or not allocated yet: see [`Store::set_held`]). 32 bytes.
     pub(super) held: Vec<SimdBox>,
+    /// While the incremental pass runs (allocated with `held`): the exact box when its
+    /// candidates were last tested. 32 bytes.
+    pub(super) anchor: Vec<SimdBox>,
+    /// The least slack of its candidates, from the anchors (metres, rounded down). 4 bytes.
+    pub(super) slack: Vec<f32>,
+    /// How far its exact box was from its anchor when last measured (metres, rounded up).
+    /// 4 bytes.
+    pub(super) drift: Vec<f32>,
     /// Collision groups. 8 bytes.
     pub(super) groups: Vec<CollisionGroups>,
     /// Distance the box moved per step, as last measured (metres, largest axis): sizes the fat
@@ -186,14 +199,24 @@ impl Store {
         self.live = live;
     }
 
-    /// Sets the held box of slot `s`, growing `held` to every slot first: it is filled only
-    /// once the incremental regime is entered, so a world that never enters it keeps none.
+    /// Sets the held box of slot `s`, growing `held`, `anchor`, `slack` and `drift` to every
+    /// slot first: they are filled only once the incremental regime is entered, so a world
+    /// that never enters it keeps none.
     #[inline]
     pub(super) fn set_held(&mut self, s: usize, b: SimdBox) {
         if self.held.len() <= s {
-            self.held.resize(self.version.len(), SimdBox::EMPTY);
+            self.grow_incremental();
         }
         self.held[s] = b;
+    }
+
+    /// Grows `held`, `anchor`, `slack` and `drift` to every slot.
+    pub(super) fn grow_incremental(&mut self) {
+        let n = self.version.len();
+        self.held.resize(n, SimdBox::EMPTY);
+        self.anchor.resize(n, SimdBox::EMPTY);
+        self.slack.resize(n, 0.0);
+        self.drift.resize(n, 0.0);
     }
 
     /// Heap bytes held (capacity, not length).
@@ -204,7 +227,8 @@ impl Store {
             + cap(self.flags.capacity(), 1)
             + cap(self.shape.capacity(), core::mem::size_of::<Shape>())
             + cap(self.exact.capacity(), 32)
-            + cap(self.held.capacity(), 32)
+            + cap(self.held.capacity() + self.anchor.capacity(), 32)
+            + cap(self.slack.capacity() + self.drift.capacity(), 4)
             + cap(self.groups.capacity(), 8)
             + cap(self.speed.capacity(), 4)
             + cap(self.stamp.capacity(), 4)

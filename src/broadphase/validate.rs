@@ -1,5 +1,6 @@
 //! The whole-structure invariant check of a [`BroadPhase`].
 
+use super::slack::slack;
 use super::step::HIT;
 use super::store::{Kind, flag};
 use super::{BodyKind, BroadPhase, Pair, Shape};
@@ -138,6 +139,48 @@ impl BroadPhase {
                 st.exact[a].overlaps(&st.exact[b]),
                 "a reported pair does not overlap"
             );
+        }
+        self.validate_slack();
+    }
+
+    /// With candidates and no change pending, the slack invariants (see `slack`): each live
+    /// proxy's drift bounds its distance from its anchor and is below half its slack (or it is
+    /// pending); each candidate's slack at the anchors bounds both sides' slack, and unless a
+    /// side is pending its recorded status is the status at the anchors.
+    fn validate_slack(&self) {
+        let st = &self.store;
+        let pending = |s: usize| st.flags[s] & flag::PENDING != 0;
+        for s in (0..st.slots()).filter(|&s| st.kind[s] != Kind::Free) {
+            let (e, a) = (st.exact[s], st.anchor[s]);
+            let moved = (e.min - a.min).abs().max((e.max - a.max).abs());
+            assert!(
+                moved.max_element() <= st.drift[s],
+                "slot {s}: drift below its distance from its anchor"
+            );
+            let d = st.drift[s];
+            assert!(
+                pending(s) || d == 0.0 || d + d < st.slack[s],
+                "slot {s}: drifted half its slack, not pending"
+            );
+            assert!(
+                pending(s) == self.pending.contains(&(s as u32)),
+                "slot {s}: pending flag and list"
+            );
+        }
+        for &c in &self.cand {
+            let (a, b) = super::step::unpack(c & !HIT);
+            let s = slack(&st.anchor[a], &st.anchor[b]);
+            assert!(
+                st.slack[a] <= s && st.slack[b] <= s,
+                "slots {a}, {b}: slack above their candidate's"
+            );
+            if !pending(a) && !pending(b) {
+                assert_eq!(
+                    st.anchor[a].overlaps(&st.anchor[b]),
+                    c & HIT != 0,
+                    "slots {a}, {b}: status at the anchors is not the recorded one"
+                );
+            }
         }
     }
 }
