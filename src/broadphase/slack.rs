@@ -31,6 +31,7 @@ use super::BroadPhase;
 use super::step::{HIT, unpack};
 use super::store::{Store, flag};
 use crate::geom::SimdBox;
+use glam::Vec3A;
 
 /// `1 + 2⁻²²`: a product with it rounds a positive normal `f32` up by at least one ulp.
 const ROUND_UP: f32 = 1.0 + 1.0 / (1u32 << 22) as f32;
@@ -43,10 +44,15 @@ const ROUND_DOWN: f32 = 1.0 - 1.0 / (1u32 << 22) as f32;
 #[inline]
 #[must_use]
 pub(super) fn drift(exact: &SimdBox, anchor: &SimdBox) -> f32 {
-    let d = (exact.min - anchor.min)
-        .abs()
-        .max((exact.max - anchor.max).abs());
+    let d = face_moves(exact.min, anchor.min).max(face_moves(exact.max, anchor.max));
     d.max_element() * ROUND_UP
+}
+
+/// `|a − b|` per lane, 0 where the faces are equal: a face that stays at `±∞` (a box grown
+/// past `f32::MAX`) has not moved, where `∞ − ∞` would give NaN.
+#[inline]
+pub(super) fn face_moves(a: Vec3A, b: Vec3A) -> Vec3A {
+    Vec3A::select(a.cmpeq(b), Vec3A::ZERO, (a - b).abs())
 }
 
 /// The slack of two boxes: the smallest overlap margin if they overlap (0 if they touch), the
