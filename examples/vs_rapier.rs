@@ -72,13 +72,20 @@
 //! start touching is `t = 0` as in broadleaf) and `project_point` with `solid` (distance
 //! `|p − projection|`, 0 inside a ball, as broadleaf's distance to the sphere). The sampled
 //! checks follow the ray's rule: the same `t` or distance within 1e-4, and the same collider
-//! or, in a tie, one whose scene sphere gives that value. Its own table; the last line is
-//! `queries mismatches=<n>`.
+//! or, in a tie, one whose scene sphere gives that value. With `--scene bodies` (N = `--n`,
+//! default 10 000, plus the static boxes and the floor) the same queries run on a world of
+//! boxes after one step of its motion, each box given to both engines as its world AABB
+//! (rapier: an axis-aligned cuboid), since broadleaf answers on a body's box; there a sphere
+//! cast of rapier's at a box also agrees if it names the same box at a `t` where the ball is
+//! within `RAPIER_CAST_GAP_TOLERANCE` of touching it (rapier stops its cast within a
+//! tolerance). Every sampled query is also checked against brute force over the scene's own
+//! shapes: the same key and exactly the same `t` or distance, ties to the smaller key. Its own
+//! table; the last line is `queries mismatches=<n>` (rapier's and brute force's summed).
 
 use broadleaf::fixtures::cli::{self, Flags, Stop};
 use broadleaf::fixtures::rapier_world::{SceneWorld, record_pile};
 use broadleaf::fixtures::scene::{
-    Bodies, Churn, Feed, Flying, Frame, Gas, Idle, Rng, Scene, Spawn,
+    Bodies, Churn, Feed, Flying, Frame, Gas, Idle, Object, Rng, Scene, Spawn,
 };
 use broadleaf::rapier::Comparison;
 use broadleaf::{Aabb, BroadPhase, Config, Passes, Placement, ProxyKey, Vec3, brute, geom};
@@ -796,6 +803,11 @@ const QUERY_CHECK_EVERY: usize = 100;
 /// Largest difference of the two engines' ray or cast `t` (or nearest distance) that still
 /// counts as the same answer.
 const RAY_T_TOLERANCE: f32 = 1e-4;
+/// How far from touching (in metres, the cast ball's distance to the box minus its radius,
+/// either sign) rapier's sphere cast at a box may stop: it ends within a tolerance of the
+/// contact, so its `t` may be a little early or late. Its answer still agrees if it names the
+/// same box as broadleaf at a `t` where the ball is within this of touching it.
+const RAPIER_CAST_GAP_TOLERANCE: f32 = 2e-3;
 /// Radius of the spheres `--queries` casts, in metres.
 const CAST_RADIUS: f32 = 0.25;
 
@@ -833,12 +845,22 @@ fn to_parry(b: &Aabb) -> rapier3d::parry::bounding_volume::Aabb {
     rapier3d::parry::bounding_volume::Aabb::new(b.min, b.max)
 }
 
-/// `--queries`: prints the query table and returns the number of sampled queries on which
-/// the engines disagree.
-fn run_queries(args: &Args) -> usize {
+/// The world `--queries` asks: both engines over the same shapes after one step of the
+/// scene's motion, the cube the queries are drawn in, and each key's shape as the scene gave
+/// it (what brute force and rapier's ties are computed from, never the broadphase's record).
+struct QueryWorld {
+    ours: Ours,
+    theirs: SceneWorld,
+    bounds: Aabb,
+    shapes: Vec<(ProxyKey, Object)>,
+    /// The table's heading: the scene and its size.
+    label: String,
+}
+
+/// `gas` (N spheres) after one step: each engine applies the scene's frame.
+fn gas_world(args: &Args) -> QueryWorld {
     let n = args.n.unwrap_or(100_000);
     let mut scene = Gas::new(n, args.seed);
-    let bounds = scene.bounds;
     let (mut ours, mut theirs, _) = spawn_both(&scene, args);
     // One step of motion, so the queries see moved objects; rapier's second step moves
     // nothing and leaves its tree at the targets' poses.
@@ -851,7 +873,116 @@ fn run_queries(args: &Args) -> usize {
     theirs.set_targets(&frame);
     theirs.step();
     theirs.step();
+    let mut spawns = Vec::new();
+    scene.spawns(&mut spawns);
+    let shapes = shapes_of(&ours, &spawns);
+    QueryWorld {
+        ours,
+        theirs,
+        bounds: scene.bounds,
+        shapes,
+        label: format!("gas N={n}"),
+    }
+}
 
+/// `bodies` (N dynamic boxes, N/10 static ones and the floor) after one step of the scene's
+/// motion, each box given to both engines as its world AABB: broadleaf answers queries on a
+/// body's box, so rapier gets an axis-aligned cuboid of exactly that box.
+fn bodies_world(args: &Args) -> QueryWorld {
+    let n = args.n.unwrap_or_else(|| default_n("bodies"));
+    let mut scene = Bodies::new(n, args.seed);
+    scene.advance(&mut Frame::default());
+    let mut spawns = Vec::new();
+    scene.spawns(&mut spawns);
+    for s in &mut spawns {
+        let b = s.object.aabb();
+        s.object = Object::Cuboid {
+            center: b.center(),
+            half_extents: 0.5 * b.extent(),
+            rotation: glam::Quat::IDENTITY,
+        };
+    }
+    let mut ours = Ours::new(args);
+    let mut theirs = SceneWorld::new().groups(args.groups);
+    ours.feed
+        .spawn(&mut ours.bp, &spawns)
+        .expect("scene objects are finite");
+    for s in &spawns {
+        theirs.insert(s);
+    }
+    ours.bp.step();
+    theirs.step();
+    let shapes = shapes_of(&ours, &spawns);
+    QueryWorld {
+        ours,
+        theirs,
+        bounds: scene.bounds,
+        shapes,
+        label: format!("bodies N={n} (+{} static)", scene.statics.len()),
+    }
+}
+
+/// Each spawned object under its broadleaf key.
+fn shapes_of(ours: &Ours, spawns: &[Spawn]) -> Vec<(ProxyKey, Object)> {
+    spawns
+        .iter()
+        .filter_map(|s| Some((ours.feed.key(s.id)?, s.object)))
+        .collect()
+}
+
+/// The shape broadleaf answers about: a sphere as itself, a box as its world AABB.
+fn ray_t(o: &Object, origin: Vec3, dir: Vec3, max_t: f32) -> Option<f32> {
+    match *o {
+        Object::Sphere { center, radius } => geom::ray_sphere(origin, dir, center, radius, max_t),
+        Object::Cuboid { .. } => o.aabb().ray_entry(origin, geom::inverse_dir(dir), max_t),
+    }
+}
+
+/// The first touch of a sphere of `radius` cast from `origin` along `dir` with `o`.
+fn cast_t(o: &Object, origin: Vec3, radius: f32, dir: Vec3, max_t: f32) -> Option<f32> {
+    match *o {
+        Object::Sphere { center, radius: r } => {
+            geom::sphere_cast_sphere(origin, radius, dir, max_t, center, r)
+        }
+        Object::Cuboid { .. } => geom::sphere_cast_aabb(origin, radius, dir, max_t, &o.aabb()),
+    }
+}
+
+/// The distance from `p` to `o` (0 inside).
+fn distance_to(o: &Object, p: Vec3) -> f32 {
+    match *o {
+        Object::Sphere { center, radius } => geom::point_sphere_distance(p, center, radius),
+        Object::Cuboid { .. } => geom::point_aabb_distance(p, &o.aabb()),
+    }
+}
+
+/// Brute force over every shape: the smallest `(value, key)` of `value_of`.
+fn brute_min(
+    shapes: &[(ProxyKey, Object)],
+    value_of: impl Fn(&Object) -> Option<f32>,
+) -> Option<(ProxyKey, f32)> {
+    shapes
+        .iter()
+        .filter_map(|(k, o)| Some((*k, value_of(o)?)))
+        .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)))
+}
+
+/// `--queries`: prints the query table of `--scene` (`gas` or `bodies`) and returns the
+/// number of sampled queries on which broadleaf disagrees with rapier or with brute force.
+fn run_queries(args: &Args) -> usize {
+    let world = match args.scene.as_str() {
+        "gas" => gas_world(args),
+        "bodies" => bodies_world(args),
+        s => cli::fail(USAGE, &format!("--queries runs on gas or bodies, not {s}")),
+    };
+    let QueryWorld {
+        ours,
+        theirs,
+        bounds,
+        shapes,
+        label,
+    } = &world;
+    let bounds = *bounds;
     let mut rng = Rng::new(args.seed ^ 0x7175_6572_7973);
     let boxes: Vec<Aabb> = (0..QUERY_COUNT)
         .map(|_| {
@@ -943,22 +1074,26 @@ fn run_queries(args: &Args) -> usize {
     }
     let rapier_nearest = per_query(t);
 
-    // The sample: every QUERY_CHECK_EVERY-th query, both engines' answers in broadleaf keys.
+    // The sample: every QUERY_CHECK_EVERY-th query, both engines' answers in broadleaf keys,
+    // and brute force over the scene's own shapes (ties to the smaller key, as broadleaf).
     let key_of = |h| theirs.scene_id(h).and_then(|id| ours.feed.key(id));
-    // The scene's own spheres by key, for the tie rule below (not the broadphase's record).
-    let center_of: HashMap<ProxyKey, Vec3> = scene
-        .centers
-        .iter()
-        .enumerate()
-        .filter_map(|(id, &c)| Some((ours.feed.key(u32::try_from(id).ok()?)?, c)))
-        .collect();
+    let shape_of: HashMap<ProxyKey, Object> = shapes.iter().copied().collect();
     let (mut box_bad, mut ray_bad, mut checked) = (0, 0, 0);
     let (mut cast_bad, mut near_bad) = (0, 0);
+    let mut brute_bad = [0usize; 4];
     for b in boxes.iter().step_by(QUERY_CHECK_EVERY) {
         let mut a: Vec<ProxyKey> = Vec::new();
         ours.bp.query_aabb(b, |k| a.push(k));
         let mut r: Vec<Option<ProxyKey>> = Vec::new();
         rapier_box(b, Box::new(|h| r.push(key_of(h))));
+        let mut want: Vec<ProxyKey> = shapes
+            .iter()
+            .filter(|(_, o)| o.aabb().overlaps(b))
+            .map(|&(k, _)| k)
+            .collect();
+        a.sort_unstable();
+        want.sort_unstable();
+        brute_bad[0] += usize::from(a != want);
         let mut a: Vec<Option<ProxyKey>> = a.into_iter().map(Some).collect();
         a.sort_unstable();
         r.sort_unstable();
@@ -970,56 +1105,85 @@ fn run_queries(args: &Args) -> usize {
         let r = qp
             .cast_ray(&Ray::new(o, d), max_t, true)
             .map(|(h, t)| (key_of(h), t));
-        // A tie (two shapes hit at the same t, e.g. an origin inside two overlapping spheres,
-        // both t = 0) may go to either: rapier's pick agrees if the scene's sphere of that
-        // key is hit at the same t.
-        let t_of = |k: ProxyKey| geom::ray_sphere(o, d, *center_of.get(&k)?, scene.radius, max_t);
+        // A tie (two shapes hit at the same t, e.g. an origin inside two overlapping shapes,
+        // both t = 0) may go to either: rapier's pick agrees if the scene's shape of that key
+        // is hit at the same t.
+        let t_of = |k: ProxyKey| ray_t(shape_of.get(&k)?, o, d, max_t);
         let same = same_closest(a, r, t_of);
         if !same {
             eprintln!("ray mismatch: origin {o} dir {d}: broadleaf {a:?}, rapier {r:?}");
         }
         ray_bad += usize::from(!same);
+        let want = brute_min(shapes, |s| ray_t(s, o, d, max_t));
+        if a != want {
+            eprintln!("ray differs from brute force: origin {o} dir {d}: {a:?}, brute {want:?}");
+        }
+        brute_bad[1] += usize::from(a != want);
     }
     for &(o, d) in casts.iter().step_by(QUERY_CHECK_EVERY) {
         let a = ours.bp.cast_sphere(o, CAST_RADIUS, d, max_t);
         let r = qp
             .cast_shape(&Pose::from_translation(o), d, &ball, cast_options)
             .map(|(h, hit)| (key_of(h), hit.time_of_impact));
-        let t_of = |k: ProxyKey| {
-            let c = *center_of.get(&k)?;
-            geom::sphere_cast_sphere(o, CAST_RADIUS, d, max_t, c, scene.radius)
+        let t_of = |k: ProxyKey| cast_t(shape_of.get(&k)?, o, CAST_RADIUS, d, max_t);
+        // The cast sphere's distance to the key's shape at `t` (the radius at an exact first
+        // touch).
+        let gap = |k: ProxyKey, t: f32| Some(distance_to(shape_of.get(&k)?, o + t * d));
+        // Rapier casts a ball at a box iteratively and stops once the distance is within its
+        // tolerance of the radius: its `t` may be off by the time that tolerance takes.
+        let near_touch = match (a, r) {
+            (Some((ka, _)), Some((Some(kr), tr))) => {
+                ka == kr
+                    && gap(kr, tr)
+                        .is_some_and(|g| (g - CAST_RADIUS).abs() <= RAPIER_CAST_GAP_TOLERANCE)
+            }
+            _ => false,
         };
-        let same = same_closest(a, r, t_of);
+        let same = same_closest(a, r, t_of) || near_touch;
         if !same {
-            eprintln!("sphere cast mismatch: origin {o} dir {d}: broadleaf {a:?}, rapier {r:?}");
+            // The cast sphere's distance to the key's shape at each engine's t (the radius at
+            // an exact first touch).
+            eprintln!(
+                "sphere cast mismatch: origin {o} dir {d}: broadleaf {a:?} (gap {:?}), rapier \
+                 {r:?} (gap {:?})",
+                a.and_then(|(k, t)| gap(k, t)),
+                r.and_then(|(k, t)| gap(k?, t))
+            );
         }
         cast_bad += usize::from(!same);
+        let want = brute_min(shapes, |s| cast_t(s, o, CAST_RADIUS, d, max_t));
+        if a != want {
+            eprintln!(
+                "sphere cast differs from brute force: origin {o} dir {d}: {a:?}, brute {want:?}"
+            );
+        }
+        brute_bad[2] += usize::from(a != want);
     }
     for &p in points.iter().step_by(QUERY_CHECK_EVERY) {
         let a = ours.bp.nearest(p, 1).first().copied();
-        // Solid: a point inside a ball projects onto itself, distance 0 as in broadleaf.
+        // Solid: a point inside a shape projects onto itself, distance 0 as in broadleaf.
         let r = qp
             .project_point(p, f32::MAX, true)
             .map(|(h, proj)| (key_of(h), p.distance(proj.point)));
-        let d_of = |k: ProxyKey| {
-            Some(geom::point_sphere_distance(
-                p,
-                *center_of.get(&k)?,
-                scene.radius,
-            ))
-        };
+        let d_of = |k: ProxyKey| Some(distance_to(shape_of.get(&k)?, p));
         let same = same_closest(a, r, d_of);
         if !same {
             eprintln!("nearest mismatch: point {p}: broadleaf {a:?}, rapier {r:?}");
         }
         near_bad += usize::from(!same);
+        let want = brute_min(shapes, |s| Some(distance_to(s, p)));
+        if a != want {
+            eprintln!("nearest differs from brute force: point {p}: {a:?}, brute {want:?}");
+        }
+        brute_bad[3] += usize::from(a != want);
     }
 
     println!(
-        "queries on gas N={n} after one step, seed {}, {QUERY_COUNT} of each; rapier: \
+        "queries on {label} after one step, seed {}, {QUERY_COUNT} of each; rapier: \
          query pipeline of its BroadPhaseBvh (boxes: intersect_aabb_conservative re-tested \
          against each collider's exact AABB; rays: cast_ray, solid); checked: every \
-         {QUERY_CHECK_EVERY}th query",
+         {QUERY_CHECK_EVERY}th query, against rapier and against brute force (the same key \
+         and the same t or distance, ties to the smaller key)",
         args.seed
     );
     println!(
@@ -1030,12 +1194,12 @@ fn run_queries(args: &Args) -> usize {
     );
     println!();
     println!(
-        "| query | count | broadleaf ns/query | rapier ns/query | speed-up | hits (broadleaf) | hits (rapier) | checked | mismatches |"
+        "| query | count | broadleaf ns/query | rapier ns/query | speed-up | hits (broadleaf) | hits (rapier) | checked | mismatches (rapier) | mismatches (brute force) |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     let edge = format!("box {}–{} m", QUERY_EDGE.0, QUERY_EDGE.1);
     let cast_label = format!("sphere cast r = {CAST_RADIUS} m, first hit");
-    for (what, ours_ns, rapier_ns, oh, rh, bad) in [
+    for ((what, ours_ns, rapier_ns, oh, rh, bad), brute) in [
         (
             edge.as_str(),
             ours_box,
@@ -1068,12 +1232,15 @@ fn run_queries(args: &Args) -> usize {
             rapier_near,
             near_bad,
         ),
-    ] {
+    ]
+    .into_iter()
+    .zip(brute_bad)
+    {
         println!(
-            "| {what} | {QUERY_COUNT} | {ours_ns:.1} | {rapier_ns:.1} | {:.2} | {oh} | {rh} | {checked} | {bad} |",
+            "| {what} | {QUERY_COUNT} | {ours_ns:.1} | {rapier_ns:.1} | {:.2} | {oh} | {rh} | {checked} | {bad} | {brute} |",
             rapier_ns / ours_ns
         );
     }
     println!();
-    box_bad + ray_bad + cast_bad + near_bad
+    box_bad + ray_bad + cast_bad + near_bad + brute_bad.iter().sum::<usize>()
 }

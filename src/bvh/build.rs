@@ -30,6 +30,11 @@ pub(crate) struct BuildScratch {
     /// By primitive index before the build: its index after (`NONE` for a tombstone).
     new_pos: Vec<u32>,
     work: Work,
+    /// The parallel build's top of the tree and one set of buffers per subtree task.
+    #[cfg(feature = "parallel")]
+    top: Vec<TopItem>,
+    #[cfg(feature = "parallel")]
+    subtrees: Vec<Subtree>,
 }
 
 impl BuildScratch {
@@ -40,6 +45,20 @@ impl BuildScratch {
             + self.tasks.capacity() * size_of::<Task>()
             + self.keys.capacity() * 8
             + self.work.heap_bytes()
+            + self.parallel_heap_bytes()
+    }
+
+    #[cfg(feature = "parallel")]
+    fn parallel_heap_bytes(&self) -> usize {
+        use core::mem::size_of;
+        self.top.capacity() * size_of::<TopItem>()
+            + self.subtrees.capacity() * size_of::<Subtree>()
+            + self.subtrees.iter().map(Subtree::heap_bytes).sum::<usize>()
+    }
+
+    #[cfg(not(feature = "parallel"))]
+    fn parallel_heap_bytes(&self) -> usize {
+        0
     }
 }
 
@@ -56,7 +75,7 @@ impl Bvh {
         self.parent.clear();
         self.leaf_of.clear();
         self.leaf_of.resize(n, NONE);
-        build_nodes(
+        build_tree(
             &self.config,
             &mut s,
             &mut self.boxes,
@@ -127,13 +146,9 @@ impl Bvh {
     }
 }
 
-/// Builds the depth-first array over `refs`, reordering `refs` and `s.ids` into tree order.
-///
-/// Depth-first order with an explicit stack: a task's node gets the next free index when it
-/// is popped; a split pushes the second child, then the first, so the first child is popped
-/// next and lands at `parent + 1`. The second child is popped once the whole first subtree is
-/// placed, and writes its index into the parent's `first`.
-fn build_nodes(
+/// Builds the depth-first array over `refs`: over rayon's current pool for a large tree with
+/// the feature `parallel` (the same tree as on one thread), else [`build_nodes`].
+fn build_tree(
     config: &BvhConfig,
     s: &mut BuildScratch,
     refs: &mut [SimdBox],
@@ -141,9 +156,48 @@ fn build_nodes(
     parent: &mut Vec<u32>,
     leaf_of: &mut [u32],
 ) {
-    let BuildScratch {
-        ids, tasks, work, ..
-    } = s;
+    #[cfg(feature = "parallel")]
+    {
+        let threads = rayon::current_num_threads();
+        if threads > 1 && refs.len() >= PARALLEL_BUILD_MIN {
+            build_parallel(config, s, refs, nodes, parent, leaf_of, threads);
+            return;
+        }
+    }
+    build_nodes(
+        config,
+        &mut s.tasks,
+        &mut s.work,
+        refs,
+        &mut s.ids,
+        nodes,
+        parent,
+        leaf_of,
+        &Bounds::of(refs),
+    );
+}
+
+/// Builds the depth-first array over `refs` (whose bounds are `root`), reordering `refs` and
+/// `ids` into tree order;
+/// appends to `nodes` and `parent` (the root's parent is `NONE`), leaf starts and `leaf_of`
+/// relative to `refs`.
+///
+/// Depth-first order with an explicit stack: a task's node gets the next free index when it
+/// is popped; a split pushes the second child, then the first, so the first child is popped
+/// next and lands at `parent + 1`. The second child is popped once the whole first subtree is
+/// placed, and writes its index into the parent's `first`.
+#[allow(clippy::too_many_arguments)] // reason: the parallel build runs it on parts of each buffer
+fn build_nodes(
+    config: &BvhConfig,
+    tasks: &mut Vec<Task>,
+    work: &mut Work,
+    refs: &mut [SimdBox],
+    ids: &mut [u32],
+    nodes: &mut Vec<Node>,
+    parent: &mut Vec<u32>,
+    leaf_of: &mut [u32],
+    root: &Bounds,
+) {
     if refs.is_empty() {
         return;
     }
@@ -154,7 +208,7 @@ fn build_nodes(
         end: refs.len() as u32,
         parent: NONE,
         second: false,
-        bounds: Bounds::of(refs),
+        bounds: *root,
     });
     while let Some(t) = tasks.pop() {
         let index = nodes.len() as u32;
@@ -192,6 +246,311 @@ fn build_nodes(
                     second: false,
                     bounds: sp.left,
                 });
+            }
+        }
+    }
+}
+
+/// Trees of fewer primitives are built on one thread: below this, handing out subtrees costs
+/// more than it saves.
+#[cfg(feature = "parallel")]
+const PARALLEL_BUILD_MIN: usize = 1 << 15;
+
+/// Subtrees the parallel build aims to hand each thread: their sizes differ (a split need not
+/// halve), and rayon's work stealing evens the threads out only when each has several.
+#[cfg(feature = "parallel")]
+const SUBTREES_PER_THREAD: usize = 4;
+
+/// One node of the parallel build's top, in depth-first order: an interior node split on the
+/// calling thread, or a subtree left to a task. `parent` indexes the top; `second` as in
+/// [`Task`].
+#[cfg(feature = "parallel")]
+#[derive(Clone, Copy, Debug)]
+enum TopItem {
+    Interior {
+        aabb: crate::geom::Aabb,
+        parent: u32,
+        second: bool,
+    },
+    Subtree {
+        task: Task,
+    },
+}
+
+/// One subtree task's buffers, reused across builds: its stack and split scratch, and the
+/// nodes it built (depth-first, indices and leaf starts relative to the subtree).
+#[cfg(feature = "parallel")]
+#[derive(Clone, Debug, Default)]
+struct Subtree {
+    tasks: Vec<Task>,
+    work: Work,
+    nodes: Vec<Node>,
+    parent: Vec<u32>,
+}
+
+#[cfg(feature = "parallel")]
+impl Subtree {
+    fn heap_bytes(&self) -> usize {
+        use core::mem::size_of;
+        self.tasks.capacity() * size_of::<Task>()
+            + self.work.heap_bytes()
+            + self.nodes.capacity() * size_of::<Node>()
+            + self.parent.capacity() * 4
+    }
+}
+
+/// [`build_nodes`] over rayon's current pool, giving the same tree.
+///
+/// The top of the tree is split on the calling thread, in the same depth-first order as
+/// [`build_nodes`], down to nodes of at most `n / (SUBTREES_PER_THREAD · threads)` primitives;
+/// each such node becomes a subtree task. The tasks' primitive ranges are disjoint and, in
+/// depth-first order, consecutive, so the boxes, ids and `leaf_of` are cut into one part per
+/// task, and each task runs [`build_nodes`] on its parts with its own buffers. A node's split
+/// depends only on its own primitives, so every node comes out as the serial build makes it.
+/// Last, the top is written out in depth-first order with each subtree's nodes copied in at its
+/// place, their indices shifted to where they landed.
+#[cfg(feature = "parallel")]
+fn build_parallel(
+    config: &BvhConfig,
+    s: &mut BuildScratch,
+    refs: &mut [SimdBox],
+    nodes: &mut Vec<Node>,
+    parent: &mut Vec<u32>,
+    leaf_of: &mut [u32],
+    threads: usize,
+) {
+    use rayon::prelude::*;
+    let BuildScratch {
+        ids,
+        tasks,
+        work,
+        top,
+        subtrees,
+        ..
+    } = s;
+    let cutoff = (refs.len() / (SUBTREES_PER_THREAD * threads)).max(config.max_leaf_size as usize);
+    work.prepare();
+    top.clear();
+    tasks.clear();
+    tasks.push(Task {
+        start: 0,
+        end: refs.len() as u32,
+        parent: NONE,
+        second: false,
+        bounds: Bounds::of(refs),
+    });
+    while let Some(t) = tasks.pop() {
+        let index = top.len() as u32;
+        let range = t.start as usize..t.end as usize;
+        let sp = if range.len() <= cutoff {
+            None
+        } else {
+            split(
+                config,
+                work,
+                &mut refs[range.clone()],
+                &mut ids[range.clone()],
+                &t.bounds,
+            )
+        };
+        // A top node that does not split is a subtree of one leaf, which its task makes.
+        let Some(sp) = sp else {
+            top.push(TopItem::Subtree { task: t });
+            continue;
+        };
+        top.push(TopItem::Interior {
+            aabb: t.bounds.boxes.aabb(),
+            parent: t.parent,
+            second: t.second,
+        });
+        let mid = t.start + sp.mid as u32;
+        tasks.push(Task {
+            start: mid,
+            end: t.end,
+            parent: index,
+            second: true,
+            bounds: sp.right,
+        });
+        tasks.push(Task {
+            start: t.start,
+            end: mid,
+            parent: index,
+            second: false,
+            bounds: sp.left,
+        });
+    }
+
+    // One part of each buffer per subtree, in depth-first (= primitive) order.
+    let count = top
+        .iter()
+        .filter(|i| matches!(i, TopItem::Subtree { .. }))
+        .count();
+    if subtrees.len() < count {
+        subtrees.resize_with(count, Subtree::default);
+    }
+    let mut parts = Vec::with_capacity(count);
+    let (mut r, mut i, mut l) = (&mut refs[..], &mut ids[..], &mut leaf_of[..]);
+    for item in top.iter() {
+        if let TopItem::Subtree { task } = item {
+            let len = (task.end - task.start) as usize;
+            let (r0, r1) = core::mem::take(&mut r).split_at_mut(len);
+            let (i0, i1) = core::mem::take(&mut i).split_at_mut(len);
+            let (l0, l1) = core::mem::take(&mut l).split_at_mut(len);
+            parts.push((*task, r0, i0, l0));
+            (r, i, l) = (r1, i1, l1);
+        }
+    }
+    parts
+        .into_par_iter()
+        .zip(subtrees[..count].par_iter_mut())
+        .for_each(|((task, r, i, l), sub)| {
+            let Subtree {
+                tasks,
+                work,
+                nodes,
+                parent,
+            } = sub;
+            nodes.clear();
+            parent.clear();
+            build_nodes(config, tasks, work, r, i, nodes, parent, l, &task.bounds);
+        });
+
+    // The top in depth-first order, each subtree copied in at its place. `placed[k]`: where
+    // top item `k` landed (an interior item's node, or a subtree's root).
+    let mut place = Vec::with_capacity(top.len());
+    let mut next_subtree = 0;
+    for item in top.iter() {
+        let index = nodes.len() as u32;
+        place.push(index);
+        let (p, second) = match *item {
+            TopItem::Interior {
+                aabb,
+                parent: p,
+                second,
+            } => {
+                nodes.push(Node::interior(&aabb));
+                parent.push(top_parent(&place, p));
+                (p, second)
+            }
+            TopItem::Subtree { task } => {
+                let sub = &subtrees[next_subtree];
+                next_subtree += 1;
+                let p_node = top_parent(&place, task.parent);
+                nodes.extend(sub.nodes.iter().map(|n| {
+                    let mut n = *n;
+                    n.first += if n.is_leaf() { task.start } else { index };
+                    n
+                }));
+                parent.extend(
+                    sub.parent
+                        .iter()
+                        .map(|&q| if q == NONE { p_node } else { q + index }),
+                );
+                let range = task.start as usize..task.end as usize;
+                leaf_of[range].iter_mut().for_each(|x| *x += index);
+                (task.parent, task.second)
+            }
+        };
+        if second {
+            nodes[place[p as usize] as usize].first = index;
+        }
+    }
+}
+
+/// The node a top item's parent (an index into the top, or `NONE`) landed at.
+#[cfg(feature = "parallel")]
+fn top_parent(place: &[u32], p: u32) -> u32 {
+    if p == NONE { NONE } else { place[p as usize] }
+}
+
+#[cfg(all(test, feature = "parallel"))]
+mod tests {
+    use super::super::SplitMethod;
+    use super::*;
+    use crate::geom::Aabb;
+    use crate::rng::Rng;
+    use glam::Vec3;
+
+    /// The tree's arrays that a build writes, for comparing two builds.
+    fn built(bvh: &Bvh) -> (Vec<Node>, Vec<u32>, Vec<u32>, Vec<ProxyKey>, Vec<SimdBox>) {
+        (
+            bvh.nodes.clone(),
+            bvh.parent.clone(),
+            bvh.leaf_of.clone(),
+            bvh.keys.clone(),
+            bvh.boxes.clone(),
+        )
+    }
+
+    /// The parallel build makes the very tree of the serial one (nodes, parents, primitive
+    /// order, keys) at any thread count, for a first build and a rebuild after churn, for
+    /// spread, clustered and coincident boxes and every split method; `validate()` holds.
+    #[test]
+    fn parallel_build_is_the_serial_build() {
+        let n = PARALLEL_BUILD_MIN + 5_000;
+        let mut rng = Rng::new(29);
+        let spread = |rng: &mut Rng| {
+            let c = rng.vec3_in(Vec3::splat(-60.0), Vec3::splat(60.0));
+            Aabb::new(c, c + rng.vec3_in(Vec3::splat(0.1), Vec3::splat(2.5)))
+        };
+        let inputs: [Vec<Aabb>; 3] = [
+            (0..n).map(|_| spread(&mut rng)).collect(),
+            // Four tight clusters: many equal-width buckets stay empty.
+            (0..n)
+                .map(|i| {
+                    let c =
+                        Vec3::splat((i % 4) as f32 * 1000.0) + rng.vec3_in(Vec3::ZERO, Vec3::ONE);
+                    Aabb::new(c, c + Vec3::splat(0.5))
+                })
+                .collect(),
+            vec![Aabb::new(Vec3::ONE, Vec3::splat(2.0)); n],
+        ];
+        let pools: Vec<rayon::ThreadPool> = [1, 2, 3, 8]
+            .iter()
+            .map(|&t| {
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(t)
+                    .build()
+                    .unwrap()
+            })
+            .collect();
+        for split in [
+            SplitMethod::Sah,
+            SplitMethod::Middle,
+            SplitMethod::EqualCounts,
+        ] {
+            let config = BvhConfig {
+                split,
+                ..BvhConfig::default()
+            };
+            for (k, aabbs) in inputs.iter().enumerate() {
+                let mut want = None;
+                for pool in &pools {
+                    let (mut bvh, keys) = pool
+                        .install(|| Bvh::from_aabbs(config.clone(), aabbs))
+                        .unwrap();
+                    bvh.validate();
+                    let first = built(&bvh);
+                    // Churn, then a rebuild from the last tree order.
+                    let mut r = Rng::new(k as u64);
+                    for key in keys.iter().step_by(3) {
+                        bvh.update(*key, spread(&mut r)).unwrap();
+                    }
+                    for key in keys.iter().skip(1).step_by(17) {
+                        bvh.remove(*key).unwrap();
+                    }
+                    pool.install(|| bvh.rebuild());
+                    bvh.validate();
+                    let got = (first, built(&bvh));
+                    match &want {
+                        None => want = Some(got),
+                        Some(w) => assert!(
+                            *w == got,
+                            "{split:?} input {k}: {} threads built another tree",
+                            pool.current_num_threads()
+                        ),
+                    }
+                }
             }
         }
     }
