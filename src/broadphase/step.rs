@@ -376,6 +376,7 @@ impl BroadPhase {
         } else {
             core::mem::swap(&mut self.packed, &mut self.fresh);
             self.cand.clear();
+            self.rev.clear();
             self.cached = false;
             self.costs.over = false;
             self.clear_pending();
@@ -502,7 +503,7 @@ impl BroadPhase {
         sort_u64(&mut self.fresh, &mut self.sort_buf, bits);
         self.fresh.dedup();
         self.classify();
-        self.scan_candidates();
+        self.update_candidates();
         let movers = self.movers.len().max(1) as f64;
         self.costs.loud_per_mover = (self.loud.len() as f64 / movers).min(1.0);
     }
