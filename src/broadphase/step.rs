@@ -146,6 +146,10 @@ pub(super) fn ahead<T>(v: &mut Vec<T>) {
     }
 }
 
+/// The incremental pass's patch lists keep room for at least one entry per this many
+/// proxies: their lengths follow the escapes and the pairs that change, which swing.
+const PATCH_FLOOR: usize = 32;
+
 /// What a step will do.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Plan {
@@ -289,9 +293,11 @@ impl BroadPhase {
         ahead(&mut self.prev_packed);
         ahead(&mut self.pairs);
         let n = self.store.len();
-        ahead(&mut self.loud);
-        ahead(&mut self.pending);
-        self.patch.keep_headroom(n / 8);
+        if self.cached {
+            ahead(&mut self.loud);
+            ahead(&mut self.pending);
+            self.patch.keep_headroom(n / PATCH_FLOOR);
+        }
         // A full pass finds every pair (or candidate) into `fresh`, sorts it, and rotates it
         // with `packed` and `prev_packed`; the incremental steps fill `fresh` only with the
         // escaped proxies' new candidates and patch `packed` in place. All four stay ready
