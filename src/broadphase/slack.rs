@@ -33,22 +33,31 @@ use super::radix::{bits_of, sort_u64};
 use super::step::{HIT, unpack};
 use super::store::{Store, flag};
 use crate::geom::SimdBox;
+use glam::Vec3A;
 
 /// `1 + 2⁻²²`: a product with it rounds a positive normal `f32` up by at least one ulp.
 const ROUND_UP: f32 = 1.0 + 1.0 / (1u32 << 22) as f32;
 /// `1 − 2⁻²²`: a product with it rounds a positive normal `f32` down by at least one ulp.
 const ROUND_DOWN: f32 = 1.0 - 1.0 / (1u32 << 22) as f32;
 
-/// How far any face of `exact` is from the same face of `anchor` (L∞ over the six faces),
-/// rounded up: at least the real distance. Differences that round are normal floats, which
-/// the product raises by more than their rounding error; subnormal differences are exact.
+/// How far any face of `exact` is from the same face of `anchor` (L∞ over the six faces), in
+/// `f32`: a face at the same coordinate has not moved, even an infinite one.
+#[inline]
+#[must_use]
+pub(super) fn distance(exact: &SimdBox, anchor: &SimdBox) -> f32 {
+    let moved = |e: Vec3A, a: Vec3A| Vec3A::select(e.cmpeq(a), Vec3A::ZERO, (e - a).abs());
+    moved(exact.min, anchor.min)
+        .max(moved(exact.max, anchor.max))
+        .max_element()
+}
+
+/// [`distance`] rounded up: at least the real distance. Differences that round are normal
+/// floats, which the product raises by more than their rounding error; subnormal differences
+/// are exact.
 #[inline]
 #[must_use]
 pub(super) fn drift(exact: &SimdBox, anchor: &SimdBox) -> f32 {
-    let d = (exact.min - anchor.min)
-        .abs()
-        .max((exact.max - anchor.max).abs());
-    d.max_element() * ROUND_UP
+    distance(exact, anchor) * ROUND_UP
 }
 
 /// The slack of two boxes: the smallest overlap margin if they overlap (0 if they touch), the
@@ -491,6 +500,9 @@ mod tests {
         let d = drift(&e, &a);
         assert!((0.3..0.3001).contains(&d), "{d}");
         assert_eq!(drift(&a, &a), 0.0);
+        let unbounded = boxed([f32::NEG_INFINITY; 3], [f32::INFINITY; 3]);
+        assert_eq!(drift(&unbounded, &unbounded), 0.0);
+        assert_eq!(drift(&unbounded, &a), f32::INFINITY);
         let far = boxed([-f32::MAX; 3], [f32::MAX; 3]);
         let back = boxed([f32::MAX; 3], [f32::MAX; 3]);
         assert_eq!(drift(&far, &back), f32::INFINITY);

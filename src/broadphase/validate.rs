@@ -1,6 +1,6 @@
 //! The whole-structure invariant check of a [`BroadPhase`].
 
-use super::slack::slack;
+use super::slack::{distance, slack};
 use super::step::HIT;
 use super::store::{Kind, flag};
 use super::{BodyKind, BroadPhase, Pair, Shape};
@@ -154,10 +154,8 @@ impl BroadPhase {
         let st = &self.store;
         let pending = |s: usize| st.flags[s] & flag::PENDING != 0;
         for s in (0..st.slots()).filter(|&s| st.kind[s] != Kind::Free) {
-            let (e, a) = (st.exact[s], st.anchor[s]);
-            let moved = (e.min - a.min).abs().max((e.max - a.max).abs());
             assert!(
-                moved.max_element() <= st.drift[s],
+                distance(&st.exact[s], &st.anchor[s]) <= st.drift[s],
                 "slot {s}: drift below its distance from its anchor"
             );
             let d = st.drift[s];
