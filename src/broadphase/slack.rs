@@ -35,6 +35,11 @@ use crate::geom::SimdBox;
 use crate::radix::{PairBits, sort_u64};
 use glam::Vec3A;
 
+/// Finding one proxy's candidates through the sorted list and the reverse index (a few
+/// binary searches, each a chain of cache misses) costs about as much as scanning this many
+/// candidates for a loud or removed side: past that many proxies to visit, the step scans.
+const CANDIDATES_PER_LOOKUP: usize = 100;
+
 /// `1 + 2⁻²²`: a product with it rounds a positive normal `f32` up by at least one ulp.
 const ROUND_UP: f32 = 1.0 + 1.0 / (1u32 << 22) as f32;
 /// `1 − 2⁻²²`: a product with it rounds a positive normal `f32` down by at least one ulp.
@@ -232,7 +237,7 @@ impl BroadPhase {
     }
 
     /// Visits the candidates of every loud or removed proxy (its forward range in `cand`, its
-    /// lower partners through `rev`), merged with the escaped proxies' new ones (`fresh`,
+    /// lower partners through `rev`; when many proxies are loud, one scan of `cand`), merged with the escaped proxies' new ones (`fresh`,
     /// sorted, each once): drops those of escaped or removed proxies that were not found
     /// again, re-tests the others (lowering both sides' slack, and marking pending a quiet
     /// side that drifted too far for it), and patches the candidates, their reverse index,
@@ -242,22 +247,33 @@ impl BroadPhase {
         let p = &mut self.patch;
         p.clear();
         let (cand, rev) = (&self.cand, &self.rev);
-        let key_at = |i: usize| cand[i] & !HIT;
-        let index_of = |key: u64| cand.partition_point(|&c| c & !HIT < key);
-        for &s in self.loud.iter().chain(self.store.freed()) {
-            let first = u64::from(s) << 32;
-            let mut i = index_of(first);
-            while i < cand.len() && key_at(i) >> 32 == u64::from(s) {
-                p.touched.push(i as u32);
-                i += 1;
+        let visits = self.loud.len() + self.store.freed().len();
+        if visits * CANDIDATES_PER_LOOKUP < cand.len() {
+            let key_at = |i: usize| cand[i] & !HIT;
+            let index_of = |key: u64| cand.partition_point(|&c| c & !HIT < key);
+            for &s in self.loud.iter().chain(self.store.freed()) {
+                let first = u64::from(s) << 32;
+                let mut i = index_of(first);
+                while i < cand.len() && key_at(i) >> 32 == u64::from(s) {
+                    p.touched.push(i as u32);
+                    i += 1;
+                }
+                let mut r = rev.partition_point(|&e| e < first);
+                while r < rev.len() && rev[r] >> 32 == u64::from(s) {
+                    let key = (rev[r] << 32) | u64::from(s);
+                    let i = index_of(key);
+                    debug_assert_eq!(key_at(i), key, "reverse index");
+                    p.touched.push(i as u32);
+                    r += 1;
+                }
             }
-            let mut r = rev.partition_point(|&e| e < first);
-            while r < rev.len() && rev[r] >> 32 == u64::from(s) {
-                let key = (rev[r] << 32) | u64::from(s);
-                let i = index_of(key);
-                debug_assert_eq!(key_at(i), key, "reverse index");
-                p.touched.push(i as u32);
-                r += 1;
+        } else {
+            let flags = &self.store.flags;
+            for (i, &c) in cand.iter().enumerate() {
+                let (a, b) = unpack(c);
+                if (flags[a] | flags[b]) & (flag::LOUD | flag::GONE) != 0 {
+                    p.touched.push(i as u32);
+                }
             }
         }
         p.touched.sort_unstable();
