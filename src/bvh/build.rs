@@ -529,9 +529,7 @@ mod tests {
             for (k, aabbs) in inputs.iter().enumerate() {
                 let mut want = None;
                 for pool in &pools {
-                    let (mut bvh, keys) = pool
-                        .install(|| Bvh::from_aabbs(config, aabbs))
-                        .unwrap();
+                    let (mut bvh, keys) = pool.install(|| Bvh::from_aabbs(config, aabbs)).unwrap();
                     bvh.validate();
                     let first = built(&bvh);
                     // Churn, then a rebuild from the last tree order.
