@@ -21,6 +21,14 @@
 //! [`LEVELS_BELOW_TYPICAL`] (capped at `MAX_DEPTH`) for the spheres smaller than typical;
 //! strict trees [`depth_for`] the region and `r`.
 //!
+//! Sparse worlds. In a world whose spheres lie far apart (a thin open world), cells of `c`
+//! would give nearly every sphere node pages of its own, and every neighbour lookup of the
+//! pass would miss the cache. So `c` is doubled while the spheres per occupied cell of the
+//! doubled size stay below [`SPHERES_PER_CELL`], counted over the spheres themselves (never
+//! estimated from the span's volume: two dense clusters far apart keep cells that fit their
+//! spheres), and the coarsened cells are then the deepest level. Worlds of fewer than
+//! [`MIN_SPHERES_TO_COARSEN`] spheres are not coarsened.
+//!
 //! Outliers. If covering every box would need cells wider than `c` at `MAX_DEPTH` (one sphere
 //! teleported to 1e7 m would put a whole world of small spheres in one cell), the cube covers
 //! instead, per axis, the boxes between the `q`-th lowest minimum and the `q`-th highest
