@@ -8,7 +8,7 @@
 
 mod common;
 
-use broadleaf::fixtures::scene::Gas;
+use broadleaf::fixtures::scene::{Gas, cube_edge};
 use broadleaf::{Aabb, BroadPhase, Config, Passes, Placement, Vec3};
 use common::{Model, ModelShape, Rng};
 
@@ -273,5 +273,113 @@ fn a_flying_cube_is_followed_without_a_reroot_per_step() {
                 "{placement:?} {passes:?}: {reroots} re-roots in {steps} steps"
             );
         }
+    }
+}
+
+/// Runs `worlds` (moving like `gas`) together through a default broadphase of `placement` for
+/// a few steps, checking the lists against brute force after each; `cells(octree, keys)` is
+/// asserted after each step too.
+fn run_worlds(
+    placement: Placement,
+    mut worlds: Vec<Gas>,
+    context: &str,
+    cells: impl Fn(&broadleaf::octree::Octree, &[broadleaf::ProxyKey]),
+) {
+    let mut bp = BroadPhase::new(Config {
+        octree_placement: placement,
+        ..Config::default()
+    });
+    let mut model = Model::new(0.0);
+    model.quadratic = false;
+    let keys: Vec<Vec<_>> = worlds
+        .iter()
+        .map(|gas| {
+            gas.centers
+                .iter()
+                .map(|&center| {
+                    let radius = gas.radius;
+                    model.insert(&mut bp, ModelShape::Sphere { center, radius })
+                })
+                .collect()
+        })
+        .collect();
+    let all: Vec<_> = keys.iter().flatten().copied().collect();
+    for s in 0..6 {
+        check(
+            &mut bp,
+            &mut model,
+            &format!("{placement:?} {context}, step {s}"),
+        );
+        cells(bp.octree(), &all);
+        for (gas, keys) in worlds.iter_mut().zip(&keys) {
+            gas.step(1.0 / 60.0);
+            for (&k, &center) in keys.iter().zip(&gas.centers) {
+                let radius = gas.radius;
+                model.update(&mut bp, k, ModelShape::Sphere { center, radius });
+            }
+        }
+    }
+}
+
+/// A thin sparse world (8000 spheres of r = 0.5 m over 400 m × 10 m × 400 m, one per 200 m³,
+/// spacing about 5.8 m) gets cells near its spacing, not near the spheres' diameter: the
+/// deepest cells are at least 4 m, and every loose sphere lives in cells between 2.5 m and
+/// twice the spacing.
+#[test]
+fn a_sparse_slab_gets_cells_near_its_spacing() {
+    let n = 8000;
+    let extent = Vec3::new(400.0, 10.0, 400.0);
+    let spacing = (extent.x * extent.y * extent.z / n as f32).cbrt();
+    for placement in PLACEMENTS {
+        let slab = Gas::in_box(n, 3, 0.5, Vec3::new(30.0, -5.0, 70.0), extent);
+        run_worlds(placement, vec![slab], "sparse slab", |octree, keys| {
+            let side = octree.bounds().extent().x;
+            let deepest = side / (1u32 << octree.depth()) as f32;
+            assert!(deepest >= 4.0, "{placement:?}: deepest cells {deepest}");
+            // Strict spheres that straddle a plane live higher up, by design.
+            if placement == Placement::Loose {
+                for &k in keys {
+                    let cell = side / (1u32 << octree.level_of(k).unwrap()) as f32;
+                    assert!(
+                        (2.5..=2.0 * spacing).contains(&cell),
+                        "cell {cell}, spacing {spacing}"
+                    );
+                }
+            }
+        });
+    }
+}
+
+/// Two dense `gas` cubes (10 % volume fraction) 300 m apart keep cells that fit their
+/// spheres: the empty space between them does not make the cells coarse.
+#[test]
+fn two_dense_clusters_far_apart_keep_fine_cells() {
+    let n = 3000;
+    let edge = Vec3::splat(cube_edge(n, 0.5, 0.1));
+    for placement in PLACEMENTS {
+        let a = Gas::in_box(n, 11, 0.5, Vec3::new(-150.0, 20.0, 0.0), edge);
+        let b = Gas::in_box(n, 12, 0.5, Vec3::new(150.0, -20.0, 10.0), edge);
+        run_worlds(placement, vec![a, b], "two clusters", |octree, keys| {
+            let side = octree.bounds().extent().x;
+            let deepest = side / (1u32 << octree.depth()) as f32;
+            // Loose trees keep a level below the median sphere's unless their cells were
+            // coarsened for a sparse world.
+            let finest = match placement {
+                Placement::Loose => 1.0,
+                Placement::Strict => 4.0,
+            };
+            assert!(
+                deepest < finest,
+                "{placement:?}: deepest cells {deepest}, region {:?}, depth {}",
+                octree.bounds(),
+                octree.depth()
+            );
+            if placement == Placement::Loose {
+                for &k in keys {
+                    let cell = side / (1u32 << octree.level_of(k).unwrap()) as f32;
+                    assert!((1.0..4.0).contains(&cell), "{placement:?}: cell {cell}");
+                }
+            }
+        });
     }
 }

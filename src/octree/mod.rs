@@ -255,7 +255,7 @@ impl Octree {
     /// An empty octree whose region follows its spheres: a cube re-rooted (every sphere placed
     /// again) by [`Octree::maintain`] when spheres leave it, when the tree has doubled since
     /// its last re-root (the first spheres included), or when the spheres' sizes call for
-    /// other cells; its depth follows the spheres' radii. No world is outside it: a world far
+    /// other cells; its depth follows the spheres' radii, and their spacing in a sparse world. No world is outside it: a world far
     /// from the origin, kilometres wide or spread by a teleport is paired at the speed of a
     /// well-placed one. See [`Octree::maintain`] for when it runs.
     #[must_use]

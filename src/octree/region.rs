@@ -21,6 +21,14 @@
 //! [`LEVELS_BELOW_TYPICAL`] (capped at `MAX_DEPTH`) for the spheres smaller than typical;
 //! strict trees [`depth_for`] the region and `r`.
 //!
+//! Sparse worlds. In a world whose spheres lie far apart (a thin open world), cells of `c`
+//! would give nearly every sphere node pages of its own, and every neighbour lookup of the
+//! pass would miss the cache. So `c` is doubled while the spheres per occupied cell of the
+//! doubled size stay below [`SPHERES_PER_CELL`], counted over the spheres themselves (never
+//! estimated from the span's volume: two dense clusters far apart keep cells that fit their
+//! spheres), and the coarsened cells are then the deepest level. Worlds of fewer than
+//! [`MIN_SPHERES_TO_COARSEN`] spheres are not coarsened.
+//!
 //! Outliers. If covering every box would need cells wider than `c` at `MAX_DEPTH` (one sphere
 //! teleported to 1e7 m would put a whole world of small spheres in one cell), the cube covers
 //! instead, per axis, the boxes between the `q`-th lowest minimum and the `q`-th highest
@@ -64,6 +72,15 @@ const FIRST_AUDIT_PERIOD: u32 = 16;
 const MAX_AUDIT_PERIOD: u32 = 1024;
 /// An audit re-roots when a fresh region changes the median sphere's cell by this factor.
 const AUDIT_GAIN: f32 = 2.0;
+/// Cells are doubled past the median sphere's while the spheres per occupied cell of the
+/// doubled size stay below this: a sparse world gets cells near its spacing, so its spheres
+/// share node pages and neighbour lookups instead of each touching pages of its own, while a
+/// dense world (a few spheres per doubled cell) keeps cells that fit its spheres.
+const SPHERES_PER_CELL: f32 = 2.0;
+/// Worlds of fewer spheres keep the median sphere's cells: their nodes fit the caches anyway.
+const MIN_SPHERES_TO_COARSEN: usize = 4096;
+/// Bits per axis of the cell coordinates the occupancy count interleaves into a `u64`.
+const OCCUPANCY_BITS: u32 = 21;
 
 /// The most overflow spheres a growing tree of `live` spheres keeps before it re-roots.
 #[must_use]
@@ -97,12 +114,18 @@ pub(super) struct Regrow {
     period: u32,
     /// One value per live sphere, for the median and the quantiles.
     scratch: Vec<f32>,
+    /// The occupancy count's cell codes, one per live sphere, and its radix sort's scratch.
+    codes: Vec<u64>,
+    codes_tmp: Vec<u64>,
+    counts: Vec<u32>,
 }
 
 impl Regrow {
     /// Heap bytes held (capacities).
     pub(super) fn heap_bytes(&self) -> usize {
         self.scratch.capacity() * 4
+            + (self.codes.capacity() + self.codes_tmp.capacity()) * 8
+            + self.counts.capacity() * 4
     }
 
     /// Resets the audit clock after a re-root of `live` spheres around `span_center` (`None`:
@@ -184,6 +207,24 @@ impl Regrow {
         // The side's floor: a cube a few float steps wide at the region's distance from the
         // origin, so its corners stay apart.
         let floor = center.abs().max_element().max(1.0) * f32::EPSILON * 64.0;
+        // The cells the spheres would get: the median sphere's, or wider where the side
+        // needs more than `MAX_DEPTH` levels of them.
+        let finest = if fits(side) {
+            cell
+        } else {
+            side / (1u32 << MAX_DEPTH) as f32
+        };
+        let doublings = if finest > 0.0 && finest.is_finite() && live >= MIN_SPHERES_TO_COARSEN {
+            self.doublings(objs, live, span.min, finest, side)
+        } else {
+            0
+        };
+        let cell = if doublings > 0 {
+            finest * (1u32 << doublings) as f32
+        } else {
+            cell
+        };
+        let fits = |side: f32| side.is_finite() && side <= cell * (1u32 << MAX_DEPTH) as f32;
         let (side, k) = if cell > 0.0 && cell.is_finite() && side <= cell {
             (cell.max(floor), 0)
         } else if fits(side) && cell > 0.0 {
@@ -195,8 +236,12 @@ impl Regrow {
         let half = Vec3::splat(side * 0.5);
         let bounds = Aabb::new(center - half, center + half);
         geom::check_bounds(&bounds).ok()?;
+        // Cells coarsened for occupancy are the deepest: a level below them would have cells
+        // of at least the median diameter again, and the spheres would move down to it.
         let depth = match placement {
+            Placement::Strict if doublings > 0 => depth_for(&bounds, r).min(k),
             Placement::Strict => depth_for(&bounds, r),
+            Placement::Loose if doublings > 0 => k,
             Placement::Loose => (k + LEVELS_BELOW_TYPICAL).min(MAX_DEPTH),
         };
         let grid = Grid::new(bounds, depth, placement);
@@ -208,6 +253,60 @@ impl Regrow {
             span_center,
         })
     }
+}
+
+impl Regrow {
+    /// How many times to double the cell `cell` so that the spheres per occupied cell stay
+    /// below [`SPHERES_PER_CELL`] (cells no wider than `side`). Counts the distinct cells of
+    /// the live spheres' centres on a grid from `origin` (an estimate: the tree's own grid is
+    /// offset from it), by sorting their interleaved cell coordinates once: a cell twice as
+    /// wide is the code shifted by 3 bits, so each coarser count is one scan of the sorted
+    /// codes. O(n); runs only when a region is proposed.
+    fn doublings(&mut self, objs: &[Obj], live: usize, origin: Vec3, cell: f32, side: f32) -> u32 {
+        let top = ((1u32 << OCCUPANCY_BITS) - 1) as f32;
+        let codes = &mut self.codes;
+        codes.clear();
+        codes.extend(objs.iter().filter(|o| o.node != NONE).map(|o| {
+            let q = ((o.center - origin) / cell).clamp(Vec3::ZERO, Vec3::splat(top));
+            spread(q.x as u64) | spread(q.y as u64) << 1 | spread(q.z as u64) << 2
+        }));
+        crate::radix::sort_bits(
+            codes,
+            &mut self.codes_tmp,
+            &mut self.counts,
+            0,
+            3 * OCCUPANCY_BITS,
+        );
+        let mut doublings = 0;
+        while doublings < MAX_DEPTH && cell * (2u32 << doublings) as f32 <= side {
+            let shift = 3 * (doublings + 1);
+            let mut occupied = 0usize;
+            let mut last = None;
+            for &c in codes.iter() {
+                let c = c >> shift;
+                if last != Some(c) {
+                    occupied += 1;
+                    last = Some(c);
+                }
+            }
+            if live as f32 >= SPHERES_PER_CELL * occupied as f32 {
+                break;
+            }
+            doublings += 1;
+        }
+        doublings
+    }
+}
+
+/// The bits of `v` below [`OCCUPANCY_BITS`] spread to every third bit (Morton interleave).
+fn spread(v: u64) -> u64 {
+    let mut x = v & ((1 << OCCUPANCY_BITS) - 1);
+    x = (x | x << 32) & 0x001f_0000_0000_ffff;
+    x = (x | x << 16) & 0x001f_0000_ff00_00ff;
+    x = (x | x << 8) & 0x100f_00f0_0f00_f00f;
+    x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
+    x = (x | x << 2) & 0x1249_2492_4924_9249;
+    x
 }
 
 /// True if an audit's `fresh` proposal is worth a re-root of a tree on `current`: it changes
