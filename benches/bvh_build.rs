@@ -83,7 +83,7 @@ fn build(c: &mut Criterion) {
     let theirs_boxes: Vec<_> = ours_boxes.iter().map(to_obvhs).collect();
     let config = BvhConfig::default();
 
-    let (ours, _) = Bvh::from_aabbs(config.clone(), &ours_boxes).expect("finite boxes");
+    let (ours, _) = Bvh::from_aabbs(config, &ours_boxes).expect("finite boxes");
     let mut builder = PlocBuilder::with_capacity(n);
     let theirs = ploc(&mut builder, &theirs_boxes);
     println!(
@@ -97,7 +97,7 @@ fn build(c: &mut Criterion) {
     g.sample_size(10);
     g.throughput(Throughput::Elements(n as u64));
     g.bench_function("broadleaf_binned_sah", |b| {
-        b.iter(|| black_box(Bvh::from_aabbs(config.clone(), &ours_boxes)))
+        b.iter(|| black_box(Bvh::from_aabbs(config, &ours_boxes)))
     });
     g.bench_function("obvhs_ploc", |b| {
         b.iter(|| black_box(ploc(&mut builder, &theirs_boxes)))

@@ -471,8 +471,11 @@ mod tests {
     use crate::rng::Rng;
     use glam::Vec3;
 
-    /// The tree's arrays that a build writes, for comparing two builds.
-    fn built(bvh: &Bvh) -> (Vec<Node>, Vec<u32>, Vec<u32>, Vec<ProxyKey>, Vec<SimdBox>) {
+    /// The tree's arrays that a build writes: nodes, parents, `leaf_of`, keys, boxes.
+    type Built = (Vec<Node>, Vec<u32>, Vec<u32>, Vec<ProxyKey>, Vec<SimdBox>);
+
+    /// The arrays of `bvh` a build wrote, for comparing two builds.
+    fn built(bvh: &Bvh) -> Built {
         (
             bvh.nodes.clone(),
             bvh.parent.clone(),
@@ -527,7 +530,7 @@ mod tests {
                 let mut want = None;
                 for pool in &pools {
                     let (mut bvh, keys) = pool
-                        .install(|| Bvh::from_aabbs(config.clone(), aabbs))
+                        .install(|| Bvh::from_aabbs(config, aabbs))
                         .unwrap();
                     bvh.validate();
                     let first = built(&bvh);
