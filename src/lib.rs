@@ -16,12 +16,15 @@
 //!   follows each proxy's own motion) and re-tests only the candidates of what moved, whichever
 //!   its work estimate says is cheaper; [`BroadPhase::stats`] says which ran. Nothing in
 //!   [`Config`] needs tuning for speed.
-//! - **[`Octree`]** — many moving spheres of similar size in a known region, on their own. A
-//!   top-down preallocated octree (Ericson, *Real-Time Collision Detection* 7.3), and a move
-//!   that keeps the node costs one store. Two [`Placement`]s: `Strict` (the standalone
+//! - **[`Octree`]** — many moving spheres, on their own. A top-down preallocated octree
+//!   (Ericson, *Real-Time Collision Detection* 7.3), and a move that keeps the node costs one
+//!   store. [`Octree::growing`] (the [`BroadPhase`]'s) follows its spheres: its region and
+//!   depth are derived from them and re-rooted when they leave, so no world is outside it;
+//!   [`Octree::new`] subdivides a region you give, for good. Two [`Placement`]s: `Strict` (the standalone
 //!   default) keeps a sphere in the deepest node whose split planes it does not straddle;
 //!   `Loose` (RTCD 7.3.6, looseness 2; the [`BroadPhase`] default) puts every sphere at the
-//!   level its radius fits (pick the depth with [`octree::depth_for_loose`]).
+//!   level its radius fits (for a fixed region, pick the depth with
+//!   [`octree::depth_for_loose`]).
 //! - **[`Bvh`]** — rigid bodies of any shape and size, given by their world AABBs, on their own.
 //!   A binned-SAH bounding-volume hierarchy in a flat depth-first array, refitted bottom-up and
 //!   rebuilt when its quality degrades. Use it for static geometry queries too.
@@ -90,7 +93,7 @@
 //!   by slot; the same operations in the same order give bit-identical lists on every run.
 //! - **Bad input is refused, never half-applied.** NaN or infinite coordinates, a negative
 //!   radius, an inverted box or a stale key give an [`Error`] and leave the structure exactly
-//!   as it was. Objects outside the octree's bounds are not errors: they are kept and paired.
+//!   as it was. No position is outside: the octree's region follows the spheres.
 //! - **No allocation per step** in steady state: every buffer is kept and reused, and lists
 //!   that swing from step to step grow ahead of their peaks.
 //!

@@ -52,6 +52,8 @@ struct World {
     rng: Rng,
     proxies: HashMap<ProxyKey, Proxy>,
     prev: BTreeSet<Pair>,
+    /// The chance that a sphere is left alone in a step.
+    still: f32,
 }
 
 /// A radius that makes lattice neighbours touch exactly (0.5), overlap by 0.8 mm, or miss by
@@ -88,6 +90,7 @@ impl World {
             rng: Rng::new(seed),
             proxies: HashMap::new(),
             prev: BTreeSet::new(),
+            still: 0.1,
         };
         for x in 0..SIDE {
             for z in 0..SIDE {
@@ -161,7 +164,7 @@ impl World {
             let p = self.proxies.get_mut(&key).expect("a live key");
             match p.shape {
                 Shape::Sphere { center, radius } => {
-                    let center = if rng.chance(0.1) {
+                    let center = if rng.chance(self.still) {
                         continue;
                     } else if p.walker {
                         center + rng.offset(0.002)
@@ -269,8 +272,9 @@ impl World {
     }
 }
 
-fn settled_pile(passes: Passes, seed: u64, steps: usize) {
+fn settled_pile(passes: Passes, seed: u64, steps: usize, still: f32) {
     let mut w = World::new(passes, seed);
+    w.still = still;
     w.check_step("first step");
     let (mut incremental, mut changes, mut skipped) = (0, 0, 0);
     for step in 0..steps {
@@ -288,7 +292,7 @@ fn settled_pile(passes: Passes, seed: u64, steps: usize) {
     }
     // Not vacuous: pairs start and stop overlapping, and the forced incremental pass skips
     // candidates.
-    assert!(changes > steps, "{changes} events in {steps} steps");
+    assert!(changes > steps / 2, "{changes} events in {steps} steps");
     if passes == Passes::Incremental {
         assert_eq!(incremental, steps);
         assert!(skipped > 0, "nothing skipped");
@@ -297,16 +301,19 @@ fn settled_pile(passes: Passes, seed: u64, steps: usize) {
 
 #[test]
 fn settled_pile_incremental_equals_brute_force_every_step() {
-    settled_pile(Passes::Incremental, 1, 120);
-    settled_pile(Passes::Incremental, 2, 60);
+    settled_pile(Passes::Incremental, 1, 120, 0.1);
+    settled_pile(Passes::Incremental, 2, 60, 0.1);
+    // Few movers: the loud proxies' candidates are looked up, not scanned for.
+    settled_pile(Passes::Incremental, 5, 120, 0.995);
 }
 
 #[test]
 fn settled_pile_adaptive_equals_brute_force_every_step() {
-    settled_pile(Passes::Adaptive, 3, 120);
+    settled_pile(Passes::Adaptive, 3, 120, 0.1);
+    settled_pile(Passes::Adaptive, 6, 60, 0.99);
 }
 
 #[test]
 fn settled_pile_full_equals_brute_force_every_step() {
-    settled_pile(Passes::Full, 4, 40);
+    settled_pile(Passes::Full, 4, 40, 0.1);
 }

@@ -212,6 +212,9 @@ pub struct BroadPhase {
     /// Candidate pairs (packed slot pairs, `HIT` set if their exact boxes overlapped at the
     /// last step), sorted.
     cand: Vec<u64>,
+    /// The candidates' reverse index: `(higher slot, lower slot)` of each, sorted, so that a
+    /// proxy's lower partners are found without a scan.
+    rev: Vec<u64>,
     /// The incremental pass's list patches.
     patch: slack::Patch,
     /// This step's pairs and the previous step's, packed, sorted.
@@ -296,6 +299,7 @@ impl BroadPhase {
             removals: 0,
             fast_movers: 0,
             cand: Vec::new(),
+            rev: Vec::new(),
             patch: slack::Patch::default(),
             packed: Vec::new(),
             prev_packed: Vec::new(),
@@ -363,6 +367,7 @@ impl BroadPhase {
             + self.patch.heap_bytes()
             + v(
                 self.cand.capacity()
+                    + self.rev.capacity()
                     + self.packed.capacity()
                     + self.prev_packed.capacity()
                     + self.fresh.capacity()

@@ -12,8 +12,9 @@
 //!
 //! A step (see [`BroadPhase::classify`]) makes *loud* every proxy that escaped its fat box,
 //! was inserted, was marked *pending* by the last step, or moved with `2·drift ≥ m`: a loud
-//! proxy is re-anchored at its exact box and all its candidates are re-tested (one scan of the
-//! candidate list, [`BroadPhase::scan_candidates`]). Each re-tested pair lowers both sides' `m`
+//! proxy is re-anchored at its exact box and all its candidates are re-tested
+//! ([`BroadPhase::update_candidates`], which finds them through the sorted candidate list and
+//! its reverse index, without looking at the others). Each re-tested pair lowers both sides' `m`
 //! to its new slack; a quiet side whose drift is no longer below half of it cannot keep the
 //! candidate's recorded status equal to the status at the anchors, so it is marked pending: its
 //! pairs were tested this step with the exact boxes, and it is re-anchored at the next.
@@ -22,31 +23,46 @@
 //! `drift + drift < m` in `f32` implies it in the reals; touching boxes have slack 0 and are
 //! re-tested whenever either side moves.
 //!
-//! The scan also keeps the lists exact in place: the candidates (minus those of escaped or
-//! removed proxies, plus the escaped proxies' new ones), the sorted pair list and the key pair
-//! list are patched by position ([`remove_at`], [`insert_at`]) with the few pairs that started
-//! or stopped overlapping, which are the step's `added` and `removed`.
+//! The same pass keeps the lists exact in place: the candidates (minus those of escaped or
+//! removed proxies, plus the escaped proxies' new ones) and their reverse index, the sorted
+//! pair list and the key pair list are patched by position ([`patch`]) with the few pairs that
+//! started or stopped overlapping, which are the step's `added` and `removed`.
 
 use super::BroadPhase;
 use super::step::{HIT, unpack};
 use super::store::{Store, flag};
 use crate::geom::SimdBox;
+use crate::radix::{PairBits, sort_u64};
+use glam::Vec3A;
+
+/// Finding one proxy's candidates through the sorted list and the reverse index (a few
+/// binary searches, each a chain of cache misses) costs about as much as scanning this many
+/// candidates for a loud or removed side: past that many proxies to visit, the step scans.
+const CANDIDATES_PER_LOOKUP: usize = 100;
 
 /// `1 + 2⁻²²`: a product with it rounds a positive normal `f32` up by at least one ulp.
 const ROUND_UP: f32 = 1.0 + 1.0 / (1u32 << 22) as f32;
 /// `1 − 2⁻²²`: a product with it rounds a positive normal `f32` down by at least one ulp.
 const ROUND_DOWN: f32 = 1.0 - 1.0 / (1u32 << 22) as f32;
 
-/// How far any face of `exact` is from the same face of `anchor` (L∞ over the six faces),
-/// rounded up: at least the real distance. Differences that round are normal floats, which
-/// the product raises by more than their rounding error; subnormal differences are exact.
+/// How far any face of `exact` is from the same face of `anchor` (L∞ over the six faces), in
+/// `f32`: a face at the same coordinate has not moved, even an infinite one.
+#[inline]
+#[must_use]
+pub(super) fn distance(exact: &SimdBox, anchor: &SimdBox) -> f32 {
+    let moved = |e: Vec3A, a: Vec3A| Vec3A::select(e.cmpeq(a), Vec3A::ZERO, (e - a).abs());
+    moved(exact.min, anchor.min)
+        .max(moved(exact.max, anchor.max))
+        .max_element()
+}
+
+/// [`distance`] rounded up: at least the real distance. Differences that round are normal
+/// floats, which the product raises by more than their rounding error; subnormal differences
+/// are exact.
 #[inline]
 #[must_use]
 pub(super) fn drift(exact: &SimdBox, anchor: &SimdBox) -> f32 {
-    let d = (exact.min - anchor.min)
-        .abs()
-        .max((exact.max - anchor.max).abs());
-    d.max_element() * ROUND_UP
+    distance(exact, anchor) * ROUND_UP
 }
 
 /// The slack of two boxes: the smallest overlap margin if they overlap (0 if they touch), the
@@ -66,25 +82,52 @@ fn quiet(d: f32, m: f32) -> bool {
     d == 0.0 || d + d < m
 }
 
-/// Scratch of [`BroadPhase::scan_candidates`]: the list patches one scan collects. Reused by
-/// every step; never shrinks.
+/// Scratch of [`BroadPhase::update_candidates`]: the candidates it visits and the list
+/// patches it collects. Reused by every step; never shrinks.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Patch {
+    /// Indices of the candidates to visit, ascending.
+    touched: Vec<u32>,
     /// Indices of the candidates dropped, ascending.
     cand_gone: Vec<u32>,
-    /// The new candidates, each with the index it goes before once the dropped ones are gone.
+    /// The new candidates, each with the index of the old list it goes before.
     cand_at: Vec<u32>,
     cand_new: Vec<u64>,
-    /// Indices of the pairs that stopped overlapping, ascending, in the pair list.
+    /// The reverse entries of the dropped candidates, then their indices in `rev`.
+    rev_keys: Vec<u64>,
+    rev_gone: Vec<u32>,
+    /// The reverse entries of the new candidates, with where they go.
+    rev_at: Vec<u32>,
+    rev_new: Vec<u64>,
+    /// Indices of the pairs that stopped overlapping, in the old pair list, ascending.
     pairs_gone: Vec<u32>,
-    /// Where each pair that started overlapping goes, once those are gone.
+    /// Where each pair that started overlapping goes in the old pair list.
     pairs_at: Vec<u32>,
+    /// [`patch`]'s runs.
+    runs: Vec<Run>,
 }
 
 impl Patch {
+    fn clear(&mut self) {
+        for v in [
+            &mut self.touched,
+            &mut self.cand_gone,
+            &mut self.cand_at,
+            &mut self.rev_gone,
+            &mut self.rev_at,
+            &mut self.pairs_gone,
+            &mut self.pairs_at,
+        ] {
+            v.clear();
+        }
+        for v in [&mut self.cand_new, &mut self.rev_keys, &mut self.rev_new] {
+            v.clear();
+        }
+    }
+
     /// Grows every list ahead of its peaks (see `radix::ahead`), to at least `floor`:
-    /// their lengths follow the escapes and the pairs that change, which swing from step to
-    /// step.
+    /// their lengths follow the loud proxies, the escapes and the pairs that change, which
+    /// swing from step to step.
     pub(super) fn keep_headroom(&mut self, floor: usize) {
         fn grow<T>(v: &mut Vec<T>, floor: usize) {
             crate::radix::ahead(v);
@@ -92,22 +135,42 @@ impl Patch {
                 v.reserve(floor - v.len());
             }
         }
-        grow(&mut self.cand_gone, floor);
-        grow(&mut self.cand_at, floor);
-        grow(&mut self.cand_new, floor);
-        grow(&mut self.pairs_gone, floor);
-        grow(&mut self.pairs_at, floor);
+        for v in [
+            &mut self.touched,
+            &mut self.cand_gone,
+            &mut self.cand_at,
+            &mut self.rev_gone,
+            &mut self.rev_at,
+            &mut self.pairs_gone,
+            &mut self.pairs_at,
+        ] {
+            grow(v, floor);
+        }
+        for v in [&mut self.cand_new, &mut self.rev_keys, &mut self.rev_new] {
+            grow(v, floor);
+        }
+        grow(&mut self.runs, floor);
     }
 
     /// Heap bytes held (capacities).
     pub(super) fn heap_bytes(&self) -> usize {
-        (self.cand_gone.capacity()
+        (self.touched.capacity()
+            + self.cand_gone.capacity()
             + self.cand_at.capacity()
+            + self.rev_gone.capacity()
+            + self.rev_at.capacity()
             + self.pairs_gone.capacity()
             + self.pairs_at.capacity())
             * 4
-            + self.cand_new.capacity() * 8
+            + (self.cand_new.capacity() + self.rev_keys.capacity() + self.rev_new.capacity()) * 8
+            + self.runs.capacity() * core::mem::size_of::<Run>()
     }
+}
+
+/// The reverse index entry of the candidate `(a, b)`, `a < b`: `b` in the high half.
+#[inline]
+fn reverse(a: usize, b: usize) -> u64 {
+    ((b as u64) << 32) | a as u64
 }
 
 impl BroadPhase {
@@ -139,8 +202,8 @@ impl BroadPhase {
         }
     }
 
-    /// Every live proxy anchored at its exact box, its slack the least over its candidates:
-    /// after a pass that tested every candidate.
+    /// Every live proxy anchored at its exact box, its slack the least over its candidates,
+    /// and the candidates' reverse index: after a pass that found and tested every candidate.
     pub(super) fn anchor_all(&mut self) {
         let st = &mut self.store;
         st.grow_incremental();
@@ -149,12 +212,19 @@ impl BroadPhase {
             st.slack[s] = f32::MAX;
             st.drift[s] = 0.0;
         }
+        self.rev.clear();
         for &c in &self.cand {
             let (a, b) = unpack(c & !HIT);
             let s = slack(&st.exact[a], &st.exact[b]);
             st.slack[a] = st.slack[a].min(s);
             st.slack[b] = st.slack[b].min(s);
+            self.rev.push(reverse(a, b));
         }
+        sort_u64(
+            &mut self.rev,
+            &mut self.sort_buf,
+            PairBits::for_slots(st.slots()),
+        );
         self.clear_pending();
     }
 
@@ -166,27 +236,53 @@ impl BroadPhase {
         self.pending.clear();
     }
 
-    /// One scan over the candidates, merged with the escaped proxies' new ones (`fresh`,
+    /// Visits the candidates of every loud or removed proxy (its forward range in `cand`, its
+    /// lower partners through `rev`; when many proxies are loud, one scan of `cand`), merged with the escaped proxies' new ones (`fresh`,
     /// sorted, each once): drops those of escaped or removed proxies that were not found
-    /// again, re-tests every one with a loud side (lowering both sides' slack, and marking
-    /// pending a quiet side that drifted too far for it), keeps the others' last outcome, and
-    /// patches the candidates, the pair list and the key pairs in place with the changes,
-    /// which are this step's `added` and `removed`.
-    pub(super) fn scan_candidates(&mut self) {
+    /// again, re-tests the others (lowering both sides' slack, and marking pending a quiet
+    /// side that drifted too far for it), and patches the candidates, their reverse index,
+    /// the pair list and the key pairs in place with the changes, which are this step's
+    /// `added` and `removed`. Every other candidate keeps its last outcome untouched.
+    pub(super) fn update_candidates(&mut self) {
+        let p = &mut self.patch;
+        p.clear();
+        let (cand, rev) = (&self.cand, &self.rev);
+        let visits = self.loud.len() + self.store.freed().len();
+        if visits * CANDIDATES_PER_LOOKUP < cand.len() {
+            let key_at = |i: usize| cand[i] & !HIT;
+            let index_of = |key: u64| cand.partition_point(|&c| c & !HIT < key);
+            for &s in self.loud.iter().chain(self.store.freed()) {
+                let first = u64::from(s) << 32;
+                let mut i = index_of(first);
+                while i < cand.len() && key_at(i) >> 32 == u64::from(s) {
+                    p.touched.push(i as u32);
+                    i += 1;
+                }
+                let mut r = rev.partition_point(|&e| e < first);
+                while r < rev.len() && rev[r] >> 32 == u64::from(s) {
+                    let key = (rev[r] << 32) | u64::from(s);
+                    let i = index_of(key);
+                    debug_assert_eq!(key_at(i), key, "reverse index");
+                    p.touched.push(i as u32);
+                    r += 1;
+                }
+            }
+        } else {
+            let flags = &self.store.flags;
+            for (i, &c) in cand.iter().enumerate() {
+                let (a, b) = unpack(c);
+                if (flags[a] | flags[b]) & (flag::LOUD | flag::GONE) != 0 {
+                    p.touched.push(i as u32);
+                }
+            }
+        }
+        p.touched.sort_unstable();
+        p.touched.dedup();
+
         let st = &mut self.store;
         let (flags, exact, anchor) = (&mut st.flags, &st.exact, &st.anchor);
         let (slk, drf) = (&mut st.slack, &mut st.drift);
         let pending = &mut self.pending;
-        let p = &mut self.patch;
-        for v in [
-            &mut p.cand_gone,
-            &mut p.cand_at,
-            &mut p.pairs_gone,
-            &mut p.pairs_at,
-        ] {
-            v.clear();
-        }
-        p.cand_new.clear();
         let (added, removed) = (&mut self.added_packed, &mut self.removed_packed);
         added.clear();
         removed.clear();
@@ -206,102 +302,105 @@ impl BroadPhase {
             exact[a].overlaps(&exact[b])
         };
         let fresh = &self.fresh;
-        let drop = flag::ESCAPED | flag::GONE;
-        // `hits`: the old candidates marked `HIT` so far, that is the old pair list's index
-        // of the next one.
-        let (mut j, mut hits) = (0usize, 0u32);
-        let n = self.cand.len();
         let cand = &mut self.cand;
-        let mut i = 0;
-        loop {
-            // Most candidates sort below the next new one and have no loud, escaped or removed
-            // side: they keep their status, and only their `HIT` bit is counted.
-            let next = fresh.get(j).copied().unwrap_or(u64::MAX);
-            while i < n {
-                let c = cand[i];
-                let (a, b) = unpack(c);
-                if c & !HIT >= next || (flags[a] | flags[b]) & (flag::LOUD | drop) != 0 {
-                    break;
-                }
-                hits += (c >> 63) as u32;
-                i += 1;
-            }
-            if i == n {
-                break;
-            }
+        let mut j = 0;
+        // A new candidate: tested, and inserted where it sorts.
+        fn insert(
+            f: u64,
+            cand: &[u64],
+            p: &mut Patch,
+            flags: &mut [u8],
+            test: &mut impl FnMut(usize, usize, &mut [u8]) -> bool,
+        ) -> bool {
+            let (a, b) = unpack(f);
+            let hit = test(a, b, flags);
+            p.cand_at
+                .push(cand.partition_point(|&c| c & !HIT < f) as u32);
+            p.cand_new.push(f | if hit { HIT } else { 0 });
+            hit
+        }
+        for t in 0..p.touched.len() {
+            let i = p.touched[t] as usize;
             let c = cand[i];
             let key = c & !HIT;
             while j < fresh.len() && fresh[j] < key {
-                let f = fresh[j];
-                j += 1;
-                let (a, b) = unpack(f);
-                let hit = test(a, b, flags);
-                p.cand_at.push(i as u32 - p.cand_gone.len() as u32);
-                p.cand_new.push(f | if hit { HIT } else { 0 });
-                if hit {
-                    p.pairs_at.push(hits - p.pairs_gone.len() as u32);
-                    added.push(f);
+                if insert(fresh[j], cand, p, flags, &mut test) {
+                    added.push(fresh[j]);
                 }
+                j += 1;
             }
-            i += 1;
             let was = c & HIT != 0;
             let (a, b) = unpack(key);
-            let both = flags[a] | flags[b];
-            let hit = if both & drop != 0 {
+            let hit = if (flags[a] | flags[b]) & (flag::ESCAPED | flag::GONE) != 0 {
                 if j < fresh.len() && fresh[j] == key {
                     j += 1;
                     test(a, b, flags)
                 } else {
-                    p.cand_gone.push(i as u32 - 1);
+                    p.cand_gone.push(i as u32);
+                    p.rev_keys.push(reverse(a, b));
                     if was {
-                        p.pairs_gone.push(hits);
                         removed.push(key);
-                        hits += 1;
                     }
                     continue;
                 }
-            } else if both & flag::LOUD != 0 {
-                test(a, b, flags)
             } else {
-                hits += u32::from(was);
-                continue;
+                test(a, b, flags)
             };
             if hit != was {
-                cand[i - 1] = key | if hit { HIT } else { 0 };
+                cand[i] = key | if hit { HIT } else { 0 };
                 if hit {
-                    p.pairs_at.push(hits - p.pairs_gone.len() as u32);
                     added.push(key);
                 } else {
-                    p.pairs_gone.push(hits);
                     removed.push(key);
                 }
             }
-            hits += u32::from(was);
         }
-        let end = self.cand.len() as u32 - p.cand_gone.len() as u32;
         for &f in &fresh[j..] {
-            let (a, b) = unpack(f);
-            let hit = test(a, b, flags);
-            p.cand_at.push(end);
-            p.cand_new.push(f | if hit { HIT } else { 0 });
-            if hit {
-                p.pairs_at.push(hits - p.pairs_gone.len() as u32);
+            if insert(f, cand, p, flags, &mut test) {
                 added.push(f);
             }
         }
         self.stats.candidates_tested = tested;
-        remove_at(&mut self.cand, &p.cand_gone);
-        insert_at(&mut self.cand, &p.cand_at, &p.cand_new);
-        remove_at(&mut self.packed, &p.pairs_gone);
-        insert_at(&mut self.packed, &p.pairs_at, added);
+
+        // The reverse index: a dropped candidate's entry goes, a new one's comes.
+        let rev = &mut self.rev;
+        p.rev_keys.sort_unstable();
+        for &e in &p.rev_keys {
+            p.rev_gone.push(rev.partition_point(|&r| r < e) as u32);
+        }
+        for &c in &p.cand_new {
+            let (a, b) = unpack(c & !HIT);
+            p.rev_new.push(reverse(a, b));
+        }
+        p.rev_new.sort_unstable();
+        for &e in &p.rev_new {
+            p.rev_at.push(rev.partition_point(|&r| r < e) as u32);
+        }
+        patch(rev, &p.rev_gone, &p.rev_at, &p.rev_new, &mut p.runs);
+        patch(cand, &p.cand_gone, &p.cand_at, &p.cand_new, &mut p.runs);
+
+        // The pair list and the key pairs: the changed pairs' places in the old list.
+        let packed = &mut self.packed;
+        for &k in removed.iter() {
+            p.pairs_gone.push(packed.partition_point(|&q| q < k) as u32);
+        }
+        for &k in added.iter() {
+            p.pairs_at.push(packed.partition_point(|&q| q < k) as u32);
+        }
+        patch(packed, &p.pairs_gone, &p.pairs_at, added, &mut p.runs);
         let store = &self.store;
         let to_pair = |&q: &u64| super::step::key_pair(store, q);
         self.added.clear();
         self.added.extend(self.added_packed.iter().map(to_pair));
         self.removed.clear();
         self.removed.extend(self.removed_packed.iter().map(to_pair));
-        remove_at(&mut self.pairs, &p.pairs_gone);
-        insert_at(&mut self.pairs, &p.pairs_at, &self.added);
+        patch(
+            &mut self.pairs,
+            &p.pairs_gone,
+            &p.pairs_at,
+            &self.added,
+            &mut p.runs,
+        );
     }
 }
 
@@ -316,41 +415,73 @@ fn make_loud(st: &mut Store, loud: &mut Vec<u32>, slot: u32) {
     st.drift[s] = 0.0;
 }
 
-/// Removes `v[i]` for every `i` of `gone` (ascending, distinct), in place: each run of kept
-/// entries moves once.
-pub(super) fn remove_at<T: Copy>(v: &mut Vec<T>, gone: &[u32]) {
-    let Some(&first) = gone.first() else {
-        return;
-    };
-    let mut to = first as usize;
-    for (k, &g) in gone.iter().enumerate() {
-        let from = g as usize + 1;
-        let end = gone.get(k + 1).map_or(v.len(), |&n| n as usize);
-        v.copy_within(from..end, to);
-        to += end - from;
-    }
-    v.truncate(to);
+/// A stretch of old entries `[start, end)` that moves by `shift` places.
+#[derive(Clone, Copy, Debug)]
+struct Run {
+    start: u32,
+    end: u32,
+    shift: i32,
 }
 
-/// Inserts `new[k]` before the entry at index `at[k]` of `v` as it is now (`at` ascending,
-/// repeats allowed, `v.len()` appends), in place: from the back, each run of old entries
-/// moves once.
-pub(super) fn insert_at<T: Copy>(v: &mut Vec<T>, at: &[u32], new: &[T]) {
+/// Removes `v[i]` for every `i` of `gone` (ascending, distinct) and inserts `new[k]` before
+/// the old entry `at[k]` (`at` ascending, repeats allowed, `v.len()` appends), in place,
+/// moving only the entries whose index changes. Between two changes the old entries move by
+/// the same shift, and their order is kept: no entry's new place is still held by an entry
+/// moving the other way, so the runs that move left are moved first, front to back, then
+/// those that move right, back to front, and the new entries are written last.
+fn patch<T: Copy>(v: &mut Vec<T>, gone: &[u32], at: &[u32], new: &[T], runs: &mut Vec<Run>) {
     debug_assert_eq!(at.len(), new.len());
-    let Some(&first) = new.first() else {
+    if gone.is_empty() && new.is_empty() {
         return;
-    };
-    let mut end = v.len();
-    v.resize(end + new.len(), first);
-    let mut to = v.len();
-    for (&p, &x) in at.iter().zip(new).rev() {
-        let p = p as usize;
-        v.copy_within(p..end, to - (end - p));
-        to -= end - p;
-        end = p;
-        to -= 1;
-        v[to] = x;
     }
+    let old = v.len();
+    runs.clear();
+    let (mut g, mut k, mut start, mut shift) = (0, 0, 0usize, 0i32);
+    loop {
+        let next_at = at.get(k).map_or(old, |&a| a as usize);
+        let next_gone = gone.get(g).map_or(old, |&i| i as usize);
+        let end = next_at.min(next_gone);
+        if end > start && shift != 0 {
+            runs.push(Run {
+                start: start as u32,
+                end: end as u32,
+                shift,
+            });
+        }
+        start = start.max(end);
+        if k < at.len() && next_at <= next_gone {
+            shift += 1;
+            k += 1;
+        } else if g < gone.len() {
+            shift -= 1;
+            g += 1;
+            start = next_gone + 1;
+        } else {
+            break;
+        }
+    }
+    let len = old + new.len() - gone.len();
+    if len > old {
+        v.resize(len, new[0]);
+    }
+    for r in runs.iter().filter(|r| r.shift < 0) {
+        let to = (r.start as i64 + i64::from(r.shift)) as usize;
+        v.copy_within(r.start as usize..r.end as usize, to);
+    }
+    for r in runs.iter().rev().filter(|r| r.shift > 0) {
+        let to = r.start as usize + r.shift as usize;
+        v.copy_within(r.start as usize..r.end as usize, to);
+    }
+    // The new entry `k` lands after the `k` new ones before it and the old ones before
+    // `at[k]` that stay.
+    let mut g = 0;
+    for (k, (&a, &x)) in at.iter().zip(new).enumerate() {
+        while g < gone.len() && gone[g] < a {
+            g += 1;
+        }
+        v[a as usize + k - g] = x;
+    }
+    v.truncate(len);
 }
 
 #[cfg(test)]
@@ -388,21 +519,53 @@ mod tests {
         let d = drift(&e, &a);
         assert!((0.3..0.3001).contains(&d), "{d}");
         assert_eq!(drift(&a, &a), 0.0);
+        let unbounded = boxed([f32::NEG_INFINITY; 3], [f32::INFINITY; 3]);
+        assert_eq!(drift(&unbounded, &unbounded), 0.0);
+        assert_eq!(drift(&unbounded, &a), f32::INFINITY);
         let far = boxed([-f32::MAX; 3], [f32::MAX; 3]);
         let back = boxed([f32::MAX; 3], [f32::MAX; 3]);
         assert_eq!(drift(&far, &back), f32::INFINITY);
         assert!(!quiet(drift(&far, &back), f32::MAX));
     }
 
+    /// `patch` against the obvious rebuild, on random removals and insertions.
     #[test]
-    fn patches_by_position() {
-        let mut v: Vec<u32> = (0..10).collect();
-        remove_at(&mut v, &[0, 3, 4, 9]);
-        assert_eq!(v, [1, 2, 5, 6, 7, 8]);
-        insert_at(&mut v, &[0, 2, 2, 6], &[100, 200, 201, 300]);
-        assert_eq!(v, [100, 1, 2, 200, 201, 5, 6, 7, 8, 300]);
-        remove_at(&mut v, &[]);
-        insert_at(&mut v, &[], &[]);
-        assert_eq!(v.len(), 10);
+    fn patch_equals_rebuild() {
+        let mut seed = 7u64;
+        let mut next = |n: u64| {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 33) % n.max(1)
+        };
+        let mut runs = Vec::new();
+        for round in 0..2000 {
+            let n = next(40) as u32;
+            let old: Vec<u32> = (0..n).map(|i| 10 * i).collect();
+            let gone: Vec<u32> = (0..n).filter(|_| next(4) == 0).collect();
+            let mut at: Vec<u32> = (0..next(6))
+                .map(|_| next(u64::from(n) + 1) as u32)
+                .collect();
+            at.sort_unstable();
+            let new: Vec<u32> = at
+                .iter()
+                .enumerate()
+                .map(|(k, &a)| 10 * a + 1 + k as u32)
+                .collect();
+            let mut want: Vec<u32> = Vec::new();
+            for i in 0..=n {
+                for (k, &a) in at.iter().enumerate() {
+                    if a == i {
+                        want.push(new[k]);
+                    }
+                }
+                if i < n && !gone.contains(&i) {
+                    want.push(old[i as usize]);
+                }
+            }
+            let mut v = old.clone();
+            patch(&mut v, &gone, &at, &new, &mut runs);
+            assert_eq!(v, want, "round {round}: gone {gone:?} at {at:?}");
+        }
     }
 }

@@ -145,6 +145,10 @@ pub(super) fn unpack(p: u64) -> (usize, usize) {
     (((p >> 32) as u32 & !(1 << 31)) as usize, p as u32 as usize)
 }
 
+/// The incremental pass's patch lists keep room for at least one entry per this many
+/// proxies: their lengths follow the escapes and the pairs that change, which swing.
+const PATCH_FLOOR: usize = 32;
+
 /// What a step will do.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Plan {
@@ -288,9 +292,11 @@ impl BroadPhase {
         ahead(&mut self.prev_packed);
         ahead(&mut self.pairs);
         let n = self.store.len();
-        ahead(&mut self.loud);
-        ahead(&mut self.pending);
-        self.patch.keep_headroom(n / 8);
+        if self.cached {
+            ahead(&mut self.loud);
+            ahead(&mut self.pending);
+            self.patch.keep_headroom(n / PATCH_FLOOR);
+        }
         // A full pass finds every pair (or candidate) into `fresh`, sorts it, and rotates it
         // with `packed` and `prev_packed`; the incremental steps fill `fresh` only with the
         // escaped proxies' new candidates and patch `packed` in place. All four stay ready
@@ -375,6 +381,7 @@ impl BroadPhase {
         } else {
             core::mem::swap(&mut self.packed, &mut self.fresh);
             self.cand.clear();
+            self.rev.clear();
             self.cached = false;
             self.costs.over = false;
             self.clear_pending();
@@ -511,7 +518,7 @@ impl BroadPhase {
         );
         self.fresh.dedup();
         self.classify();
-        self.scan_candidates();
+        self.update_candidates();
         let movers = self.movers.len().max(1) as f64;
         self.costs.loud_per_mover = (self.loud.len() as f64 / movers).min(1.0);
     }

@@ -182,6 +182,11 @@ impl Store {
         }
     }
 
+    /// The slots freed since the last step.
+    pub(super) fn freed(&self) -> &[u32] {
+        &self.quarantine
+    }
+
     /// The free slots in reuse order (the last is taken first), and the quarantined ones in
     /// the order they become free.
     #[cfg(feature = "serde")]

@@ -1,6 +1,6 @@
 //! The whole-structure invariant check of a [`BroadPhase`].
 
-use super::slack::slack;
+use super::slack::{distance, slack};
 use super::step::HIT;
 use super::store::{Kind, flag};
 use super::{BodyKind, BroadPhase, Pair, Shape};
@@ -123,6 +123,9 @@ impl BroadPhase {
         want.sort_unstable();
         let have: Vec<u64> = self.cand.iter().map(|&c| c & !HIT).collect();
         assert_eq!(have, want, "candidates are not the overlapping fat pairs");
+        let mut rev: Vec<u64> = have.iter().map(|&c| c.rotate_right(32)).collect();
+        rev.sort_unstable();
+        assert_eq!(rev, self.rev, "the reverse index is not the candidates'");
         let hits: Vec<u64> = self
             .cand
             .iter()
@@ -151,10 +154,8 @@ impl BroadPhase {
         let st = &self.store;
         let pending = |s: usize| st.flags[s] & flag::PENDING != 0;
         for s in (0..st.slots()).filter(|&s| st.kind[s] != Kind::Free) {
-            let (e, a) = (st.exact[s], st.anchor[s]);
-            let moved = (e.min - a.min).abs().max((e.max - a.max).abs());
             assert!(
-                moved.max_element() <= st.drift[s],
+                distance(&st.exact[s], &st.anchor[s]) <= st.drift[s],
                 "slot {s}: drift below its distance from its anchor"
             );
             let d = st.drift[s];

@@ -471,10 +471,10 @@ mod tests {
     use crate::rng::Rng;
     use glam::Vec3;
 
-    /// The tree's arrays that a build writes: nodes, parents, `leaf_of`, keys, boxes.
+    /// The tree's arrays that a build writes: nodes, parents, leaf of each box, keys, boxes.
     type Built = (Vec<Node>, Vec<u32>, Vec<u32>, Vec<ProxyKey>, Vec<SimdBox>);
 
-    /// The arrays of `bvh` a build wrote, for comparing two builds.
+    /// The tree's arrays that a build writes, for comparing two builds.
     fn built(bvh: &Bvh) -> Built {
         (
             bvh.nodes.clone(),
@@ -529,9 +529,7 @@ mod tests {
             for (k, aabbs) in inputs.iter().enumerate() {
                 let mut want = None;
                 for pool in &pools {
-                    let (mut bvh, keys) = pool
-                        .install(|| Bvh::from_aabbs(config, aabbs))
-                        .unwrap();
+                    let (mut bvh, keys) = pool.install(|| Bvh::from_aabbs(config, aabbs)).unwrap();
                     bvh.validate();
                     let first = built(&bvh);
                     // Churn, then a rebuild from the last tree order.

@@ -63,6 +63,8 @@ const NEAR_OWN: usize = 4;
 const NEAR_RANGE: usize = 4;
 /// The list's room: every stretch at its longest, and the slack of the last stretch's writes.
 const NEAR_CAP: usize = STRETCHES * NEAR_RANGE + NEAR_RANGE;
+/// The least room of the list of a crowded run's neighbours, in spheres (4 KB).
+const DENSE_FLOOR: usize = 1024;
 
 /// Buffers of the loose pair pass, reused by every pass; they never shrink.
 #[derive(Clone, Debug, Default)]
@@ -607,7 +609,10 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
             .map(|&[lo, hi]| hi.saturating_sub(lo))
             .sum();
         if self.dense.len() < total as usize {
-            self.dense.resize(total as usize, 0);
+            // To a power of two, at least `DENSE_FLOOR`: a chunk's first crowded runs do not
+            // each reach a new peak.
+            let room = (total as usize).next_power_of_two().max(DENSE_FLOOR);
+            self.dense.resize(room, 0);
         }
         let mut len = 0;
         for &[lo, hi] in stretches {

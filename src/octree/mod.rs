@@ -20,6 +20,10 @@
 //!   [`BroadPhase`](crate::BroadPhase) ([`Config::octree_placement`](crate::Config)), whose
 //!   octree holds spheres of every size.
 //!
+//! The region is fixed ([`Octree::new`]) or follows the spheres ([`Octree::growing`], module
+//! `region`: when a growing tree re-roots, over which cube, and why no pass between two
+//! re-roots is quadratic).
+//!
 //! Queries and rays follow the per-node lists through occupied subtrees, testing nodes by
 //! their cells (strict) or loose bounds (loose) (module `query`); [`Octree::validate`] checks
 //! every invariant (module `validate`).
@@ -189,7 +193,8 @@ impl Passes {
 
 /// A top-down octree over spheres with implicit node indexing; see the [module docs](self).
 ///
-/// Spheres outside [`Octree::bounds`] are kept in the root and paired correctly. Every `Err`
+/// The region is fixed ([`Octree::new`]) or follows the spheres ([`Octree::growing`]); spheres
+/// outside [`Octree::bounds`] are kept in the root and paired correctly. Every `Err`
 /// leaves the tree exactly as it was.
 #[derive(Clone, Debug)]
 pub struct Octree {
@@ -226,7 +231,9 @@ pub struct Octree {
 }
 
 impl Octree {
-    /// An empty strict octree over `bounds` with levels `0..=depth`. `Err(DepthOutOfRange)` if
+    /// An empty strict octree over the fixed region `bounds` with levels `0..=depth` (spheres
+    /// outside it are paired from the root: exact, but slower the more there are; see
+    /// [`Octree::growing`] for a region that follows them). `Err(DepthOutOfRange)` if
     /// `depth > MAX_DEPTH`, `Err(InvalidBounds)` if the bounds are not finite or have no
     /// volume. Cheap at any depth: node storage is paged in as spheres arrive.
     pub fn new(bounds: Aabb, depth: u32) -> Result<Octree, Error> {
