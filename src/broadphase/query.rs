@@ -336,7 +336,7 @@ impl BroadPhase {
         if k == 0 || n == 0 || !point.is_finite() {
             return;
         }
-        let start = nearest_start(point, &self.octree.bounds(), k, n);
+        let start = nearest_start(point, &self.occupied_bounds(), k, n);
         nearest_expanding(k, n, start, out, |radius, out| {
             let reach = radius + geom::distance_pad(point, radius);
             let mut seen = 0;
@@ -355,6 +355,20 @@ impl BroadPhase {
             });
             seen
         });
+    }
+
+    /// Where the proxies lie, for where a nearest search starts: the octree's region if it
+    /// holds spheres (a sphere outside it only costs the search more rounds), joined with the
+    /// bounds of both trees' boxes.
+    fn occupied_bounds(&self) -> Aabb {
+        let spheres = if self.octree.is_empty() {
+            Aabb::EMPTY
+        } else {
+            self.octree.bounds()
+        };
+        spheres
+            .union(&self.dynamic.bounds())
+            .union(&self.statics.bounds())
     }
 
     /// Calls `f(key, slot)` for every proxy whose held box is within `radius` of `p`

@@ -342,11 +342,7 @@ impl Bvh {
         if k == 0 || n == 0 || !point.is_finite() {
             return Vec::new();
         }
-        let bounds = self.pending_boxes().iter().fold(
-            self.nodes.first().map_or(Aabb::EMPTY, |r| r.aabb()),
-            |u, b| u.union(&b.aabb()),
-        );
-        let start = nearest_start(point, &bounds, k, n);
+        let start = nearest_start(point, &self.bounds(), k, n);
         let mut out = Vec::new();
         nearest_expanding(k, n, start, &mut out, |radius, out| {
             let _ = self.within_distance(point, radius, |key, aabb| {
@@ -356,6 +352,16 @@ impl Bvh {
             out.len()
         });
         out
+    }
+
+    /// A box holding every live box (the root's and the pending boxes' union; it may hold
+    /// removed ones too), or [`Aabb::EMPTY`] for a tree with none: where a nearest search
+    /// starts.
+    pub(crate) fn bounds(&self) -> Aabb {
+        self.pending_boxes().iter().fold(
+            self.nodes.first().map_or(Aabb::EMPTY, |r| r.aabb()),
+            |u, b| u.union(&b.aabb()),
+        )
     }
 
     pub(super) fn pending_boxes(&self) -> &[SimdBox] {
