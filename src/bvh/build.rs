@@ -2,7 +2,7 @@
 //! place, with an explicit work stack and buffers reused across builds.
 
 use super::node::Node;
-use super::split::{Bounds, Work, split};
+use super::split::{Bounds, Split, Work, split};
 use super::{Bvh, BvhConfig, NONE};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
@@ -18,6 +18,26 @@ struct Task {
     /// True for a second child: its index must be written into the parent's `first`.
     second: bool,
     bounds: Bounds,
+}
+
+/// Pushes the two halves of task `t`, split by `sp`, as the children of node `index`: the
+/// second child first, so the first is popped next and lands right after its parent.
+fn push_children(tasks: &mut Vec<Task>, t: &Task, index: u32, sp: Split) {
+    let mid = t.start + sp.mid as u32;
+    tasks.push(Task {
+        start: mid,
+        end: t.end,
+        parent: index,
+        second: true,
+        bounds: sp.right,
+    });
+    tasks.push(Task {
+        start: t.start,
+        end: mid,
+        parent: index,
+        second: false,
+        bounds: sp.left,
+    });
 }
 
 /// Buffers every build reuses, so a rebuild allocates only when the tree grew.
@@ -231,21 +251,7 @@ fn build_nodes(
             }
             Some(sp) => {
                 nodes.push(Node::interior(&aabb));
-                let mid = t.start + sp.mid as u32;
-                tasks.push(Task {
-                    start: mid,
-                    end: t.end,
-                    parent: index,
-                    second: true,
-                    bounds: sp.right,
-                });
-                tasks.push(Task {
-                    start: t.start,
-                    end: mid,
-                    parent: index,
-                    second: false,
-                    bounds: sp.left,
-                });
+                push_children(tasks, &t, index, sp);
             }
         }
     }
@@ -363,21 +369,7 @@ fn build_parallel(
             parent: t.parent,
             second: t.second,
         });
-        let mid = t.start + sp.mid as u32;
-        tasks.push(Task {
-            start: mid,
-            end: t.end,
-            parent: index,
-            second: true,
-            bounds: sp.right,
-        });
-        tasks.push(Task {
-            start: t.start,
-            end: mid,
-            parent: index,
-            second: false,
-            bounds: sp.left,
-        });
+        push_children(tasks, &t, index, sp);
     }
 
     // One part of each buffer per subtree, in depth-first (= primitive) order.
