@@ -136,15 +136,7 @@ impl Aabb {
     #[must_use]
     #[inline]
     pub fn ray_entry(&self, origin: Vec3, inv_dir: Vec3, max_t: f32) -> Option<f32> {
-        let t1 = (self.min - origin) * inv_dir;
-        let t2 = (self.max - origin) * inv_dir;
-        let (n1, n2) = (t1.is_nan_mask(), t2.is_nan_mask());
-        let near =
-            Vec3::select(n1, Vec3::NEG_INFINITY, t1).min(Vec3::select(n2, Vec3::NEG_INFINITY, t2));
-        let far = Vec3::select(n1, Vec3::INFINITY, t1).max(Vec3::select(n2, Vec3::INFINITY, t2));
-        let t_near = near.max_element().max(0.0);
-        let t_far = far.min_element().min(max_t);
-        (t_near <= t_far).then_some(t_near)
+        SimdBox::new(self).ray_entry(origin.into(), inv_dir.into(), max_t)
     }
 
     /// The ray's exit parameter from the box, capped at `max_t`, for a ray that
@@ -208,6 +200,35 @@ impl SimdBox {
     #[inline]
     pub(crate) fn aabb(&self) -> Aabb {
         Aabb::new(self.min.into(), self.max.into())
+    }
+
+    /// [`Aabb::ray_entry`] in vector lanes (the same floats lane for lane): the slab test with
+    /// its NaN rule, for the traversals that test many boxes against one ray.
+    #[inline]
+    pub(crate) fn ray_entry(&self, origin: Vec3A, inv_dir: Vec3A, max_t: f32) -> Option<f32> {
+        let t1 = (self.min - origin) * inv_dir;
+        let t2 = (self.max - origin) * inv_dir;
+        let (n1, n2) = (t1.is_nan_mask(), t2.is_nan_mask());
+        let near = Vec3A::select(n1, Vec3A::NEG_INFINITY, t1).min(Vec3A::select(
+            n2,
+            Vec3A::NEG_INFINITY,
+            t2,
+        ));
+        let far =
+            Vec3A::select(n1, Vec3A::INFINITY, t1).max(Vec3A::select(n2, Vec3A::INFINITY, t2));
+        let t_near = near.max_element().max(0.0);
+        let t_far = far.min_element().min(max_t);
+        (t_near <= t_far).then_some(t_near)
+    }
+
+    /// This box grown by `margin` on every side, as [`Aabb::grown`] grows it.
+    #[inline]
+    pub(crate) fn grown(&self, margin: f32) -> SimdBox {
+        let m = Vec3A::splat(margin);
+        SimdBox {
+            min: self.min - m,
+            max: self.max + m,
+        }
     }
 
     /// True if the closed boxes share at least one point; touching boxes overlap. Two

@@ -12,7 +12,7 @@ use crate::geom::{
 use crate::pair::ProxyKey;
 use crate::search::{FirstHit, nearest_expanding, nearest_start};
 use core::ops::ControlFlow;
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 use slotmap::Key;
 
 impl Bvh {
@@ -194,13 +194,12 @@ impl Bvh {
         if !ray_is_valid(origin, dir, max_t) || inflate.is_nan() || inflate < 0.0 {
             return;
         }
-        let inv = inverse_dir(dir);
-        let entry = |b: Aabb, limit: f32| b.grown(inflate).ray_entry(origin, inv, limit);
+        let (o, inv) = (Vec3A::from(origin), Vec3A::from(inverse_dir(dir)));
+        let entry = |b: SimdBox, limit: f32| b.grown(inflate).ray_entry(o, inv, limit);
         let mut best = max_t;
         let mut consider = |key: ProxyKey, b: &SimdBox, best: &mut f32| {
-            let aabb = b.aabb();
-            if !key.is_null() && entry(aabb, *best).is_some() {
-                *best = best.min(visit(key, &aabb));
+            if !key.is_null() && entry(*b, *best).is_some() {
+                *best = best.min(visit(key, &b.aabb()));
             }
         };
         for (b, &key) in self.pending_boxes().iter().zip(self.pending_keys()) {
@@ -209,7 +208,7 @@ impl Bvh {
         let Some(root) = self.nodes.first() else {
             return;
         };
-        let Some(t_root) = entry(root.aabb(), best) else {
+        let Some(t_root) = entry(SimdBox::new(&root.aabb()), best) else {
             return;
         };
         let mut stack = SmallStack::<(u32, f32), INLINE_STACK>::new((0, 0.0));
@@ -226,8 +225,8 @@ impl Bvh {
                 continue;
             }
             let (a, b) = node.children(n);
-            let ta = entry(self.nodes[a as usize].aabb(), best);
-            let tb = entry(self.nodes[b as usize].aabb(), best);
+            let ta = entry(SimdBox::new(&self.nodes[a as usize].aabb()), best);
+            let tb = entry(SimdBox::new(&self.nodes[b as usize].aabb()), best);
             match (ta, tb) {
                 (Some(ta), Some(tb)) if tb < ta => {
                     stack.push((a, ta));
