@@ -201,7 +201,7 @@ impl Octree {
         }
         self.candidates(&Aabb::from_center_radius(center, radius), |id| {
             let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
-            if (c - center).length_squared() <= (r + radius) * (r + radius) {
+            if geom::spheres_touch(c, r, center, radius) {
                 f(self.keys[id as usize])
             } else {
                 ControlFlow::Continue(())
