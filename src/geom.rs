@@ -407,6 +407,16 @@ pub fn point_aabb_distance(p: Vec3, b: &Aabb) -> f32 {
     gap.length() as f32
 }
 
+/// True if the solid spheres `(a, ra)` and `(b, rb)` touch or overlap: `|a − b| <= ra + rb`,
+/// compared in `f64` (squares of `f32` values neither overflow nor lose the small terms there),
+/// so that centres far apart are not taken for touching when the `f32` squares would overflow
+/// to `+∞`. Finite inputs expected.
+#[must_use]
+pub fn spheres_touch(a: Vec3, ra: f32, b: Vec3, rb: f32) -> bool {
+    let r = f64::from(ra) + f64::from(rb);
+    (a.as_dvec3() - b.as_dvec3()).length_squared() <= r * r
+}
+
 /// The distance from `p` to the solid sphere, `max(|p − center| − radius, 0)`, computed in
 /// `f64` and rounded once; `+∞` if an input is not finite or the radius is negative.
 #[must_use]

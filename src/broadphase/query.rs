@@ -292,7 +292,7 @@ impl BroadPhase {
                 Shape::Sphere {
                     center: c,
                     radius: r,
-                } => (c - center).length_squared() <= (r + radius) * (r + radius),
+                } => geom::spheres_touch(c, r, center, radius),
                 Shape::Body { aabb, .. } => geom::point_aabb_distance(center, &aabb) <= radius,
             };
             if inside && self.passes(filter, key, s) {

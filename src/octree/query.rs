@@ -201,7 +201,7 @@ impl Octree {
         }
         self.candidates(&Aabb::from_center_radius(center, radius), |id| {
             let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
-            if (c - center).length_squared() <= (r + radius) * (r + radius) {
+            if geom::spheres_touch(c, r, center, radius) {
                 f(self.keys[id as usize])
             } else {
                 ControlFlow::Continue(())
@@ -332,7 +332,9 @@ impl Octree {
         let cell = extent.min_element() / (1u32 << deepest) as f32;
         let dt = cell / dir.abs().max_element();
         let pieces = (t1 - t0) / dt;
-        if !(dt > 0.0 && pieces.is_finite() && pieces <= MAX_RAY_PIECES) {
+        // A zero direction has no pieces (`dt = ∞` would make the first one NaN, a box over
+        // every cell): it, and a ray of too many pieces, walks the tree instead.
+        if !(dt > 0.0 && dt.is_finite() && pieces.is_finite() && pieces <= MAX_RAY_PIECES) {
             self.ray_ids_walk(origin, dir, best, inflate, |id, b| {
                 if self.objs[id as usize].node == 0 {
                     b
