@@ -24,6 +24,12 @@ const MAX_RAY_PIECES: f32 = 65_536.0;
 /// Relative widening of a ray piece's box against the rounding of its end points.
 const RAY_PIECE_SLACK: f32 = 1e-5;
 
+/// A ray whose pieces, grown by the cast's radius and the slack, would be wider than this many
+/// deepest cells walks the occupied subtrees instead: such pieces overlap each other so much
+/// that each would read most of what its neighbours read (a huge sphere cast would read every
+/// cell once per piece).
+const MAX_PIECE_CELLS: f32 = 8.0;
+
 impl Octree {
     /// Depth-first over occupied nodes from the root: `enter(cell)` decides whether to visit a
     /// node's spheres (`visit(id)`) and children; the root is always entered. The first
@@ -332,9 +338,17 @@ impl Octree {
         let cell = extent.min_element() / (1u32 << deepest) as f32;
         let dt = cell / dir.abs().max_element();
         let pieces = (t1 - t0) / dt;
+        let (a, b) = (origin + dir * t0, origin + dir * t1);
+        let slack = RAY_PIECE_SLACK * a.abs().max(b.abs()).max_element().max(1.0) + inflate;
+        let piece_cells = (slack + slack + cell) / cell;
         // A zero direction has no pieces (`dt = ∞` would make the first one NaN, a box over
-        // every cell): it, and a ray of too many pieces, walks the tree instead.
-        if !(dt > 0.0 && dt.is_finite() && pieces.is_finite() && pieces <= MAX_RAY_PIECES) {
+        // every cell): it, a ray of too many pieces and one of too wide pieces walk the tree.
+        if !(dt > 0.0
+            && dt.is_finite()
+            && pieces.is_finite()
+            && pieces <= MAX_RAY_PIECES
+            && piece_cells <= MAX_PIECE_CELLS)
+        {
             self.ray_ids_walk(origin, dir, best, inflate, |id, b| {
                 if self.objs[id as usize].node == 0 {
                     b
@@ -348,8 +362,6 @@ impl Octree {
         // `inflate` and a slack fixed for the whole ray (so that each axis' piece intervals
         // only move forward: the pieces whose ranges meet a sphere's range are consecutive,
         // and a sphere is visited in the first of them only).
-        let (a, b) = (origin + dir * t0, origin + dir * t1);
-        let slack = RAY_PIECE_SLACK * a.abs().max(b.abs()).max_element().max(1.0) + inflate;
         let q = |t_lo: f32, t_hi: f32| {
             let (p, r) = (origin + dir * t_lo, origin + dir * t_hi);
             Aabb::new(p.min(r) - Vec3::splat(slack), p.max(r) + Vec3::splat(slack))
