@@ -345,11 +345,18 @@ pub(crate) fn sort_bits_by<T: Copy + Default>(
 
 /// Grows `v` to half again its length once it is within a quarter of its capacity: a sort's
 /// list whose length swings from step to step (the pair lists, the parallel walk-order sort's
-/// parts) stops growing after its first few swings.
+/// parts) stops growing after its first few swings. Exactly to that capacity ([`grow_to`]).
 pub(crate) fn ahead<T>(v: &mut Vec<T>) {
-    let want = v.len() + v.len() / 2;
     if v.capacity() < v.len() + v.len() / 4 {
-        v.reserve(want - v.len());
+        grow_to(v, v.len() + v.len() / 2);
+    }
+}
+
+/// Grows `v`'s capacity to `want` if it is below: exactly, where `Vec::reserve` would double
+/// a capacity a little short, so a list kept ahead of its peak holds no more than asked.
+pub(crate) fn grow_to<T>(v: &mut Vec<T>, want: usize) {
+    if v.capacity() < want {
+        v.reserve_exact(want - v.len());
     }
 }
 
