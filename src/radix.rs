@@ -352,6 +352,15 @@ pub(crate) fn ahead<T>(v: &mut Vec<T>) {
     }
 }
 
+/// [`grow_to`] as a hint for a size the user gave: room the allocator cannot give (or a size
+/// past `isize::MAX` bytes) is not reserved, without an error or a panic.
+pub(crate) fn try_grow_to<T>(v: &mut Vec<T>, want: usize) {
+    if v.capacity() < want {
+        // A hint: on failure the list keeps its capacity and grows as it fills.
+        let _ = v.try_reserve_exact(want - v.len());
+    }
+}
+
 /// Grows `v`'s capacity to `want` if it is below: exactly, where `Vec::reserve` would double
 /// a capacity a little short, so a list kept ahead of its peak holds no more than asked.
 pub(crate) fn grow_to<T>(v: &mut Vec<T>, want: usize) {

@@ -390,6 +390,23 @@ impl BroadPhase {
         0
     }
 
+    /// Reserves room for `spheres` more spheres and `bodies` more bodies, exactly: a world
+    /// that knows its size ahead keeps no growth slack in its per-proxy arrays (which
+    /// otherwise grow by doubling). The octree's arrays are indexed by slot, so with spheres
+    /// to come they are reserved for every new slot.
+    /// A hint: room the allocator cannot give is not reserved (no error, no panic).
+    pub fn reserve(&mut self, spheres: usize, bodies: usize) {
+        let additional = spheres.saturating_add(bodies).min(MAX_PROXIES);
+        self.store.reserve(additional);
+        // Every insert is listed as moved and escaped until the next step.
+        for list in [&mut self.movers, &mut self.escaped] {
+            crate::radix::try_grow_to(list, list.len() + additional);
+        }
+        if spheres > 0 {
+            self.octree.reserve_ids(self.store.slots() + additional);
+        }
+    }
+
     /// Adds a sphere; it pairs from the next [`BroadPhase::step`] on. `Err` on a non-finite
     /// centre or radius or a negative radius. Any finite position is accepted: the octree's region follows the spheres.
     pub fn insert_sphere(&mut self, center: Vec3, radius: f32) -> Result<ProxyKey, Error> {

@@ -410,6 +410,14 @@ impl Octree {
         Ok(())
     }
 
+    /// Reserves the per-id arrays, exactly, for ids below `ids` (the broadphase's slots); a
+    /// hint, as [`crate::radix::try_grow_to`].
+    pub(crate) fn reserve_ids(&mut self, ids: usize) {
+        crate::radix::try_grow_to(&mut self.objs, ids);
+        crate::radix::try_grow_to(&mut self.links, ids);
+        crate::radix::try_grow_to(&mut self.keys, ids);
+    }
+
     /// Heap bytes held (capacities, not lengths), pair-pass scratch included.
     #[must_use]
     pub fn heap_bytes(&self) -> usize {
