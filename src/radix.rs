@@ -352,6 +352,17 @@ pub(crate) fn ahead<T>(v: &mut Vec<T>) {
     }
 }
 
+/// Grows a full per-slot array by an eighth (at least `MIN_GROWTH` entries) instead of
+/// `Vec`'s doubling: a world a little past a power of two, or one that reserved exactly and then
+/// takes a few more slots (a churn's quarantined ones), keeps little spare. Still geometric,
+/// so pushes stay amortised constant (and large reallocations are remaps, not copies).
+pub(crate) fn grow_slots<T>(v: &mut Vec<T>, len: usize) {
+    const MIN_GROWTH: usize = 64;
+    if v.capacity() < len {
+        grow_to(v, len + (len / 8).max(MIN_GROWTH));
+    }
+}
+
 /// [`grow_to`] as a hint for a size the user gave: room the allocator cannot give (or a size
 /// past `isize::MAX` bytes) is not reserved, without an error or a panic.
 pub(crate) fn try_grow_to<T>(v: &mut Vec<T>, want: usize) {

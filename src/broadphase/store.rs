@@ -10,7 +10,7 @@
 use super::{BodyKind, CollisionGroups, Shape};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
-use crate::radix::try_grow_to;
+use crate::radix::{grow_slots, try_grow_to};
 use slotmap::{Key, KeyData};
 
 /// What a slot holds.
@@ -136,6 +136,9 @@ impl Store {
                 let slot = u32::try_from(self.version.len())
                     .ok()
                     .filter(|&s| s < MAX_SLOTS)?;
+                if self.version.len() == self.version.capacity() {
+                    self.grow_slots();
+                }
                 self.version.push(0);
                 self.kind.push(Kind::Free);
                 self.flags.push(0);
@@ -161,6 +164,19 @@ impl Store {
         self.stamp[s] = step;
         self.live += 1;
         Some(slot)
+    }
+
+    /// Grows every per-slot array by an eighth ([`grow_slots`]) for the next slot.
+    fn grow_slots(&mut self) {
+        let len = self.version.len() + 1;
+        grow_slots(&mut self.version, len);
+        grow_slots(&mut self.kind, len);
+        grow_slots(&mut self.flags, len);
+        grow_slots(&mut self.shape, len);
+        grow_slots(&mut self.exact, len);
+        grow_slots(&mut self.groups, len);
+        grow_slots(&mut self.speed, len);
+        grow_slots(&mut self.stamp, len);
     }
 
     /// Reserves room, exactly, for `additional` more live slots than the free ones hold (at

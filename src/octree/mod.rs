@@ -652,6 +652,9 @@ impl Octree {
         let id = crate::pair::slot(key);
         let i = id as usize;
         if self.objs.len() <= i {
+            crate::radix::grow_slots(&mut self.objs, i + 1);
+            crate::radix::grow_slots(&mut self.links, i + 1);
+            crate::radix::grow_slots(&mut self.keys, i + 1);
             self.objs.resize(i + 1, Obj::HOLE);
             self.links.resize(i + 1, Link::NONE);
             self.keys.resize(i + 1, ProxyKey::default());
