@@ -345,11 +345,38 @@ pub(crate) fn sort_bits_by<T: Copy + Default>(
 
 /// Grows `v` to half again its length once it is within a quarter of its capacity: a sort's
 /// list whose length swings from step to step (the pair lists, the parallel walk-order sort's
-/// parts) stops growing after its first few swings.
+/// parts) stops growing after its first few swings. Exactly to that capacity ([`grow_to`]).
 pub(crate) fn ahead<T>(v: &mut Vec<T>) {
-    let want = v.len() + v.len() / 2;
     if v.capacity() < v.len() + v.len() / 4 {
-        v.reserve(want - v.len());
+        grow_to(v, v.len() + v.len() / 2);
+    }
+}
+
+/// Grows a full per-slot array by an eighth (at least `MIN_GROWTH` entries) instead of
+/// `Vec`'s doubling: a world a little past a power of two, or one that reserved exactly and then
+/// takes a few more slots (a churn's quarantined ones), keeps little spare. Still geometric,
+/// so pushes stay amortised constant (and large reallocations are remaps, not copies).
+pub(crate) fn grow_slots<T>(v: &mut Vec<T>, len: usize) {
+    const MIN_GROWTH: usize = 64;
+    if v.capacity() < len {
+        grow_to(v, len + (len / 8).max(MIN_GROWTH));
+    }
+}
+
+/// [`grow_to`] as a hint for a size the user gave: room the allocator cannot give (or a size
+/// past `isize::MAX` bytes) is not reserved, without an error or a panic.
+pub(crate) fn try_grow_to<T>(v: &mut Vec<T>, want: usize) {
+    if v.capacity() < want {
+        // A hint: on failure the list keeps its capacity and grows as it fills.
+        let _ = v.try_reserve_exact(want - v.len());
+    }
+}
+
+/// Grows `v`'s capacity to `want` if it is below: exactly, where `Vec::reserve` would double
+/// a capacity a little short, so a list kept ahead of its peak holds no more than asked.
+pub(crate) fn grow_to<T>(v: &mut Vec<T>, want: usize) {
+    if v.capacity() < want {
+        v.reserve_exact(want - v.len());
     }
 }
 

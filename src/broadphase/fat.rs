@@ -106,18 +106,10 @@ impl BroadPhase {
         }
     }
 
-    /// The box pairs are computed on: the shape's box grown by the margin, with faces that
-    /// overflow kept at `±f32::MAX` (which overlaps exactly what `±∞` would).
+    /// The box pairs are computed on: [`grown`] by `Config::margin`.
     #[inline]
     pub(super) fn exact_box(&self, shape: &Shape) -> SimdBox {
-        let m = self.config.margin;
-        match *shape {
-            Shape::Sphere { center, radius } => {
-                SimdBox::from_center_radius(center, (radius + m).min(f32::MAX))
-            }
-            Shape::Body { aabb, .. } if m == 0.0 => SimdBox::new(&aabb),
-            Shape::Body { aabb, .. } => SimdBox::new(&finite_grown(&aabb, m)),
-        }
+        grown(*shape, self.config.margin).aabb
     }
 
     /// What `slot`'s structure should hold: its exact box, or with `fat` one grown by a
@@ -136,24 +128,18 @@ impl BroadPhase {
             let speed = if resting { 0.0 } else { self.store.speed[s] };
             margin(speed, exact.extent().max_element()) * jitter(slot)
         };
-        match self.store.shape[s] {
-            Shape::Sphere { center, radius } => {
-                // Huge finite radii stay finite: the octree places the sphere in its root.
-                let r = (radius + self.config.margin + margin).min(f32::MAX);
-                Held {
-                    aabb: SimdBox::from_center_radius(center, r),
-                    radius: r,
-                }
-            }
-            Shape::Body { .. } if margin == 0.0 => Held {
-                aabb: exact,
-                radius: 0.0,
+        // The exact shape, [`grown`] by the fat margin.
+        let exact_shape = match self.store.shape[s] {
+            Shape::Sphere { center, radius } => Shape::Sphere {
+                center,
+                radius: grown_radius(radius, self.config.margin),
             },
-            Shape::Body { .. } => Held {
-                aabb: SimdBox::new(&finite_grown(&exact.aabb(), margin)),
-                radius: 0.0,
+            Shape::Body { kind, .. } => Shape::Body {
+                aabb: exact.aabb(),
+                kind,
             },
-        }
+        };
+        grown(exact_shape, margin)
     }
 }
 
@@ -165,11 +151,47 @@ pub(super) struct Held {
     pub(super) radius: f32,
 }
 
-/// `aabb` grown by `margin`, with coordinates that overflowed clamped to `±f32::MAX`.
-pub(super) fn finite_grown(aabb: &Aabb, margin: f32) -> Aabb {
-    let g = aabb.grown(margin);
-    Aabb {
-        min: g.min.max(Vec3::splat(-f32::MAX)),
-        max: g.max.min(Vec3::splat(f32::MAX)),
+/// The grown-box rule: `shape` grown by `margin`, as a structure holds it. A sphere keeps its
+/// centre and grows its radius ([`grown_radius`]); a body's box grows on every side, and a face
+/// that overflows stays at `±f32::MAX` (which overlaps exactly what `±∞` would). The box pairs
+/// are computed on is the shape grown by `Config::margin`, a fat box that one grown again by
+/// the fat margin.
+#[inline]
+pub(super) fn grown(shape: Shape, margin: f32) -> Held {
+    match shape {
+        Shape::Sphere { center, radius } => grown_sphere(center, radius, margin),
+        Shape::Body { aabb, .. } if margin == 0.0 => Held {
+            aabb: SimdBox::new(&aabb),
+            radius: 0.0,
+        },
+        Shape::Body { aabb, .. } => {
+            let g = aabb.grown(margin);
+            let finite = Aabb {
+                min: g.min.max(Vec3::splat(-f32::MAX)),
+                max: g.max.min(Vec3::splat(f32::MAX)),
+            };
+            Held {
+                aabb: SimdBox::new(&finite),
+                radius: 0.0,
+            }
+        }
     }
+}
+
+/// [`grown`] for a sphere: the update path passes centre and radius as values, since a `Shape`
+/// built for the call costs instructions on that path.
+#[inline]
+pub(super) fn grown_sphere(center: Vec3, radius: f32, margin: f32) -> Held {
+    let radius = grown_radius(radius, margin);
+    Held {
+        aabb: SimdBox::from_center_radius(center, radius),
+        radius,
+    }
+}
+
+/// A sphere's radius grown by `margin`. A sum that overflows stays at `f32::MAX`: huge finite
+/// radii stay finite, and the octree places such a sphere in its root.
+#[inline]
+fn grown_radius(radius: f32, margin: f32) -> f32 {
+    (radius + margin).min(f32::MAX)
 }

@@ -29,11 +29,10 @@ pub use config::{Config, Passes};
 pub use query::{QueryFilter, QueryPredicate};
 
 use crate::bvh::Bvh;
-use crate::geom::{self, SimdBox, check_aabb, check_sphere};
+use crate::geom::{self, check_aabb, check_sphere};
 use crate::octree::Octree;
 use crate::pair::{Pair, ProxyKey};
 use crate::{Aabb, BatchError, Error, Vec3};
-use fat::finite_grown;
 use store::{Kind, Store, flag};
 
 /// Whether a body moves. Static bodies never pair with each other.
@@ -87,16 +86,14 @@ impl Shape {
         )
     }
 
-    /// The box the broadphase pairs: a sphere's `center ± (radius + margin)`, a body's box
-    /// grown by `margin` on every side (faces that overflow stay at `±f32::MAX`, which
-    /// overlaps exactly what `±∞` would). (For a sphere this is not always bit-equal to
-    /// `aabb().grown(margin)`, which rounds twice.)
+    /// The box the broadphase pairs: a sphere's `center ± (radius + margin)` (a radius sum
+    /// that overflows stays at `f32::MAX`), a body's box grown by `margin` on every side
+    /// (faces that overflow stay at `±f32::MAX`, which overlaps exactly what `±∞` would).
+    /// (For a sphere this is not always bit-equal to `aabb().grown(margin)`, which rounds
+    /// twice.)
     #[must_use]
     pub fn grown_aabb(&self, margin: f32) -> Aabb {
-        match *self {
-            Shape::Sphere { center, radius } => Aabb::from_center_radius(center, radius + margin),
-            Shape::Body { aabb, .. } => finite_grown(&aabb, margin),
-        }
+        fat::grown(*self, margin).aabb.aabb()
     }
 }
 
@@ -393,6 +390,23 @@ impl BroadPhase {
         0
     }
 
+    /// Reserves room for `spheres` more spheres and `bodies` more bodies, exactly: a world
+    /// that knows its size ahead keeps no growth slack in its per-proxy arrays (which
+    /// otherwise grow by doubling). The octree's arrays are indexed by slot, so with spheres
+    /// to come they are reserved for every new slot.
+    /// A hint: room the allocator cannot give is not reserved (no error, no panic).
+    pub fn reserve(&mut self, spheres: usize, bodies: usize) {
+        let additional = spheres.saturating_add(bodies).min(MAX_PROXIES);
+        self.store.reserve(additional);
+        // Every insert is listed as moved and escaped until the next step.
+        for list in [&mut self.movers, &mut self.escaped] {
+            crate::radix::try_grow_to(list, list.len() + additional);
+        }
+        if spheres > 0 {
+            self.octree.reserve_ids(self.store.slots() + additional);
+        }
+    }
+
     /// Adds a sphere; it pairs from the next [`BroadPhase::step`] on. `Err` on a non-finite
     /// centre or radius or a negative radius. Any finite position is accepted: the octree's region follows the spheres.
     pub fn insert_sphere(&mut self, center: Vec3, radius: f32) -> Result<ProxyKey, Error> {
@@ -415,12 +429,21 @@ impl BroadPhase {
             .store
             .alloc(shape, exact, self.now)
             .ok_or(Error::Full)?;
+        self.place(slot);
+        Ok(self.store.key(slot))
+    }
+
+    /// Puts the new live proxy in `slot` (its shape and exact box stored) into its structure
+    /// under its key, holding its exact box, or a fat one in the incremental regime, and marks
+    /// it for the next step to find its pairs. [`BroadPhase::insert`] and a snapshot's restore
+    /// both place proxies here.
+    fn place(&mut self, slot: u32) {
         let key = self.store.key(slot);
         let held = self.held_shape(slot, self.cached);
         if self.cached {
             self.store.set_held(slot as usize, held.aabb);
         }
-        match shape {
+        match self.store.shape[slot as usize] {
             Shape::Sphere { center, .. } => self.octree.insert_checked(key, center, held.radius),
             Shape::Body { kind, .. } => {
                 let tree = self.tree_mut(kind);
@@ -428,7 +451,6 @@ impl BroadPhase {
             }
         }
         self.mark(slot, flag::MOVED | flag::ESCAPED);
-        Ok(key)
     }
 
     /// The tree of bodies of `kind`, marked changed.
@@ -534,8 +556,8 @@ impl BroadPhase {
     #[inline]
     fn set_sphere(&mut self, key: ProxyKey, slot: u32, center: Vec3, radius: f32) {
         let s = slot as usize;
-        let r = (radius + self.config.margin).min(f32::MAX);
-        let exact = SimdBox::from_center_radius(center, r);
+        let grown = fat::grown_sphere(center, radius, self.config.margin);
+        let (exact, r) = (grown.aabb, grown.radius);
         self.note_motion(s, &exact);
         // Field by field: a whole new `Shape` is built on the stack and copied with wide loads
         // that stall on the store forwarding of its narrow stores.
@@ -561,12 +583,7 @@ impl BroadPhase {
     #[inline]
     fn set_body(&mut self, key: ProxyKey, slot: u32, aabb: &Aabb, kind: BodyKind) {
         let s = slot as usize;
-        let m = self.config.margin;
-        let exact = if m == 0.0 {
-            SimdBox::new(aabb)
-        } else {
-            SimdBox::new(&finite_grown(aabb, m))
-        };
+        let exact = fat::grown(Shape::Body { aabb: *aabb, kind }, self.config.margin).aabb;
         self.note_motion(s, &exact);
         match &mut self.store.shape[s] {
             Shape::Body { aabb: a, .. } => *a = *aabb,

@@ -338,21 +338,12 @@ impl Snapshot {
         bp.removals = self.quarantine.len();
         bp.store.set_free_lists(self.free, self.quarantine, live);
         // Every live proxy enters its structure as `BroadPhase::insert` puts a new one there
-        // outside the incremental regime: under its key, with its exact box.
+        // (a new broadphase is outside the incremental regime: under its key, with its exact
+        // box).
         for (s, role) in roles.iter().enumerate() {
-            if *role != Role::Live {
-                continue;
+            if *role == Role::Live {
+                bp.place(s as u32);
             }
-            let slot = s as u32;
-            let key = bp.store.key(slot);
-            let held = bp.held_shape(slot, false);
-            match bp.store.shape[s] {
-                Shape::Sphere { center, .. } => bp.octree.insert_checked(key, center, held.radius),
-                Shape::Body { kind, .. } => {
-                    bp.tree_mut(kind).insert_checked(key, &held.aabb.aabb())
-                }
-            }
-            bp.mark(slot, flag::MOVED | flag::ESCAPED);
         }
         bp.packed = self
             .pairs

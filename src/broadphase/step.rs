@@ -37,7 +37,7 @@ use super::fat::LOOKAHEAD_STEPS;
 use super::*;
 #[cfg(feature = "parallel")]
 use crate::radix;
-use crate::radix::{PairBits, ahead, sort_u64};
+use crate::radix::{PairBits, ahead, grow_to, sort_u64};
 
 /// Set on a candidate whose exact boxes overlapped at the last step.
 pub(super) const HIT: u64 = 1 << 63;
@@ -300,28 +300,24 @@ impl BroadPhase {
         // A full pass finds every pair (or candidate) into `fresh`, sorts it, and rotates it
         // with `packed` and `prev_packed`; the incremental steps fill `fresh` only with the
         // escaped proxies' new candidates and patch `packed` in place. All four stay ready
-        // for the largest list a full pass can make.
+        // for the largest list a full pass can make, grown as `ahead` grows a list: to half
+        // again that length once within a quarter of it.
         let most = self.cand.len().max(self.packed.len());
-        let want = most + most / 4;
         for v in [
             &mut self.fresh,
             &mut self.sort_buf,
             &mut self.packed,
             &mut self.prev_packed,
         ] {
-            if v.capacity() < want {
-                v.reserve(want - v.len());
+            if v.capacity() < most + most / 4 {
+                grow_to(v, most + most / 2);
             }
         }
         for v in [&mut self.added_packed, &mut self.removed_packed] {
-            if v.capacity() < n / 8 {
-                v.reserve(n / 8);
-            }
+            grow_to(v, n / 8);
         }
         for v in [&mut self.added, &mut self.removed] {
-            if v.capacity() < n / 8 {
-                v.reserve(n / 8);
-            }
+            grow_to(v, n / 8);
         }
     }
 

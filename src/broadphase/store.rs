@@ -10,6 +10,7 @@
 use super::{BodyKind, CollisionGroups, Shape};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
+use crate::radix::{grow_slots, try_grow_to};
 use slotmap::{Key, KeyData};
 
 /// What a slot holds.
@@ -135,6 +136,9 @@ impl Store {
                 let slot = u32::try_from(self.version.len())
                     .ok()
                     .filter(|&s| s < MAX_SLOTS)?;
+                if self.version.len() == self.version.capacity() {
+                    self.grow_slots();
+                }
                 self.version.push(0);
                 self.kind.push(Kind::Free);
                 self.flags.push(0);
@@ -160,6 +164,41 @@ impl Store {
         self.stamp[s] = step;
         self.live += 1;
         Some(slot)
+    }
+
+    /// Grows every per-slot array by an eighth ([`grow_slots`]) for the next slot.
+    fn grow_slots(&mut self) {
+        let len = self.version.len() + 1;
+        grow_slots(&mut self.version, len);
+        grow_slots(&mut self.kind, len);
+        grow_slots(&mut self.flags, len);
+        grow_slots(&mut self.shape, len);
+        grow_slots(&mut self.exact, len);
+        grow_slots(&mut self.groups, len);
+        grow_slots(&mut self.speed, len);
+        grow_slots(&mut self.stamp, len);
+    }
+
+    /// Reserves room, exactly, for `additional` more live slots than the free ones hold (at
+    /// most [`MAX_SLOTS`] in all); the incremental regime's arrays only if they are allocated.
+    /// A hint: room the allocator cannot give is not reserved.
+    pub(super) fn reserve(&mut self, additional: usize) {
+        let new = additional.saturating_sub(self.free.len());
+        let want = (self.version.len() + new).min(MAX_SLOTS as usize);
+        try_grow_to(&mut self.version, want);
+        try_grow_to(&mut self.kind, want);
+        try_grow_to(&mut self.flags, want);
+        try_grow_to(&mut self.shape, want);
+        try_grow_to(&mut self.exact, want);
+        try_grow_to(&mut self.groups, want);
+        try_grow_to(&mut self.speed, want);
+        try_grow_to(&mut self.stamp, want);
+        if !self.held.is_empty() {
+            try_grow_to(&mut self.held, want);
+            try_grow_to(&mut self.anchor, want);
+            try_grow_to(&mut self.slack, want);
+            try_grow_to(&mut self.drift, want);
+        }
     }
 
     /// Frees a live slot; it stays quarantined until [`Store::release_quarantine`].
@@ -238,5 +277,53 @@ impl Store {
             + cap(self.speed.capacity(), 4)
             + cap(self.stamp.capacity(), 4)
             + cap(self.free.capacity() + self.quarantine.capacity(), 4)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Vec3;
+
+    /// `reserve` sizes every per-slot array to exactly the slots asked for, counting free
+    /// slots as room, and the allocations that fill them do not grow them.
+    #[test]
+    fn reserve_is_exact_and_counts_free_slots() {
+        let sphere = Shape::Sphere {
+            center: Vec3::ZERO,
+            radius: 1.0,
+        };
+        let exact = SimdBox::from_center_radius(Vec3::ZERO, 1.0);
+        let mut st = Store::default();
+        st.reserve(100);
+        let caps = |st: &Store| {
+            [
+                st.version.capacity(),
+                st.kind.capacity(),
+                st.flags.capacity(),
+                st.shape.capacity(),
+                st.exact.capacity(),
+                st.groups.capacity(),
+                st.speed.capacity(),
+                st.stamp.capacity(),
+            ]
+        };
+        assert_eq!(caps(&st), [100; 8]);
+        let slots: Vec<u32> = (0..100)
+            .map(|_| st.alloc(sphere, exact, 0).unwrap())
+            .collect();
+        assert_eq!(caps(&st), [100; 8]);
+        for &s in &slots[..10] {
+            st.free(s);
+        }
+        st.release_quarantine();
+        // Ten free slots cover ten of the fifteen asked for.
+        st.reserve(15);
+        assert_eq!(caps(&st), [105; 8]);
+        for _ in 0..15 {
+            st.alloc(sphere, exact, 1).unwrap();
+        }
+        assert_eq!(caps(&st), [105; 8]);
+        assert_eq!(st.len(), 105);
     }
 }

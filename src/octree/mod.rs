@@ -410,6 +410,14 @@ impl Octree {
         Ok(())
     }
 
+    /// Reserves the per-id arrays, exactly, for ids below `ids` (the broadphase's slots); a
+    /// hint, as [`crate::radix::try_grow_to`].
+    pub(crate) fn reserve_ids(&mut self, ids: usize) {
+        crate::radix::try_grow_to(&mut self.objs, ids);
+        crate::radix::try_grow_to(&mut self.links, ids);
+        crate::radix::try_grow_to(&mut self.keys, ids);
+    }
+
     /// Heap bytes held (capacities, not lengths), pair-pass scratch included.
     #[must_use]
     pub fn heap_bytes(&self) -> usize {
@@ -644,6 +652,9 @@ impl Octree {
         let id = crate::pair::slot(key);
         let i = id as usize;
         if self.objs.len() <= i {
+            crate::radix::grow_slots(&mut self.objs, i + 1);
+            crate::radix::grow_slots(&mut self.links, i + 1);
+            crate::radix::grow_slots(&mut self.keys, i + 1);
             self.objs.resize(i + 1, Obj::HOLE);
             self.links.resize(i + 1, Link::NONE);
             self.keys.resize(i + 1, ProxyKey::default());
