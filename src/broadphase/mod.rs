@@ -138,7 +138,7 @@ pub enum Pass {
     /// The full pass over exact boxes: the structures' pair passes.
     Full,
     /// The full pass over fat boxes, which (re)starts the candidate list.
-    Rebuild,
+    FullFat,
     /// Only the candidates of what moved were re-tested, and the proxies that left their fat
     /// box queried the structures.
     Incremental,

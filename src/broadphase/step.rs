@@ -154,7 +154,7 @@ const PATCH_FLOOR: usize = 32;
 pub(super) enum Plan {
     Unchanged,
     Full,
-    Rebuild,
+    FullFat,
     Incremental,
 }
 
@@ -195,7 +195,7 @@ impl BroadPhase {
         match self.config.passes {
             Passes::Full => return Plan::Full,
             Passes::Incremental if self.cached => return Plan::Incremental,
-            Passes::Incremental => return Plan::Rebuild,
+            Passes::Incremental => return Plan::FullFat,
             Passes::Adaptive => {}
         }
         let n = self.store.len() as f64;
@@ -217,7 +217,7 @@ impl BroadPhase {
             let escapes = self.fast_movers as f64 / (1.5 * f64::from(LOOKAHEAD_STEPS));
             let inc = self.incremental_cost(movers as f64, escapes);
             if inc < full * ENTER_FRACTION {
-                Plan::Rebuild
+                Plan::FullFat
             } else {
                 Plan::Full
             }
@@ -245,7 +245,7 @@ impl BroadPhase {
             pass: match plan {
                 Plan::Unchanged => Pass::Unchanged,
                 Plan::Full => Pass::Full,
-                Plan::Rebuild => Pass::Rebuild,
+                Plan::FullFat => Pass::FullFat,
                 Plan::Incremental => Pass::Incremental,
             },
             updated,
@@ -258,7 +258,7 @@ impl BroadPhase {
                 self.removed.clear();
             }
             Plan::Full => self.full(false),
-            Plan::Rebuild => self.full(true),
+            Plan::FullFat => self.full(true),
             Plan::Incremental => self.incremental(),
         }
         self.stats.pairs = self.pairs.len();

@@ -1,8 +1,8 @@
 //! All overlapping pairs of a [`Placement::Loose`](super::Placement::Loose) tree: same-level
 //! neighbours, then cross-level pairs through the neighbours' occupied subtrees.
 //!
-//! Why neighbours suffice. On the integer grid (see `Grid::loose_node`) a sphere's range
-//! lies inside its node's loose range `[k·S − S/2, k·S + S − 1 + S/2]` (cell `k`, `S` grid
+//! Why neighbours suffice. On the integer lattice (see `Lattice::loose_node`) a sphere's range
+//! lies inside its node's loose range `[k·S − S/2, k·S + S − 1 + S/2]` (cell `k`, `S` lattice
 //! cells per level-`L` cell), and a node's loose range lies inside its parent's. Overlapping
 //! boxes have overlapping ranges, so if `a` at level `L` overlaps `b` at level `L' >= L`, the
 //! loose range of `a`'s cell overlaps that of `b`'s level-`L` ancestor cell `k'`. Two level-`L`
@@ -35,7 +35,7 @@
 //!
 //! Overflow spheres sit in the root, whose 27-cell neighbourhood is the root itself: each is
 //! tested against the whole tree pruned by its own clamped range, which overlaps the range of
-//! everything its box overlaps (outside the region, a face of the grid: few nodes), and the
+//! everything its box overlaps (outside the region, a face of the lattice: few nodes), and the
 //! root's spheres are paired among themselves by the strict pass's subdivision of a long own
 //! list over the root cell (`strict::Parts`), so overflow spheres bunched on one face of the
 //! region do not meet each other in one sweep.
@@ -143,7 +143,7 @@ impl Octree {
         };
         let deeper = self.occupied_below();
         // Only a pass with cross-level pairs needs the runs by node slot.
-        let d = self.grid.depth as usize;
+        let d = self.lattice.depth as usize;
         let cross = (0..=d).any(|l| deeper[l] && self.per_level[l] > 0);
         s.index_runs(self, node_key, cross);
         let Scratch {
@@ -209,7 +209,7 @@ impl Octree {
         self.sort_into_walk_order_par(ws, k);
         let (hot, keys) = (&ws.hot[..], &ws.keys[..]);
         let deeper = self.occupied_below();
-        let d = self.grid.depth as usize;
+        let d = self.lattice.depth as usize;
         let cross = (0..=d).any(|l| deeper[l] && self.per_level[l] > 0);
         s.index_runs_par(self, &ws.node_key, cross, k);
         if s.chunks.len() < k {
@@ -280,7 +280,7 @@ impl Octree {
     fn occupied_below(&self) -> [bool; MAX_DEPTH as usize + 1] {
         let mut deeper = [false; MAX_DEPTH as usize + 1];
         let mut below = 0;
-        for l in (0..=self.grid.depth as usize).rev() {
+        for l in (0..=self.lattice.depth as usize).rev() {
             deeper[l] = below > 0;
             below += self.per_level[l];
         }
@@ -309,7 +309,7 @@ impl Scratch {
         self.run_slot.clear();
         for (key, i, j) in runs(node_key) {
             if cross {
-                let (level, xyz) = LooseKey(key).cell(tree.grid.depth);
+                let (level, xyz) = LooseKey(key).cell(tree.lattice.depth);
                 let slot = tree
                     .nodes
                     .slot(Cell::at(level, xyz).node())
@@ -439,7 +439,7 @@ impl Runs<'_> {
             run_key[r] = key;
             run_start[r] = i as u32;
             if self.cross {
-                let (level, xyz) = LooseKey(key).cell(self.tree.grid.depth);
+                let (level, xyz) = LooseKey(key).cell(self.tree.lattice.depth);
                 run_slot[r] = self
                     .tree
                     .nodes
@@ -489,7 +489,7 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
     #[cfg(feature = "parallel")]
     fn start_at(&mut self, r: usize) {
         let key = self.run_key[r];
-        let (level, _) = LooseKey(key).cell(self.tree.grid.depth);
+        let (level, _) = LooseKey(key).cell(self.tree.lattice.depth);
         for (k, [dy, dz]) in ROWS.into_iter().enumerate() {
             let off = LooseKey::offset(level, [0, dy, dz]);
             let low = key.wrapping_add(off).saturating_sub(1).max(key);
@@ -506,9 +506,9 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
         let (hot, run_start) = (self.hot, self.run_start);
         let key = LooseKey(self.run_key[r]);
         let own = &hot[run_start[r] as usize..run_start[r + 1] as usize];
-        let (level, xyz) = key.cell(self.tree.grid.depth);
+        let (level, xyz) = key.cell(self.tree.lattice.depth);
         if level == 0 && own.len() > SHORT_SELF {
-            let bits = self.tree.grid.bits;
+            let bits = self.tree.lattice.bits;
             self.parts
                 .own_pairs(&mut self.t, own, [0; 3], bits, self.sweeps);
         } else if own.len() > 1 {
@@ -645,7 +645,7 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
                 umax[a] = umax[a].max(h.qmax[a]);
             }
         }
-        let reaches = |c: &Cell| tree.grid.reaches(c, umin, umax);
+        let reaches = |c: &Cell| tree.lattice.reaches(c, umin, umax);
         let side = 1i32 << level;
         let mut visited = 0;
         for dz in -1..=1 {

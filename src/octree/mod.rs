@@ -73,7 +73,7 @@ use crate::pair::{Pair, ProxyKey};
 use cell::level_of;
 use glam::Vec3;
 use nodes::Nodes;
-use placement::Grid;
+use placement::Lattice;
 use region::Regrow;
 use slotmap::{Key as _, SlotMap};
 
@@ -109,13 +109,13 @@ pub enum Placement {
 struct Obj {
     /// `center ± radius`, the box every pair test uses. 24 bytes.
     aabb: Aabb,
-    /// The box's corners as integer cell coordinates on the tree's integer grid (the deepest
-    /// level's cells, or their halves in loose mode), clamped to the grid. 12 bytes.
+    /// The box's corners as integer cell coordinates on the tree's integer lattice (the deepest
+    /// level's cells, or their halves in loose mode), clamped to the lattice. 12 bytes.
     qmin: [u16; 3],
     qmax: [u16; 3],
     /// The node the sphere is linked in. 4 bytes.
     node: u32,
-    /// The node's walk key (`Grid::walk_key`), set on every link. 8 bytes.
+    /// The node's walk key (`Lattice::walk_key`), set on every link. 8 bytes.
     walk_key: u64,
     /// The sphere exactly as given. 16 bytes.
     center: Vec3,
@@ -179,13 +179,13 @@ struct PassCost {
 
 /// Buffers of the pair passes, reused by every pass; they never shrink.
 #[derive(Clone, Debug, Default)]
-struct Passes {
+struct PassScratch {
     walk: walk::Scratch,
     strict: strict::Scratch,
     loose: loose::Scratch,
 }
 
-impl Passes {
+impl PassScratch {
     fn heap_bytes(&self) -> usize {
         self.walk.heap_bytes() + self.strict.heap_bytes() + self.loose.heap_bytes()
     }
@@ -198,8 +198,8 @@ impl Passes {
 /// leaves the tree exactly as it was.
 #[derive(Clone, Debug)]
 pub struct Octree {
-    /// Bounds, depth, placement and the integer grid.
-    grid: Grid,
+    /// Bounds, depth, placement and the integer lattice.
+    lattice: Lattice,
     /// Hot data by id (see [`Obj`]).
     objs: Vec<Obj>,
     /// List links by id.
@@ -213,7 +213,7 @@ pub struct Octree {
     nodes: Nodes,
     per_level: [u32; MAX_DEPTH as usize + 1],
     overflow: u32,
-    passes: Passes,
+    passes: PassScratch,
     /// The cost of the last pair pass.
     last_pass: PassCost,
     /// The region follows the spheres ([`Octree::growing`]); else it is fixed.
@@ -249,7 +249,7 @@ impl Octree {
             });
         }
         geom::check_bounds(&bounds)?;
-        Ok(Octree::build(Grid::new(bounds, depth, placement), false))
+        Ok(Octree::build(Lattice::new(bounds, depth, placement), false))
     }
 
     /// An empty octree whose region follows its spheres: a cube re-rooted (every sphere placed
@@ -261,7 +261,7 @@ impl Octree {
     #[must_use]
     pub fn growing(placement: Placement) -> Octree {
         let start = Aabb::new(Vec3::splat(-1.0), Vec3::ONE);
-        Octree::build(Grid::new(start, 0, placement), true)
+        Octree::build(Lattice::new(start, 0, placement), true)
     }
 
     /// [`Octree::growing`] with a hint of the region the spheres will occupy: each region the
@@ -275,10 +275,10 @@ impl Octree {
         Ok(t)
     }
 
-    fn build(grid: Grid, growing: bool) -> Octree {
-        let depth = grid.depth;
+    fn build(lattice: Lattice, growing: bool) -> Octree {
+        let depth = lattice.depth;
         Octree {
-            grid,
+            lattice,
             objs: Vec::new(),
             links: Vec::new(),
             keys: Vec::new(),
@@ -287,7 +287,7 @@ impl Octree {
             nodes: Nodes::new(cell::node_count(depth)),
             per_level: [0; MAX_DEPTH as usize + 1],
             overflow: 0,
-            passes: Passes::default(),
+            passes: PassScratch::default(),
             last_pass: PassCost::default(),
             growing,
             hint: None,
@@ -324,7 +324,7 @@ impl Octree {
         if self.overflow as usize > limit || self.live > 2 * self.regrow.rooted {
             match self
                 .regrow
-                .propose(&self.objs, self.live, self.hint, self.grid.placement)
+                .propose(&self.objs, self.live, self.hint, self.lattice.placement)
             {
                 Some(p) => self.reroot(&p),
                 None => {
@@ -339,9 +339,9 @@ impl Octree {
         if self.regrow.tick() {
             match self
                 .regrow
-                .propose(&self.objs, self.live, self.hint, self.grid.placement)
+                .propose(&self.objs, self.live, self.hint, self.lattice.placement)
             {
-                Some(p) if region::worth_it(&self.grid, &p) => self.reroot(&p),
+                Some(p) if region::worth_it(&self.lattice, &p) => self.reroot(&p),
                 _ => self.regrow.back_off(),
             }
         }
@@ -350,7 +350,7 @@ impl Octree {
     /// Places every sphere again in a tree over the proposal's region and depth.
     #[inline(never)]
     fn reroot(&mut self, p: &region::Proposal) {
-        self.grid = Grid::new(p.bounds, p.depth, self.grid.placement);
+        self.lattice = Lattice::new(p.bounds, p.depth, self.lattice.placement);
         self.nodes.reset(cell::node_count(p.depth));
         self.per_level = [0; MAX_DEPTH as usize + 1];
         self.overflow = 0;
@@ -359,7 +359,7 @@ impl Octree {
             if o.node == NONE {
                 continue;
             }
-            let at = self.grid.locate(o.center, o.radius);
+            let at = self.lattice.locate(o.center, o.radius);
             (o.aabb, o.qmin, o.qmax) = (at.aabb, at.qmin, at.qmax);
             self.per_level[level_of(at.node) as usize] += 1;
             self.overflow += u32::from(at.outside);
@@ -466,7 +466,7 @@ impl Octree {
 
     #[inline(always)]
     fn update_id(&mut self, id: u32, center: Vec3, radius: f32) {
-        let at = self.grid.locate(center, radius);
+        let at = self.lattice.locate(center, radius);
         let i = id as usize;
         let old_node = self.objs[i].node;
         if old_node == 0 || at.outside {
@@ -557,20 +557,20 @@ impl Octree {
     /// tree's current region (a cube; before its first re-root, `±1` m).
     #[must_use]
     pub fn bounds(&self) -> Aabb {
-        self.grid.bounds
+        self.lattice.bounds
     }
 
     /// The deepest level: the tree has levels `0..=depth` (a growing tree's current depth).
     #[must_use]
     pub fn depth(&self) -> u32 {
-        self.grid.depth
+        self.lattice.depth
     }
 
     /// The placement given to [`Octree::with_placement`] ([`Placement::Strict`] for
     /// [`Octree::new`]).
     #[must_use]
     pub fn placement(&self) -> Placement {
-        self.grid.placement
+        self.lattice.placement
     }
 
     /// Calls `f(a, b)` once for every pair of spheres whose AABBs overlap (closed: touching
@@ -579,7 +579,7 @@ impl Octree {
     pub fn for_each_pair(&mut self, f: impl FnMut(ProxyKey, ProxyKey)) {
         self.maintain();
         let mut p = core::mem::take(&mut self.passes);
-        self.last_pass = match self.grid.placement {
+        self.last_pass = match self.lattice.placement {
             Placement::Strict => self.strict_pairs(&mut p.walk, &mut p.strict, f),
             Placement::Loose => self.loose_pairs(&mut p.walk, &mut p.loose, f),
         };
@@ -600,7 +600,7 @@ impl Octree {
         self.maintain();
         let mut p = core::mem::take(&mut self.passes);
         let tree = &*self;
-        let pass = || match tree.grid.placement {
+        let pass = || match tree.lattice.placement {
             Placement::Strict => match out.first_mut() {
                 Some(o) => tree.strict_pairs(&mut p.walk, &mut p.strict, |a, b| emit(o, a, b)),
                 None => PassCost::default(),
@@ -648,7 +648,7 @@ impl Octree {
 
     /// Adds a sphere that passed the checks under `key` (not live here) at its id.
     fn push(&mut self, key: ProxyKey, center: Vec3, radius: f32) {
-        let at = self.grid.locate(center, radius);
+        let at = self.lattice.locate(center, radius);
         let id = crate::pair::slot(key);
         let i = id as usize;
         if self.objs.len() <= i {
@@ -680,13 +680,13 @@ impl Octree {
         let o = &self.objs[id as usize];
         o.node == 0 && {
             let (c, r) = (o.center, o.radius);
-            self.grid.is_outside(&o.aabb, c, r)
+            self.lattice.is_outside(&o.aabb, c, r)
         }
     }
 
     /// Pushes object `id` at the front of `node`'s list.
     fn link(&mut self, id: u32, node: u32) {
-        let walk_key = self.grid.walk_key(node);
+        let walk_key = self.lattice.walk_key(node);
         let became_occupied = self.nodes.is_empty(node);
         let head = self.nodes.head(node);
         let o = &mut self.objs[id as usize];

@@ -1,6 +1,6 @@
 //! The placement rules: which node a sphere lives in (computed in O(1) from integer cell
 //! coordinates), the walk key a node sorts by in the pair passes, and the region a node's
-//! spheres can reach. [`Grid`] holds a tree's bounds, depth and integer grid, and is the only
+//! spheres can reach. [`Lattice`] holds a tree's bounds, depth and integer lattice, and is the only
 //! place that tells the two [`Placement`]s apart.
 
 use super::cell::{Cell, code_of, level_of, morton, node_index, unmorton};
@@ -160,12 +160,12 @@ impl LooseKey {
     }
 }
 
-/// Where a sphere goes, from [`Grid::locate`].
+/// Where a sphere goes, from [`Lattice::locate`].
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Located {
     /// `center ± radius`.
     pub(super) aabb: Aabb,
-    /// The box's corners as grid coordinates, clamped to the grid.
+    /// The box's corners as lattice coordinates, clamped to the lattice.
     pub(super) qmin: [u16; 3],
     pub(super) qmax: [u16; 3],
     /// The node the sphere lives in.
@@ -174,18 +174,18 @@ pub(super) struct Located {
     pub(super) outside: bool,
 }
 
-/// A tree's bounds, depth, placement and the integer grid boxes are mapped to.
+/// A tree's bounds, depth, placement and the integer lattice boxes are mapped to.
 #[derive(Clone, Debug)]
-pub(super) struct Grid {
+pub(super) struct Lattice {
     pub(super) bounds: Aabb,
     pub(super) depth: u32,
     pub(super) placement: Placement,
-    /// Bits per axis of the grid: `depth` (strict), or `depth + 1` (loose: half the deepest
-    /// cells, so every level's loose bounds lie on grid lines).
+    /// Bits per axis of the lattice: `depth` (strict), or `depth + 1` (loose: half the deepest
+    /// cells, so every level's loose bounds lie on lattice lines).
     pub(super) bits: u32,
-    /// Grid cells per unit length on each axis: `2^bits / extent`.
+    /// Lattice cells per unit length on each axis: `2^bits / extent`.
     scale: Vec3A,
-    /// `bounds.min`, and the last grid cell `2^bits − 1` on every axis, for `quantize`.
+    /// `bounds.min`, and the last lattice cell `2^bits − 1` on every axis, for `quantize`.
     min: Vec3A,
     top: Vec3A,
     /// Loose mode: the largest radius placed at level `L`, half the level's cell size on the
@@ -193,15 +193,15 @@ pub(super) struct Grid {
     pub(super) half_cell: [f32; MAX_DEPTH as usize + 1],
 }
 
-impl Grid {
-    /// The grid of a tree; `bounds` are finite with volume, `depth <= MAX_DEPTH`.
-    pub(super) fn new(bounds: Aabb, depth: u32, placement: Placement) -> Grid {
+impl Lattice {
+    /// The lattice of a tree; `bounds` are finite with volume, `depth <= MAX_DEPTH`.
+    pub(super) fn new(bounds: Aabb, depth: u32, placement: Placement) -> Lattice {
         let bits = match placement {
             Placement::Strict => depth,
             Placement::Loose => depth + 1,
         };
         let shortest = bounds.extent().min_element();
-        Grid {
+        Lattice {
             bounds,
             depth,
             placement,
@@ -213,7 +213,7 @@ impl Grid {
         }
     }
 
-    /// Where a sphere goes: its box, the box's grid range, its node, and whether it is kept in
+    /// Where a sphere goes: its box, the box's lattice range, its node, and whether it is kept in
     /// the root for not fitting.
     #[inline(always)]
     pub(super) fn locate(&self, center: Vec3, radius: f32) -> Located {
@@ -269,19 +269,19 @@ impl Grid {
 
     /// Loose placement (looseness 2).
     ///
-    /// Derivation. The integer grid has `2^(d+1)` cells per axis (`bits = d + 1`), half the
-    /// deepest cells, so a level-`L` cell `k` spans `S = 2^(d+1−L)` grid cells `[k·S, k·S+S−1]`
-    /// and its loose bounds, grown by `S/2` on each side, are the grid range
+    /// Derivation. The integer lattice has `2^(d+1)` cells per axis (`bits = d + 1`), half the
+    /// deepest cells, so a level-`L` cell `k` spans `S = 2^(d+1−L)` lattice cells `[k·S, k·S+S−1]`
+    /// and its loose bounds, grown by `S/2` on each side, are the lattice range
     /// `[k·S − S/2, k·S + S − 1 + S/2]` (exact integers at every level). The float rule is
     /// "radius ≤ half the level's cell size on every axis" (`half_cell`): the deepest such level
     /// is `floor(log2(half_cell[0] / r))`, read from the quotient's exponent and corrected by one
     /// table compare for its rounding. The pair pass relies on the integer version of "the box
-    /// is inside the loose bounds": with `qc` the centre's grid cell and `k = qc >> (bits − L)`,
+    /// is inside the loose bounds": with `qc` the centre's lattice cell and `k = qc >> (bits − L)`,
     /// the box's range `[qmin, qmax]` is inside `k`'s loose range whenever
     /// `h = max(qc − qmin, qmax − qc) ≤ S/2 = 2^(d−L)` (worst cases `qc = k·S` and
     /// `qc = k·S + S − 1`), i.e. for `L ≤ d − ceil_log2(h)`. Both rules agree except where
     /// rounding makes the quantized box a cell wider; the sphere takes the shallower of the two
-    /// levels, so both hold. Clamping to the grid only moves range ends towards the grid, so a
+    /// levels, so both hold. Clamping to the lattice only moves range ends towards the lattice, so a
     /// clamped range stays inside the loose range and overlapping boxes keep overlapping ranges.
     /// Centres outside the bounds and spheres too big for the root's loose bounds go to the
     /// root as overflow.
@@ -350,7 +350,7 @@ impl Grid {
         self.bounds.extent().max_element() / (1u32 << level) as f32
     }
 
-    /// The grid cell of a point, clamped to the grid: `floor((p − min)·scale)` clamped to
+    /// The lattice cell of a point, clamped to the lattice: `floor((p − min)·scale)` clamped to
     /// `[0, top]` (`floor` commutes with the clamp to integer limits).
     #[inline]
     pub(super) fn quantize(&self, p: Vec3) -> [u16; 3] {
@@ -372,7 +372,7 @@ impl Grid {
         }
     }
 
-    /// The grid range that holds the ranges of the spheres placed in `cell`: the cell itself
+    /// The lattice range that holds the ranges of the spheres placed in `cell`: the cell itself
     /// (strict), or its loose bounds, the cell grown by half its size (loose; the low end is
     /// clamped at 0, which no range is below).
     #[inline]
@@ -389,7 +389,7 @@ impl Grid {
         }
     }
 
-    /// The cells of `level` whose reach ([`Grid::reach_range`]) overlaps the grid range
+    /// The cells of `level` whose reach ([`Lattice::reach_range`]) overlaps the lattice range
     /// `[lo, hi]`, as an inclusive range of cell coordinates per axis (empty if `lo > hi` on
     /// some axis after clamping to the level).
     #[inline]
@@ -423,7 +423,7 @@ impl Grid {
         (a, b)
     }
 
-    /// True if the grid range of `cell`'s spheres ([`Grid::reach_range`]) overlaps the grid
+    /// True if the lattice range of `cell`'s spheres ([`Lattice::reach_range`]) overlaps the lattice
     /// range `[lo, hi]`: the node may hold a sphere whose box overlaps a box with that range.
     #[inline]
     pub(super) fn reaches(&self, cell: &Cell, lo: [u16; 3], hi: [u16; 3]) -> bool {
@@ -432,7 +432,7 @@ impl Grid {
     }
 
     /// The box that holds the spheres placed in `cell`: its cell (strict) or its loose bounds
-    /// (loose); rounded, so a sphere placed in it may poke out by [`Grid::slack`].
+    /// (loose); rounded, so a sphere placed in it may poke out by [`Lattice::slack`].
     pub(super) fn reach_box(&self, cell: &Cell) -> Aabb {
         let size = self.bounds.extent() / (1u32 << cell.level) as f32;
         let min = self.bounds.min
@@ -444,7 +444,7 @@ impl Grid {
         }
     }
 
-    /// How far a sphere placed in a cell may poke out of [`Grid::reach_box`]: the cell map and
+    /// How far a sphere placed in a cell may poke out of [`Lattice::reach_box`]: the cell map and
     /// the box corners each round by a few ulps of the coordinates involved, which this covers
     /// with a relative margin of the coordinates' magnitude (`1e-5`) and of the extent (`1e-6`),
     /// both far above `f32`'s `6e-8`.
@@ -459,7 +459,7 @@ impl Grid {
     }
 }
 
-impl Grid {
+impl Lattice {
     /// Panics unless sphere `id` (centre `c`, radius `r`, located as `at`) may live in `node`
     /// by the placement rule, checked from the rule's definition rather than by re-running the
     /// O(1) placement (for `Octree::validate`).
@@ -473,7 +473,7 @@ impl Grid {
     }
 
     /// Strict: an overflow sphere's box leaves the bounds and it is in the root; any other
-    /// box's grid range lies in the node's cell and straddles a mid plane of it, unless the
+    /// box's lattice range lies in the node's cell and straddles a mid plane of it, unless the
     /// node is deepest.
     fn check_strict(&self, id: usize, at: &Located, node: u32, level: u32, cell: [u32; 3]) {
         let wrong = "is not in the node placement gives";
@@ -494,7 +494,7 @@ impl Grid {
     }
 
     /// Loose: the centre lies in the node's cell, the radius within half the cell size, the
-    /// box's grid range inside the node's loose bounds, and no deeper level would take it; an
+    /// box's lattice range inside the node's loose bounds, and no deeper level would take it; an
     /// overflow sphere is in the root and fits no level.
     #[allow(clippy::too_many_arguments, reason = "the parts of one placed sphere")]
     fn check_loose(
@@ -509,7 +509,7 @@ impl Grid {
     ) {
         let fits = |l: u32| r <= self.half_cell[l as usize];
         let qc = self.quantize(c);
-        // How far the box's grid range reaches from the centre's grid cell: the range fits the
+        // How far the box's lattice range reaches from the centre's lattice cell: the range fits the
         // loose bounds of any level-`L` cell holding the centre iff this is `<= 2^(depth − L)`.
         let reach = (0..3)
             .map(|a| {

@@ -86,11 +86,14 @@ impl Octree {
         small: bool,
         mut visit: impl FnMut(u32) -> ControlFlow<()>,
     ) -> ControlFlow<()> {
-        let (qlo, qhi) = (self.grid.quantize(aabb.min), self.grid.quantize(aabb.max));
+        let (qlo, qhi) = (
+            self.lattice.quantize(aabb.min),
+            self.lattice.quantize(aabb.max),
+        );
         let mut cells = 0u64;
-        for level in (1..=self.grid.depth).filter(|_| !small) {
+        for level in (1..=self.lattice.depth).filter(|_| !small) {
             if self.per_level[level as usize] > 0 {
-                let (a, b) = self.grid.reaching_cells(level, qlo, qhi);
+                let (a, b) = self.lattice.reaching_cells(level, qlo, qhi);
                 cells += (0..3)
                     .map(|i| u64::from((b[i] + 1).saturating_sub(a[i])))
                     .product::<u64>();
@@ -98,7 +101,7 @@ impl Octree {
         }
         if cells > DIRECT_CELLS {
             return self.traverse(
-                |cell| self.grid.reaches(cell, qlo, qhi),
+                |cell| self.lattice.reaches(cell, qlo, qhi),
                 |id| {
                     if root || self.objs[id as usize].node != 0 {
                         visit(id)
@@ -119,11 +122,11 @@ impl Octree {
         if root && self.per_level[0] > 0 {
             list(0)?;
         }
-        for level in 1..=self.grid.depth {
+        for level in 1..=self.lattice.depth {
             if self.per_level[level as usize] == 0 {
                 continue;
             }
-            let (a, b) = self.grid.reaching_cells(level, qlo, qhi);
+            let (a, b) = self.lattice.reaching_cells(level, qlo, qhi);
             for z in a[2]..=b[2] {
                 for y in a[1]..=b[1] {
                     for x in a[0]..=b[0] {
@@ -225,12 +228,12 @@ impl Octree {
             return None;
         }
         let inv = geom::inverse_dir(dir);
-        let slack = self.grid.slack();
+        let slack = self.lattice.slack();
         let hit = core::cell::Cell::new(FirstHit::new(max_t));
         let limit = || hit.get().limit();
         let _ = self.traverse(
             |cell| {
-                self.grid
+                self.lattice
                     .reach_box(cell)
                     .grown(slack)
                     .ray_entry(origin, inv, limit())
@@ -280,10 +283,10 @@ impl Octree {
             return;
         }
         let inv = geom::inverse_dir(dir);
-        let slack = self.grid.slack();
+        let slack = self.lattice.slack();
         let _ = self.traverse(
             |cell| {
-                self.grid
+                self.lattice
                     .reach_box(cell)
                     .grown(slack)
                     .ray_entry(origin, inv, max_t)
@@ -320,7 +323,7 @@ impl Octree {
             best = best.min(visit(i, best));
             i = self.links[i as usize].next;
         }
-        let Some(deepest) = (1..=self.grid.depth)
+        let Some(deepest) = (1..=self.lattice.depth)
             .rev()
             .find(|&l| self.per_level[l as usize] > 0)
         else {
@@ -328,8 +331,11 @@ impl Octree {
         };
         // Spheres below the root lie in the bounds grown by half their extent (a loose
         // level-1 cell reaches a quarter of it past the bounds).
-        let extent = self.grid.bounds.extent();
-        let region = self.grid.bounds.grown(extent.max_element() * 0.5 + inflate);
+        let extent = self.lattice.bounds.extent();
+        let region = self
+            .lattice
+            .bounds
+            .grown(extent.max_element() * 0.5 + inflate);
         let inv = geom::inverse_dir(dir);
         let Some(t0) = region.ray_entry(origin, inv, best) else {
             return;
@@ -378,7 +384,10 @@ impl Octree {
             }
             let tb = (t0 + dt * (k + 1) as f32).min(t1);
             let piece = q(ta, tb);
-            let range = (self.grid.quantize(piece.min), self.grid.quantize(piece.max));
+            let range = (
+                self.lattice.quantize(piece.min),
+                self.lattice.quantize(piece.max),
+            );
             let _ = self.candidates_from(&piece, false, true, |id| {
                 let o = &self.objs[id as usize];
                 let new =
@@ -406,11 +415,11 @@ impl Octree {
         mut visit: impl FnMut(u32, f32) -> f32,
     ) {
         let inv = geom::inverse_dir(dir);
-        let slack = self.grid.slack();
+        let slack = self.lattice.slack();
         let best = core::cell::Cell::new(max_t);
         let _ = self.traverse(
             |cell| {
-                self.grid
+                self.lattice
                     .reach_box(cell)
                     .grown(slack)
                     .grown(inflate)
@@ -530,7 +539,7 @@ impl Octree {
         if k == 0 || n == 0 || !point.is_finite() {
             return Vec::new();
         }
-        let start = nearest_start(point, &self.grid.bounds, k, n);
+        let start = nearest_start(point, &self.lattice.bounds, k, n);
         let mut out = Vec::new();
         nearest_expanding(k, n, start, &mut out, |radius, out| {
             let reach = radius + geom::distance_pad(point, radius);
@@ -557,7 +566,7 @@ impl Octree {
             |_| true,
             |cell, slot| {
                 if self.nodes.head_at(slot) != NONE {
-                    f(cell.level, self.grid.reach_box(cell));
+                    f(cell.level, self.lattice.reach_box(cell));
                 }
             },
         );

@@ -47,7 +47,7 @@
 //! of it for as much motion again, so a world in flight re-roots less often the faster it
 //! goes: re-roots are amortised like a growing `Vec`'s copies.
 
-use super::placement::{Grid, depth_for};
+use super::placement::{Lattice, depth_for};
 use super::{MAX_DEPTH, NONE, Obj, Placement};
 use crate::geom::{self, Aabb};
 use glam::Vec3;
@@ -244,11 +244,11 @@ impl Regrow {
             Placement::Loose if doublings > 0 => k,
             Placement::Loose => (k + LEVELS_BELOW_TYPICAL).min(MAX_DEPTH),
         };
-        let grid = Grid::new(bounds, depth, placement);
+        let lattice = Lattice::new(bounds, depth, placement);
         Some(Proposal {
             bounds,
             depth,
-            typical_cell: grid.typical_cell(r),
+            typical_cell: lattice.typical_cell(r),
             typical_radius: r,
             span_center,
         })
@@ -258,7 +258,7 @@ impl Regrow {
 impl Regrow {
     /// How many times to double the cell `cell` so that the spheres per occupied cell stay
     /// below [`SPHERES_PER_CELL`] (cells no wider than `side`). Counts the distinct cells of
-    /// the live spheres' centres on a grid from `origin` (an estimate: the tree's own grid is
+    /// the live spheres' centres on a grid from `origin` (an estimate: the tree's own lattice is
     /// offset from it), by sorting their interleaved cell coordinates once: a cell twice as
     /// wide is the code shifted by 3 bits, so each coarser count is one scan of the sorted
     /// codes. O(n); runs only when a region is proposed.
@@ -312,7 +312,7 @@ fn spread(v: u64) -> u64 {
 /// True if an audit's `fresh` proposal is worth a re-root of a tree on `current`: it changes
 /// the median sphere's cell by [`AUDIT_GAIN`] (loose: only a smaller cell counts; a loose
 /// sphere's level follows its radius, so a wider region only costs where it caps the depth).
-pub(super) fn worth_it(current: &Grid, fresh: &Proposal) -> bool {
+pub(super) fn worth_it(current: &Lattice, fresh: &Proposal) -> bool {
     let now = current.typical_cell(fresh.typical_radius);
     let finer = now > AUDIT_GAIN * fresh.typical_cell;
     let coarser = fresh.typical_cell > AUDIT_GAIN * now;

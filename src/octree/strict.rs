@@ -18,7 +18,7 @@
 //! per parent when its first child is entered. A sphere `a` that overlaps a sphere `b`
 //! placed in the cell's subtree has a range overlapping `b`'s (the cell map is monotone), and
 //! `b`'s range lies inside the cell, so `a` is never filtered out wrongly. Ranges are clamped
-//! to the grid, so overflow spheres in the root are filtered the same way. Levels between the
+//! to the lattice, so overflow spheres in the root are filtered the same way. Levels between the
 //! current node and its nearest occupied ancestor are filtered too (with no own spheres), so a
 //! long list is narrowed step by step and shared by all the nodes under a level.
 //!
@@ -167,7 +167,7 @@ impl Octree {
         else {
             return PassCost::default();
         };
-        let d = self.grid.depth;
+        let d = self.lattice.depth;
         s.start(hot, node_key, d);
         let mut visited = 0;
         for (key, i, j) in runs(node_key) {

@@ -500,14 +500,14 @@ fn an_audit_refits_the_cells_to_shrunk_spheres() {
             .map(|&c| t.insert(c, 0.5).unwrap())
             .collect();
         t.maintain();
-        let before = t.grid.typical_cell(0.5);
+        let before = t.lattice.typical_cell(0.5);
         for (&k, &c) in keys.iter().zip(&gas.centers) {
             t.update(k, c * 0.01, 0.005).unwrap();
         }
         for _ in 0..64 {
             t.maintain();
         }
-        let after = t.grid.typical_cell(0.005);
+        let after = t.lattice.typical_cell(0.005);
         assert!(after * 20.0 < before, "{p:?}: {before} -> {after}");
         assert_eq!(t.stats().overflow, 0);
         assert_eq!(sorted_pairs(&mut t), brute::pairs(&proxies(&t)));

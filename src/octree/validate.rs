@@ -8,9 +8,9 @@ impl Octree {
     /// Checks every invariant and panics with a message naming the first one broken: each
     /// sphere's box, cell range, node and walk key are what placement gives for its stored
     /// sphere, and its node obeys the placement rule checked from its definition (strict: the
-    /// box's grid range lies in the node's cell and straddles a mid plane of it, unless the
+    /// box's lattice range lies in the node's cell and straddles a mid plane of it, unless the
     /// node is deepest; loose: the centre lies in the node's cell, the radius within half the
-    /// cell size, the box's grid range inside the node's loose bounds, and no deeper level
+    /// cell size, the box's lattice range inside the node's loose bounds, and no deeper level
     /// would take it); every node list is doubly linked and reaches exactly the spheres that
     /// name its node; a child bit is set iff the child's subtree holds a sphere; per-level,
     /// overflow and key-map counts agree. O(n + occupied nodes); for tests and debugging.
@@ -38,7 +38,7 @@ impl Octree {
                 "key map disagrees at id {id}"
             );
             let (c, r) = (o.center, o.radius);
-            let at = self.grid.locate(c, r);
+            let at = self.lattice.locate(c, r);
             assert_eq!(
                 o.aabb, at.aabb,
                 "stored box of id {id} is not centre ± radius"
@@ -48,14 +48,14 @@ impl Octree {
                 (at.qmin, at.qmax),
                 "stale cell range at id {id}"
             );
-            self.grid.check_rule(id, c, r, &at, o.node);
+            self.lattice.check_rule(id, c, r, &at, o.node);
             assert_eq!(
                 o.node, at.node,
                 "id {id} is not in the node placement gives"
             );
             assert_eq!(
                 o.walk_key,
-                self.grid.walk_key(at.node),
+                self.lattice.walk_key(at.node),
                 "stale walk key at id {id}"
             );
             per_level[level_of(at.node) as usize] += 1;
@@ -105,7 +105,7 @@ impl Octree {
                 i = link.next;
             }
             assert!(
-                cell.level < self.grid.depth || self.nodes.mask(node) == 0,
+                cell.level < self.lattice.depth || self.nodes.mask(node) == 0,
                 "deepest node {node} has children"
             );
         });

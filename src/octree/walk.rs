@@ -2,7 +2,7 @@
 //! contiguous walk-ordered copies ([`Hot`]), the runs of equal keys (one per occupied node), and
 //! the [`Tester`] that runs and counts the box tests of a pass through the sweep kernel.
 //!
-//! Order. Every sphere carries its node's walk key (`Grid::walk_key`). A pass LSD-radix-sorts
+//! Order. Every sphere carries its node's walk key (`Lattice::walk_key`). A pass LSD-radix-sorts
 //! `(walk key, id)` (two or three streaming passes; the order of the dense ids is left alone,
 //! so `update` keeps streaming in insertion order) and gathers each sphere's box and cell range
 //! into a contiguous walk-ordered array. A pass then never chases a list: each node is a run of
@@ -34,7 +34,7 @@ pub(super) const SHORT_SIDE: usize = 4;
 pub(super) struct Hot {
     /// `center ± radius`. 32 bytes.
     pub(super) bx: SimdBox,
-    /// Range on the integer grid, clamped to the grid. 12 bytes.
+    /// Range on the integer lattice, clamped to the lattice. 12 bytes.
     pub(super) qmin: [u16; 3],
     pub(super) qmax: [u16; 3],
     /// Position in walk order (index of `Scratch::keys`). 4 bytes.
@@ -306,7 +306,7 @@ impl Octree {
             rank,
             ..
         } = s;
-        let key_bits = walk_key_bits(self.grid.depth);
+        let key_bits = walk_key_bits(self.lattice.depth);
         if key_bits <= 32 {
             items.clear();
             items.extend(
@@ -396,7 +396,7 @@ impl Octree {
     /// the cut. Trees too deep for 32-bit keys, or too small for two parts, sort serially.
     pub(super) fn sort_into_walk_order_par(&self, s: &mut Scratch, parts: usize) {
         use rayon::prelude::*;
-        let key_bits = walk_key_bits(self.grid.depth);
+        let key_bits = walk_key_bits(self.lattice.depth);
         let parts = parts.min(MAX_PARTS).min(self.live / MIN_PART_SPHERES);
         if key_bits > 32 || parts < 2 {
             self.sort_into_walk_order(s);
