@@ -9,6 +9,7 @@
 //! ns/object/step. Under callgrind, `--toggle-collect=*measured*` counts only the measured
 //! steps.
 
+use broadleaf::fixtures::cli::{self, Flags, Stop};
 use broadleaf::fixtures::scene::{Feed, Frame, Recorded, Scene};
 use broadleaf::{Aabb, BroadPhase, Config, Passes, Vec3};
 use std::hint::black_box;
@@ -29,38 +30,32 @@ struct Args {
     passes: Passes,
 }
 
-fn parse() -> Result<Args, String> {
+fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
     let mut a = Args {
         frames: String::new(),
         n: 10_000,
         steps: 35,
         passes: Passes::Adaptive,
     };
-    let argv: Vec<String> = std::env::args().skip(1).collect();
-    if argv.iter().any(|s| s == "--help") {
-        println!("{USAGE}");
-        std::process::exit(0);
-    }
-    for kv in argv.chunks(2) {
-        let v = kv.get(1).ok_or(format!("{} takes a value", kv[0]))?;
-        let count = |v: &str| v.parse::<usize>().map_err(|_| format!("bad count {v}"));
-        match kv[0].as_str() {
-            "--frames" => a.frames = v.clone(),
-            "--n" => a.n = count(v)?,
-            "--steps" => a.steps = count(v)?,
+    let mut flags = Flags::new(argv);
+    while let Some(flag) = flags.next_flag()? {
+        match flag.as_str() {
+            "--frames" => a.frames = flags.value(&flag)?,
+            "--n" => a.n = flags.parse(&flag)?,
+            "--steps" => a.steps = flags.parse(&flag)?,
             "--passes" => {
-                a.passes = match v.as_str() {
-                    "adaptive" => Passes::Adaptive,
-                    "full" => Passes::Full,
-                    "incremental" => Passes::Incremental,
-                    other => return Err(format!("bad --passes {other}")),
-                }
+                let passes = [
+                    ("adaptive", Passes::Adaptive),
+                    ("full", Passes::Full),
+                    ("incremental", Passes::Incremental),
+                ];
+                a.passes = flags.choice(&flag, &passes)?;
             }
-            other => return Err(format!("unknown flag {other}")),
+            _ => return Err(Stop::unknown(&flag)),
         }
     }
     if a.frames.is_empty() {
-        return Err("--frames is required".into());
+        return Err(Stop::Error("--frames is required".into()));
     }
     Ok(a)
 }
@@ -124,10 +119,7 @@ fn measured_step(run: &mut dyn FnMut() -> usize) -> usize {
 }
 
 fn main() {
-    let args = parse().unwrap_or_else(|e| {
-        eprintln!("{e}\n{USAGE}");
-        std::process::exit(2);
-    });
+    let args = cli::or_exit(USAGE, parse(std::env::args().skip(1)));
     let mut scene = match load(&args.frames) {
         Some(r) => r,
         None => {
