@@ -108,21 +108,26 @@ pub(super) struct Patch {
 }
 
 impl Patch {
+    /// Every list: the index lists and the key lists.
+    fn lists(&mut self) -> ([&mut Vec<u32>; 7], [&mut Vec<u64>; 3]) {
+        (
+            [
+                &mut self.touched,
+                &mut self.cand_gone,
+                &mut self.cand_at,
+                &mut self.rev_gone,
+                &mut self.rev_at,
+                &mut self.pairs_gone,
+                &mut self.pairs_at,
+            ],
+            [&mut self.cand_new, &mut self.rev_keys, &mut self.rev_new],
+        )
+    }
+
     fn clear(&mut self) {
-        for v in [
-            &mut self.touched,
-            &mut self.cand_gone,
-            &mut self.cand_at,
-            &mut self.rev_gone,
-            &mut self.rev_at,
-            &mut self.pairs_gone,
-            &mut self.pairs_at,
-        ] {
-            v.clear();
-        }
-        for v in [&mut self.cand_new, &mut self.rev_keys, &mut self.rev_new] {
-            v.clear();
-        }
+        let (index, keys) = self.lists();
+        index.into_iter().for_each(|v| v.clear());
+        keys.into_iter().for_each(|v| v.clear());
     }
 
     /// Grows every list ahead of its peaks (see `radix::ahead`), to at least `floor`:
@@ -135,21 +140,9 @@ impl Patch {
                 v.reserve(floor - v.len());
             }
         }
-        for v in [
-            &mut self.touched,
-            &mut self.cand_gone,
-            &mut self.cand_at,
-            &mut self.rev_gone,
-            &mut self.rev_at,
-            &mut self.pairs_gone,
-            &mut self.pairs_at,
-        ] {
-            grow(v, floor);
-        }
-        for v in [&mut self.cand_new, &mut self.rev_keys, &mut self.rev_new] {
-            grow(v, floor);
-        }
-        grow(&mut self.runs, floor);
+        let (index, keys) = self.lists();
+        index.into_iter().for_each(|v| grow(v, floor));
+        keys.into_iter().for_each(|v| grow(v, floor));
     }
 
     /// Heap bytes held (capacities).
