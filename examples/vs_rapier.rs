@@ -58,7 +58,7 @@
 //! speed-up of the scenes and `missed`/`extra` are summed over them.
 //!
 //! `--queries` runs scene queries instead of the step table: on `gas` (N = `--n`, default
-//! 100 000) after one step, 100 000 box queries (cubes of 1–4 m edge, centres uniform in the
+//! 100 000) after the warm-up steps (`--warmup`), 100 000 box queries (cubes of 1–4 m edge, centres uniform in the
 //! scene's cube) and 100 000 closest-hit rays (origins uniform in the cube, directions uniform
 //! on the sphere, `max_t` the cube's edge), timed in broadleaf (`query_aabb`, `cast_ray`) and in
 //! rapier's query pipeline over the same colliders (`BroadPhaseBvh::as_query_pipeline`:
@@ -845,8 +845,7 @@ fn to_parry(b: &Aabb) -> rapier3d::parry::bounding_volume::Aabb {
     rapier3d::parry::bounding_volume::Aabb::new(b.min, b.max)
 }
 
-/// The world `--queries` asks: both engines over the same shapes after one step of the
-/// scene's motion, the cube the queries are drawn in, and each key's shape as the scene gave
+/// The world `--queries` asks: both engines over the same shapes after the scene's motion, the cube the queries are drawn in, and each key's shape as the scene gave
 /// it (what brute force and rapier's ties are computed from, never the broadphase's record).
 struct QueryWorld {
     ours: Ours,
@@ -857,21 +856,24 @@ struct QueryWorld {
     label: String,
 }
 
-/// `gas` (N spheres) after one step: each engine applies the scene's frame.
+/// `gas` (N spheres) after the warm-up steps: each engine applies the scene's frames.
 fn gas_world(args: &Args) -> QueryWorld {
     let n = args.n.unwrap_or(100_000);
     let mut scene = Gas::new(n, args.seed);
     let (mut ours, mut theirs, _) = spawn_both(&scene, args);
-    // One step of motion, so the queries see moved objects; rapier's second step moves
-    // nothing and leaves its tree at the targets' poses.
+    // The warm-up steps of motion (at least one), so the queries see a running world in its
+    // steady regime, not the step that woke it; rapier's extra step moves nothing and leaves
+    // its tree at the targets' poses.
     let mut frame = Frame::default();
-    scene.advance(&mut frame);
-    ours.feed
-        .apply(&mut ours.bp, &frame)
-        .expect("scene frames are valid");
-    ours.bp.step();
-    theirs.set_targets(&frame);
-    theirs.step();
+    for _ in 0..args.warmup.max(1) {
+        scene.advance(&mut frame);
+        ours.feed
+            .apply(&mut ours.bp, &frame)
+            .expect("scene frames are valid");
+        ours.bp.step();
+        theirs.set_targets(&frame);
+        theirs.step();
+    }
     theirs.step();
     let mut spawns = Vec::new();
     scene.spawns(&mut spawns);
@@ -881,7 +883,7 @@ fn gas_world(args: &Args) -> QueryWorld {
         theirs,
         bounds: scene.bounds,
         shapes,
-        label: format!("gas N={n}"),
+        label: format!("gas N={n} after {} steps", args.warmup.max(1)),
     }
 }
 
@@ -918,7 +920,10 @@ fn bodies_world(args: &Args) -> QueryWorld {
         theirs,
         bounds: scene.bounds,
         shapes,
-        label: format!("bodies N={n} (+{} static)", scene.statics.len()),
+        label: format!(
+            "bodies N={n} (+{} static) after one step",
+            scene.statics.len()
+        ),
     }
 }
 
@@ -1179,7 +1184,7 @@ fn run_queries(args: &Args) -> usize {
     }
 
     println!(
-        "queries on {label} after one step, seed {}, {QUERY_COUNT} of each; rapier: \
+        "queries on {label}, seed {}, {QUERY_COUNT} of each; rapier: \
          query pipeline of its BroadPhaseBvh (boxes: intersect_aabb_conservative re-tested \
          against each collider's exact AABB; rays: cast_ray, solid); checked: every \
          {QUERY_CHECK_EVERY}th query, against rapier and against brute force (the same key \

@@ -60,6 +60,10 @@ mod cost {
 /// The incremental regime is entered when its estimated cost is below this fraction of the
 /// full pass: the margin pays for the rebuild that enters it.
 const ENTER_FRACTION: f64 = 0.5;
+/// The incremental regime is left at once, without waiting for a second step over the full
+/// pass's estimate, when a step's estimate is this many times the full pass's: a burst that
+/// large (most proxies escaping) is a world in motion, not a passing spike.
+const LEAVE_AT_ONCE: f64 = 2.0;
 
 /// A full pass splits over rayon's current pool only with at least this many spheres or
 /// [`PARALLEL_MIN_BODIES`] dynamic bodies (and more than one thread): below this many spheres
@@ -203,11 +207,11 @@ impl BroadPhase {
         if self.cached {
             // Leaving drops the candidates, which a later return rebuilds with a full pass of
             // its own: a single step over the full pass's cost (a burst of escapes) does not
-            // leave, two in a row do.
+            // leave, two in a row do, and so does one step far over it (a world waking up).
             let inc = self.incremental_cost(movers as f64, self.escaped.len() as f64);
             let over = inc > full;
             let was_over = core::mem::replace(&mut self.costs.over, over);
-            if over && was_over {
+            if over && (was_over || inc > full * LEAVE_AT_ONCE) {
                 Plan::Full
             } else {
                 Plan::Incremental
