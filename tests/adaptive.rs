@@ -418,3 +418,41 @@ fn each_pass_forced_equals_the_model_every_step() {
         );
     }
 }
+
+/// A world waking up (every sphere moving far at once, right after the step that entered the
+/// incremental regime) runs the full pass at its next step instead of re-testing and querying
+/// every escaped proxy: a step estimated far over the full pass leaves the regime at once. Its
+/// pairs equal brute force either way.
+#[test]
+fn a_world_waking_up_runs_the_full_pass_at_once() {
+    let mut rng = Rng::new(29);
+    let mut bp = BroadPhase::new(Config::default());
+    let mut spheres: Vec<(ProxyKey, Vec3)> = (0..6000)
+        .map(|_| {
+            let c = Vec3::new(
+                rng.range(0.0, 40.0),
+                rng.range(0.0, 40.0),
+                rng.range(0.0, 40.0),
+            );
+            (bp.insert_sphere(c, 0.5).unwrap(), c)
+        })
+        .collect();
+    bp.step();
+    for (key, c) in &mut spheres {
+        *c += Vec3::new(
+            rng.range(-2.0, 2.0),
+            rng.range(-2.0, 2.0),
+            rng.range(-2.0, 2.0),
+        );
+        bp.update_sphere(*key, *c, 0.5).unwrap();
+    }
+    bp.step();
+    assert_eq!(bp.stats().pass, Pass::Full, "{:?}", bp.stats());
+    let proxies: Vec<broadleaf::brute::Proxy> = spheres
+        .iter()
+        .map(|&(k, c)| broadleaf::brute::Proxy::new(k, Aabb::from_center_radius(c, 0.5)))
+        .collect();
+    let mut want = broadleaf::brute::pairs(&proxies);
+    want.sort();
+    assert_eq!(bp.pairs(), &want[..]);
+}
