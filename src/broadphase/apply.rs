@@ -4,8 +4,9 @@
 //! their input, write the new shape into the slot's entry of the dense shape array, and mark
 //! the slot `MOVED | STALE` (listing it in `movers` once, however often it is updated). Nothing
 //! else happens at the call: the exact box, the motion record and the structure's box are the
-//! last step's until the next [`BroadPhase::step`], whose first act is [`BroadPhase::apply_updates`]:
-//! one pass over the stale slots in slot order (the mover list radix-sorted by slot when the
+//! last step's until the next [`BroadPhase::step`], whose first act is
+//! [`BroadPhase::apply_updates`]: one pass over the stale slots in slot order (a walk over every
+//! slot's flags when many are stale, else the mover list, radix-sorted by slot when the
 //! caller's order was another), each given
 //! - its exact box (the shape grown by `Config::margin`) and its motion since it was last
 //!   applied (for its fat margin and the pass estimate: a key updated several times between
@@ -29,37 +30,55 @@ use super::store::flag;
 use super::{BroadPhase, Shape, fat};
 use crate::radix::sort_bits_by;
 
+/// The stale slots are applied by walking every slot's flags once at least one slot in this
+/// many is stale, and by sorting the mover list below that.
+const DENSE_FRACTION: usize = 8;
+
 impl BroadPhase {
     /// Applies every update since the last step, in slot order (see the module docs).
     pub(super) fn apply_updates(&mut self) {
         if self.stale == 0 {
             return;
         }
-        self.stale = 0;
-        if !self.movers.is_sorted() {
-            let bits = u32::BITS - (self.store.slots() as u32).leading_zeros();
-            sort_bits_by(
-                &mut self.movers,
-                &mut self.movers_tmp,
-                &mut self.movers_counts,
-                |&s| u64::from(s),
-                0,
-                bits,
-            );
-        }
-        for i in 0..self.movers.len() {
-            let slot = self.movers[i];
-            let f = &mut self.store.flags[slot as usize];
-            if *f & flag::STALE != 0 {
-                *f &= !flag::STALE;
-                self.apply(slot);
+        let slots = self.store.slots();
+        if self.stale >= slots / DENSE_FRACTION {
+            // Most slots are stale: one streaming walk over the flags is cheaper than sorting
+            // the mover list (whose order then stays the caller's).
+            for s in 0..slots {
+                let f = &mut self.store.flags[s];
+                if *f & flag::STALE != 0 {
+                    *f &= !flag::STALE;
+                    self.apply(s as u32);
+                }
+            }
+        } else {
+            if !self.movers.is_sorted() {
+                let bits = u32::BITS - (slots as u32).leading_zeros();
+                sort_bits_by(
+                    &mut self.movers,
+                    &mut self.movers_tmp,
+                    &mut self.movers_counts,
+                    |&s| u64::from(s),
+                    0,
+                    bits,
+                );
+            }
+            for i in 0..self.movers.len() {
+                let slot = self.movers[i];
+                let f = &mut self.store.flags[slot as usize];
+                if *f & flag::STALE != 0 {
+                    *f &= !flag::STALE;
+                    self.apply(slot);
+                }
             }
         }
+        self.stale = 0;
     }
 
     /// Applies the stored shape of the stale live `slot`: its exact box, its motion, and its
-    /// structure's box (the exact one, or outside the incremental regime, or a fat one).
-    #[inline]
+    /// structure's box (outside the incremental regime the exact one, inside it a fat one).
+    /// Always inlined into both walks: the centre then stays in registers.
+    #[inline(always)]
     fn apply(&mut self, slot: u32) {
         let s = slot as usize;
         let key = self.store.key(slot);

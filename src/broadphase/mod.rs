@@ -573,14 +573,18 @@ impl BroadPhase {
         self.mark_stale(slot);
     }
 
-    /// Marks `slot` updated and not yet applied, listing it once.
+    /// Marks `slot` updated and not yet applied, listing it in `movers` once.
     #[inline]
     fn mark_stale(&mut self, slot: u32) {
-        let f = self.store.flags[slot as usize];
-        if f & flag::STALE == 0 {
+        let f = &mut self.store.flags[slot as usize];
+        let old = *f;
+        *f = old | flag::MOVED | flag::STALE;
+        if old & flag::STALE == 0 {
             self.stale += 1;
+            if old & flag::MOVED == 0 {
+                self.movers.push(slot);
+            }
         }
-        self.mark(slot, flag::MOVED | flag::STALE);
     }
 
     /// Removes a proxy; its pairs are reported in `removed` at the next step.
