@@ -351,3 +351,56 @@ fn snapshot_between_an_update_and_a_step_holds_the_latest_shapes() {
         twin.check_step(&mut restored, &format!("restored {step}"));
     }
 }
+
+/// Feature `parallel`: the apply pass splits its spheres over the pool when most slots are
+/// stale in a world of more than `PARALLEL_MIN_SPHERES` (10 000) spheres outside the
+/// incremental regime. Updated in random slot order, with bodies among them and removes and
+/// inserts between, every step's lists equal the model's brute force (a sweep) at one thread
+/// and at two, and `validate()` holds.
+#[cfg(feature = "parallel")]
+#[test]
+fn parallel_apply_equals_brute_force_at_one_and_two_threads() {
+    for threads in [1, 2] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("a pool");
+        pool.install(|| {
+            let mut rng = Rng::new(11);
+            let mut bp = BroadPhase::new(Config {
+                passes: Passes::Full,
+                ..Config::default()
+            });
+            let mut model = Model::new(0.0);
+            model.quadratic = false;
+            for _ in 0..12_000 {
+                let s = ModelShape::Sphere {
+                    center: rng.offset(60.0),
+                    radius: rng.range(0.1, 0.6),
+                };
+                model.insert(&mut bp, s);
+            }
+            for _ in 0..200 {
+                model.insert(&mut bp, random_shape(&mut rng));
+            }
+            model.check_step(&mut bp, "first");
+            for step in 0..5 {
+                let what = format!("{threads} threads step {step}");
+                let mut keys = model.keys();
+                for i in (1..keys.len()).rev() {
+                    keys.swap(i, rng.below(i + 1));
+                }
+                for &key in &keys[..keys.len() * 3 / 4] {
+                    let s = moved(&mut rng, &model.shapes[&key]);
+                    model.update(&mut bp, key, s);
+                }
+                for _ in 0..20 {
+                    let keys = model.keys();
+                    model.remove(&mut bp, keys[rng.below(keys.len())]);
+                    model.insert(&mut bp, random_shape(&mut rng));
+                }
+                model.check_step(&mut bp, &what);
+            }
+        });
+    }
+}

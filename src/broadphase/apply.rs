@@ -33,6 +33,10 @@ use crate::radix::sort_bits_by;
 /// The stale slots are applied by walking every slot's flags once at least one slot in this
 /// many is stale, and by sorting the mover list below that.
 const DENSE_FRACTION: usize = 8;
+/// Tasks per thread of the parallel apply, so that a thread that finishes its ranges early
+/// takes over part of a slower one's.
+#[cfg(feature = "parallel")]
+const TASKS_PER_THREAD: usize = 4;
 
 impl BroadPhase {
     /// Applies every update since the last step, in slot order (see the module docs).
@@ -41,6 +45,11 @@ impl BroadPhase {
             return;
         }
         let slots = self.store.slots();
+        #[cfg(feature = "parallel")]
+        if self.apply_par() {
+            self.stale = 0;
+            return;
+        }
         if self.stale >= slots / DENSE_FRACTION {
             // Most slots are stale: one streaming walk over the flags is cheaper than sorting
             // the mover list (whose order then stays the caller's).
@@ -105,6 +114,81 @@ impl BroadPhase {
                 }
             }
         }
+    }
+
+    /// The dense walk with its spheres' share split over rayon's current pool, outside the
+    /// incremental regime, with more than one thread and at least `PARALLEL_MIN_SPHERES`
+    /// spheres, at least one slot in [`DENSE_FRACTION`] stale; false (nothing done) otherwise.
+    /// Each task takes a range of slots and computes, for its stale spheres, the exact box, the
+    /// motion and the octree placement (reading the tree only); then one walk in slot order
+    /// stores the placements in the octree (relinking the spheres whose node changed) and
+    /// applies the bodies. Every slot's outcome depends only on its own shape, so the result is
+    /// the serial walk's at any thread count.
+    #[cfg(feature = "parallel")]
+    fn apply_par(&mut self) -> bool {
+        use super::store::Kind;
+        use crate::octree::Placed;
+        use rayon::prelude::*;
+        let slots = self.store.slots();
+        let threads = rayon::current_num_threads();
+        if self.cached
+            || threads < 2
+            || self.octree.len() < super::step::PARALLEL_MIN_SPHERES
+            || self.stale < slots / DENSE_FRACTION
+        {
+            return false;
+        }
+        let chunk = slots.div_ceil(threads * TASKS_PER_THREAD).max(1);
+        if self.placed.len() < slots {
+            self.placed.resize(slots, Placed::NONE);
+        }
+        let (margin, now, octree) = (self.config.margin, self.now, &self.octree);
+        let st = &mut self.store;
+        let (shape, flags) = (&st.shape, &st.flags);
+        let fast: usize = st
+            .exact
+            .par_chunks_mut(chunk)
+            .zip(st.speed.par_chunks_mut(chunk))
+            .zip(st.stamp.par_chunks_mut(chunk))
+            .zip(self.placed.par_chunks_mut(chunk))
+            .enumerate()
+            .map(|(c, (((exact, speed), stamp), placed))| {
+                let mut fast = 0;
+                for i in 0..exact.len() {
+                    let s = c * chunk + i;
+                    let Shape::Sphere { center, radius } = shape[s] else {
+                        continue;
+                    };
+                    if flags[s] & flag::STALE == 0 {
+                        continue;
+                    }
+                    let grown = fat::grown_sphere(center, radius, margin);
+                    let (v, f) = fat::motion(&exact[i], &grown.aabb, stamp[i], now);
+                    (exact[i], speed[i], stamp[i]) = (grown.aabb, v, now);
+                    fast += usize::from(f);
+                    placed[i] = octree.placement_of(center, grown.radius);
+                }
+                fast
+            })
+            .sum();
+        self.fast_movers += fast;
+        for s in 0..slots {
+            let f = &mut self.store.flags[s];
+            if *f & flag::STALE == 0 {
+                continue;
+            }
+            *f &= !flag::STALE;
+            if self.store.kind[s] != Kind::Sphere {
+                self.apply(s as u32);
+                continue;
+            }
+            if let Shape::Sphere { center, radius } = self.store.shape[s] {
+                let key = self.store.key(s as u32);
+                let r = fat::grown_sphere(center, radius, margin).radius;
+                self.octree.update_placed(key, center, r, &self.placed[s]);
+            }
+        }
+        true
     }
 
     /// True if `slot` was updated since the last step and the update is not applied yet: the

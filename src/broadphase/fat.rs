@@ -33,6 +33,23 @@ fn jitter(slot: u32) -> f32 {
     1.0 + h as f32 / (1u32 << 24) as f32
 }
 
+/// The speed (metres per step, largest axis) of a box that moved from `old` to `new` since
+/// step `stamp`, at step `now`; and whether that outgrows the smallest fat margin
+/// ([`outgrows_min_margin`]).
+#[inline(always)]
+pub(super) fn motion(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> (f32, bool) {
+    let moved = ((new.min + new.max) - (old.min + old.max))
+        .abs()
+        .max_element()
+        * 0.5;
+    let steps = now.wrapping_sub(stamp).max(1);
+    let speed = moved / steps as f32;
+    (
+        speed,
+        outgrows_min_margin(speed, new.extent().max_element()),
+    )
+}
+
 /// True if a box of largest extent `size` moving `speed` per step gets a margin above the
 /// smallest: it will leave its fat box every few steps.
 #[inline]
@@ -45,17 +62,9 @@ impl BroadPhase {
     /// `exact`), for its fat margin and the pass estimate.
     #[inline]
     pub(super) fn note_motion(&mut self, s: usize, exact: &SimdBox) {
-        let old = self.store.exact[s];
-        let moved = ((exact.min + exact.max) - (old.min + old.max))
-            .abs()
-            .max_element()
-            * 0.5;
-        let steps = self.now.wrapping_sub(self.store.stamp[s]).max(1);
-        let speed = moved / steps as f32;
+        let (speed, fast) = motion(&self.store.exact[s], exact, self.store.stamp[s], self.now);
         self.store.speed[s] = speed;
-        if outgrows_min_margin(speed, exact.extent().max_element()) {
-            self.fast_movers += 1;
-        }
+        self.fast_movers += usize::from(fast);
         self.store.stamp[s] = self.now;
     }
 

@@ -202,6 +202,9 @@ pub struct BroadPhase {
     /// The radix sort's scratch for `movers` (see [`apply`]).
     movers_tmp: Vec<u32>,
     movers_counts: Vec<u32>,
+    /// The parallel apply's sphere placements, by slot (see [`apply`]).
+    #[cfg(feature = "parallel")]
+    placed: Vec<crate::octree::Placed>,
     /// Slots given a new fat box since the last step, each once (`flag::ESCAPED`).
     escaped: Vec<u32>,
     /// Slots re-anchored this step, each once (`flag::LOUD`).
@@ -300,6 +303,8 @@ impl BroadPhase {
             stale: 0,
             movers_tmp: Vec::new(),
             movers_counts: Vec::new(),
+            #[cfg(feature = "parallel")]
+            placed: Vec::new(),
             escaped: Vec::new(),
             loud: Vec::new(),
             pending: Vec::new(),
@@ -395,6 +400,7 @@ impl BroadPhase {
     #[cfg(feature = "parallel")]
     fn par_heap_bytes(&self) -> usize {
         self.par.heap_bytes()
+            + self.placed.capacity() * core::mem::size_of::<crate::octree::Placed>()
     }
 
     #[cfg(not(feature = "parallel"))]

@@ -70,7 +70,7 @@ const LEAVE_AT_ONCE: f64 = 2.0;
 /// handing out the octree's chunks costs about what the second thread saves (measured on
 /// `gas`).
 #[cfg(feature = "parallel")]
-const PARALLEL_MIN_SPHERES: usize = 10_000;
+pub(super) const PARALLEL_MIN_SPHERES: usize = 10_000;
 /// The dynamic bodies from which a full pass splits over the pool whatever the spheres: a
 /// body costs the pass several times what a sphere does, so fewer of them pay for the split.
 #[cfg(feature = "parallel")]
