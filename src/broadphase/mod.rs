@@ -10,6 +10,8 @@
 //! keeps the candidate pairs of overlapping fat boxes, re-tests only what moved, and queries
 //! the structures for the proxies that left their fat box.
 //!
+//! An update stores the new shape and marks the slot; the step applies it ([`apply`]).
+//!
 //! The files: this one holds the type and its public API; [`config`] the settings,
 //! [`fat`] the fat-box layer (motion, fat boxes, the marks a step reads), [`slack`] what the
 //! incremental pass need not re-test, [`step`] the passes,
@@ -343,14 +345,16 @@ impl BroadPhase {
     }
 
     /// The octree holding the spheres, under the broadphase's keys, for debug views and
-    /// stats. Each sphere is held as `center ± (radius + margin)`, or a larger box around it
+    /// stats, as the last [`BroadPhase::step`] left it (updates since then are applied by the
+    /// next one). Each sphere is held as `center ± (radius + margin)`, or a larger box around it
     /// while the incremental pass runs; its level is where that box lives.
     #[must_use]
     pub fn octree(&self) -> &Octree {
         &self.octree
     }
 
-    /// The BVH holding the dynamic or the static bodies, under the broadphase's keys. Each
+    /// The BVH holding the dynamic or the static bodies, under the broadphase's keys, as the
+    /// last [`BroadPhase::step`] left it. Each
     /// body is held as its box grown by the margin, or a larger box around it while the
     /// incremental pass runs.
     #[must_use]
@@ -486,7 +490,9 @@ impl BroadPhase {
     }
 
     /// Moves or resizes a sphere. `Err(UnknownProxy)` for a stale key, `Err(WrongKind)` for a
-    /// body's key, or a geometry error; on `Err` nothing changes.
+    /// body's key, or a geometry error; on `Err` nothing changes. Only the shape is stored
+    /// here: the next [`BroadPhase::step`] moves it in the octree, and queries see it at once
+    /// (see the crate docs' "Queries").
     #[inline]
     pub fn update_sphere(&mut self, key: ProxyKey, center: Vec3, radius: f32) -> Result<(), Error> {
         let slot = self.check_sphere_update(key, center, radius)?;
@@ -496,6 +502,7 @@ impl BroadPhase {
 
     /// Sets a body's world AABB (its kind stays). `Err(UnknownProxy)` for a stale key,
     /// `Err(WrongKind)` for a sphere's key, or a geometry error; on `Err` nothing changes.
+    /// Stored like [`BroadPhase::update_sphere`]'s.
     pub fn update_body(&mut self, key: ProxyKey, aabb: Aabb) -> Result<(), Error> {
         let slot = self.check_body_update(key, &aabb)?;
         self.set_body(slot, &aabb);

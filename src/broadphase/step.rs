@@ -30,8 +30,9 @@
 //! the parts of the pair sort as it finds them (at the quantiles of the last step's pairs),
 //! each part is sorted by its own task, and the event diff is split the same way. Each pair is
 //! found by one producer, once, and every part covers a key range, so the lists are the
-//! serial pass's at any thread count. What stays serial: the updates (the caller's), the
-//! refits, the sphere × body queries (one task), and the incremental pass.
+//! serial pass's at any thread count. What stays serial: the octree's relinks and the body
+//! leaves of the updates' apply (see [`super::apply`]), the refits, the sphere × body queries
+//! (one task), and the incremental pass.
 
 use super::fat::LOOKAHEAD_STEPS;
 use super::*;
