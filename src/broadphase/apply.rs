@@ -140,6 +140,8 @@ impl BroadPhase {
         }
         let chunk = slots.div_ceil(threads * TASKS_PER_THREAD).max(1);
         if self.placed.len() < slots {
+            // Exactly the slots: the per-slot arrays grow by an eighth, not by doubling.
+            crate::radix::grow_to(&mut self.placed, self.store.capacity_slots());
             self.placed.resize(slots, Placed::NONE);
         }
         let (margin, now, octree) = (self.config.margin, self.now, &self.octree);
