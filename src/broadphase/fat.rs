@@ -24,12 +24,15 @@ fn margin(speed: f32, size: f32) -> f32 {
         .max(size * MIN_MARGIN)
 }
 
-/// A per-slot factor in `[1, 2)` on the fat margin. Proxies given fat boxes in the same step
-/// at the same speed would otherwise all leave them in the same later step (a burst of
-/// queries); spread margins spread the escapes.
+/// A factor in `[1, 2)` on the fat margin, hashed from the slot and the step the box is made
+/// at. Proxies given fat boxes in the same step at the same speed would otherwise all leave
+/// them in the same later step (a burst of queries); spread margins spread the escapes. A
+/// factor fixed per slot would give each proxy a fixed period in whole steps, and the
+/// proxies of equal periods would keep escaping together: hashing in the step redraws it at
+/// every new fat box.
 #[inline]
-fn jitter(slot: u32) -> f32 {
-    let h = slot.wrapping_mul(0x9E37_79B9) >> 8;
+fn jitter(slot: u32, now: u32) -> f32 {
+    let h = (slot ^ now.wrapping_mul(0x85EB_CA6B)).wrapping_mul(0x9E37_79B9) >> 8;
     1.0 + h as f32 / (1u32 << 24) as f32
 }
 
@@ -135,7 +138,7 @@ impl BroadPhase {
         } else {
             let resting = self.now.wrapping_sub(self.store.stamp[s]) > 1;
             let speed = if resting { 0.0 } else { self.store.speed[s] };
-            margin(speed, exact.extent().max_element()) * jitter(slot)
+            margin(speed, exact.extent().max_element()) * jitter(slot, self.now)
         };
         // The exact shape, [`grown`] by the fat margin.
         let exact_shape = match self.store.shape[s] {
