@@ -73,6 +73,16 @@ pub(crate) fn nearest_start(point: Vec3, bounds: &Aabb, k: usize, n: usize) -> f
     geom::point_aabb_distance(point, bounds) + spacing
 }
 
+/// Where a search for the `k` nearest objects of a structure that knows the cell its typical
+/// object lives in (the octree's most populated level) starts: the distance from `point` to
+/// `bounds` plus [`NEAREST_START`] of the edge of `k` such cells. Cells sized for their
+/// objects hold about one each wherever the objects are, so this stays near the spacing
+/// however much empty room the region around them has.
+pub(crate) fn nearest_start_in_cells(point: Vec3, bounds: &Aabb, k: usize, cell: f32) -> f32 {
+    let spacing = NEAREST_START * cell.max(0.0) * (k as f32).cbrt();
+    geom::point_aabb_distance(point, bounds) + spacing
+}
+
 /// The `k` nearest of `n` objects by an expanding search, into `out` (cleared first): from
 /// `radius`, each round has `collect(radius, out)` push `(key, exact distance)` for the
 /// objects that may be within `radius` and are wanted (a superset is fine; every wanted one

@@ -15,6 +15,70 @@ use core::ops::ControlFlow;
 use glam::{Vec3, Vec3A};
 use slotmap::Key;
 
+/// One segment's slab test against many boxes, each grown by `inflate`: the same answer as
+/// [`SimdBox::ray_entry`] (`is_some` and `t` alike, up to the sign of a zero `t`), cheaper
+/// when no direction component is zero. Derivation: with `1 / dir` finite and nonzero on every
+/// lane (a finite nonzero `dir` component has a finite nonzero inverse) and finite or infinite
+/// but never NaN box corners, `(corner − origin) · inv` is never NaN (a NaN needs `0 · ∞` or
+/// `∞ − ∞`, and a corner's difference with a finite origin can be `±∞` only times a nonzero
+/// factor), so the NaN selects of the general test pick their own lanes and can be left out.
+struct Slab {
+    origin: Vec3A,
+    inv: Vec3A,
+    inflate: f32,
+    /// No direction component is zero: the NaN-free test applies.
+    finite: bool,
+}
+
+impl Slab {
+    fn new(origin: Vec3, dir: Vec3, inflate: f32) -> Self {
+        let inv = Vec3A::from(inverse_dir(dir));
+        Slab {
+            origin: origin.into(),
+            inv,
+            inflate,
+            finite: inv.is_finite(),
+        }
+    }
+
+    /// The segment's entry `t` into `b` grown by `inflate`, if it enters it by `limit`.
+    #[inline(always)]
+    fn entry(&self, b: &SimdBox, limit: f32) -> Option<f32> {
+        let SimdBox { min, max } = b.grown(self.inflate);
+        if !self.finite {
+            return SimdBox { min, max }.ray_entry(self.origin, self.inv, limit);
+        }
+        let t1 = (min - self.origin) * self.inv;
+        let t2 = (max - self.origin) * self.inv;
+        let near = t1.min(t2).max_element();
+        let far = t1.max(t2).min_element();
+        let t_near = if near > 0.0 { near } else { 0.0 };
+        let t_far = if far < limit { far } else { limit };
+        (t_near <= t_far).then_some(t_near)
+    }
+}
+
+/// Relative margin of [`near_filter`]'s squared radius: a few `f32` roundings of a sum of
+/// three squares, with room to spare.
+const NEAR_FILTER_MARGIN: f32 = 32.0 * f32::EPSILON;
+
+/// A test in `f32` lanes that passes every box within `radius` of `p` by
+/// [`point_aabb_distance`] (which rounds an `f64` distance once), and every box holding such a
+/// box; it may pass a few slightly farther. Derivation: the per-axis gaps `max(min − p,
+/// p − max, 0)` are correctly rounded subtractions, monotone in the corners, so a box holding
+/// another has gaps no larger, and so no larger a sum of their squares (each operation rounds
+/// monotonically); that sum is within a few roundings of the exact squared distance, which the
+/// margin on `radius²` covers. An overflow to `+∞` only happens beyond every finite radius,
+/// and an underflow only shrinks the sum.
+fn near_filter(p: Vec3, radius: f32) -> impl Fn(&SimdBox) -> bool {
+    let p = Vec3A::from(p);
+    let r2 = radius * radius * (1.0 + NEAR_FILTER_MARGIN);
+    move |b: &SimdBox| {
+        let gap = (b.min - p).max(p - b.max).max(Vec3A::ZERO);
+        gap.length_squared() <= r2
+    }
+}
+
 impl Bvh {
     /// Calls `f` with the key of every live box that overlaps `aabb` (closed: touching
     /// counts), each once, in no particular order. A non-finite or inverted query box matches
@@ -194,8 +258,11 @@ impl Bvh {
         if !ray_is_valid(origin, dir, max_t) || inflate.is_nan() || inflate < 0.0 {
             return;
         }
-        let (o, inv) = (Vec3A::from(origin), Vec3A::from(inverse_dir(dir)));
-        let entry = |b: SimdBox, limit: f32| b.grown(inflate).ray_entry(o, inv, limit);
+        let slab = Slab::new(origin, dir, inflate);
+        let entry = |b: SimdBox, limit: f32| slab.entry(&b, limit);
+        // Nodes are read as one 16-byte load per corner (`Node::bounds`), whose fourth lane
+        // the slab test ignores.
+        let node_entry = |n: u32, limit: f32| entry(self.nodes[n as usize].bounds(), limit);
         let mut best = max_t;
         let mut consider = |key: ProxyKey, b: &SimdBox, best: &mut f32| {
             if !key.is_null() && entry(*b, *best).is_some() {
@@ -208,7 +275,7 @@ impl Bvh {
         let Some(root) = self.nodes.first() else {
             return;
         };
-        let Some(t_root) = entry(SimdBox::new(&root.aabb()), best) else {
+        let Some(t_root) = entry(root.bounds(), best) else {
             return;
         };
         let mut stack = SmallStack::<(u32, f32), INLINE_STACK>::new((0, 0.0));
@@ -225,8 +292,7 @@ impl Bvh {
                 continue;
             }
             let (a, b) = node.children(n);
-            let ta = entry(SimdBox::new(&self.nodes[a as usize].aabb()), best);
-            let tb = entry(SimdBox::new(&self.nodes[b as usize].aabb()), best);
+            let (ta, tb) = (node_entry(a, best), node_entry(b, best));
             match (ta, tb) {
                 (Some(ta), Some(tb)) if tb < ta => {
                     stack.push((a, ta));
@@ -257,10 +323,13 @@ impl Bvh {
         if !p.is_finite() || radius.is_nan() || radius < 0.0 {
             return ControlFlow::Continue(());
         }
-        let near = |b: &Aabb| point_aabb_distance(p, b) <= radius;
+        let may_be_near = near_filter(p, radius);
         let mut consider = |key: ProxyKey, b: &SimdBox| {
+            if key.is_null() || !may_be_near(b) {
+                return ControlFlow::Continue(());
+            }
             let aabb = b.aabb();
-            if !key.is_null() && near(&aabb) {
+            if point_aabb_distance(p, &aabb) <= radius {
                 f(key, &aabb)
             } else {
                 ControlFlow::Continue(())
@@ -270,7 +339,7 @@ impl Bvh {
             consider(key, b)?;
         }
         self.walk(
-            |node| near(&node.aabb()),
+            |node| may_be_near(&node.bounds()),
             |i| consider(self.keys[i], &self.boxes[i]),
         )
     }

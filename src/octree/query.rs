@@ -5,11 +5,11 @@
 //! [`Octree::nearest`], for its result. The `try_` queries stop as soon as their visitor
 //! returns [`ControlFlow::Break`], and say whether it did.
 
-use super::cell::Cell;
-use super::{NONE, Octree};
+use super::cell::{Cell, morton, node_index};
+use super::{NONE, Octree, Placement};
 use crate::geom::{self, Aabb};
 use crate::pair::ProxyKey;
-use crate::search::{FirstHit, nearest_expanding, nearest_start};
+use crate::search::{FirstHit, nearest_expanding, nearest_start_in_cells};
 use core::ops::ControlFlow;
 use glam::Vec3;
 
@@ -71,19 +71,6 @@ impl Octree {
     fn candidates(
         &self,
         aabb: &Aabb,
-        visit: impl FnMut(u32) -> ControlFlow<()>,
-    ) -> ControlFlow<()> {
-        self.candidates_from(aabb, true, false, visit)
-    }
-
-    /// [`Octree::candidates`], the root's list left out unless `root`; with `small` the
-    /// caller knows the box spans about a deepest occupied cell (a ray piece) and the direct
-    /// lists are read without counting the cells first. The first `Break` of `visit` ends it.
-    fn candidates_from(
-        &self,
-        aabb: &Aabb,
-        root: bool,
-        small: bool,
         mut visit: impl FnMut(u32) -> ControlFlow<()>,
     ) -> ControlFlow<()> {
         let (qlo, qhi) = (
@@ -91,7 +78,7 @@ impl Octree {
             self.lattice.quantize(aabb.max),
         );
         let mut cells = 0u64;
-        for level in (1..=self.lattice.depth).filter(|_| !small) {
+        for level in 1..=self.lattice.depth {
             if self.per_level[level as usize] > 0 {
                 let (a, b) = self.lattice.reaching_cells(level, qlo, qhi);
                 cells += (0..3)
@@ -100,16 +87,7 @@ impl Octree {
             }
         }
         if cells > DIRECT_CELLS {
-            return self.traverse(
-                |cell| self.lattice.reaches(cell, qlo, qhi),
-                |id| {
-                    if root || self.objs[id as usize].node != 0 {
-                        visit(id)
-                    } else {
-                        ControlFlow::Continue(())
-                    }
-                },
-            );
+            return self.traverse(|cell| self.lattice.reaches(cell, qlo, qhi), visit);
         }
         let mut list = |node: u32| {
             let mut i = self.nodes.head(node);
@@ -119,7 +97,7 @@ impl Octree {
             }
             ControlFlow::Continue(())
         };
-        if root && self.per_level[0] > 0 {
+        if self.per_level[0] > 0 {
             list(0)?;
         }
         for level in 1..=self.lattice.depth {
@@ -329,13 +307,23 @@ impl Octree {
         else {
             return;
         };
-        // Spheres below the root lie in the bounds grown by half their extent (a loose
-        // level-1 cell reaches a quarter of it past the bounds).
+        // Spheres below the root lie in their cells' reach boxes grown by the slack: within
+        // the bounds (strict), or within them grown by half a cell of the shallowest occupied
+        // level (loose); twice the slack covers the rounding of the region's own corners.
         let extent = self.lattice.bounds.extent();
+        let reach = match self.lattice.placement {
+            Placement::Strict => 0.0,
+            Placement::Loose => {
+                let shallowest = (1..=deepest)
+                    .find(|&l| self.per_level[l as usize] > 0)
+                    .unwrap_or(deepest);
+                extent.max_element() / (2u32 << shallowest) as f32
+            }
+        };
         let region = self
             .lattice
             .bounds
-            .grown(extent.max_element() * 0.5 + inflate);
+            .grown(reach + 2.0 * self.lattice.slack() + inflate);
         let inv = geom::inverse_dir(dir);
         let Some(t0) = region.ray_entry(origin, inv, best) else {
             return;
@@ -365,17 +353,24 @@ impl Octree {
             return;
         }
         // Pieces in order of `t`, each a box around its stretch of the segment grown by
-        // `inflate` and a slack fixed for the whole ray (so that each axis' piece intervals
-        // only move forward: the pieces whose ranges meet a sphere's range are consecutive,
-        // and a sphere is visited in the first of them only).
+        // `inflate` and a slack fixed for the whole ray. Each axis' piece intervals only move
+        // forward, and so do the cell ranges that reach them at every level: the pieces a
+        // cell reaches are consecutive, so reading at each piece only the cells the previous
+        // piece did not reach reads every cell once, in the first piece it reaches, and every
+        // sphere with it (its exact test decides; one read early costs nothing but the test).
         let q = |t_lo: f32, t_hi: f32| {
             let (p, r) = (origin + dir * t_lo, origin + dir * t_hi);
             Aabb::new(p.min(r) - Vec3::splat(slack), p.max(r) + Vec3::splat(slack))
         };
-        let meets = |o: &super::Obj, lo: [u16; 3], hi: [u16; 3]| {
-            (0..3).all(|a| o.qmin[a] <= hi[a] && lo[a] <= o.qmax[a])
-        };
-        let mut prev: Option<([u16; 3], [u16; 3])> = None;
+        // The occupied levels below the root, each with the cell range its last piece read.
+        let mut levels = [(0u32, [1u32; 3], [0u32; 3]); super::MAX_DEPTH as usize];
+        let mut occupied = 0;
+        for level in 1..=self.lattice.depth {
+            if self.per_level[level as usize] > 0 {
+                levels[occupied].0 = level;
+                occupied += 1;
+            }
+        }
         let mut k = 0u32;
         loop {
             let ta = t0 + dt * k as f32;
@@ -384,23 +379,48 @@ impl Octree {
             }
             let tb = (t0 + dt * (k + 1) as f32).min(t1);
             let piece = q(ta, tb);
-            let range = (
+            let (qlo, qhi) = (
                 self.lattice.quantize(piece.min),
                 self.lattice.quantize(piece.max),
             );
-            let _ = self.candidates_from(&piece, false, true, |id| {
-                let o = &self.objs[id as usize];
-                let new =
-                    meets(o, range.0, range.1) && prev.is_none_or(|(lo, hi)| !meets(o, lo, hi));
-                if new {
-                    best = best.min(visit(id, best));
+            for (level, pa, pb) in &mut levels[..occupied] {
+                let (a, b) = self.lattice.reaching_cells(*level, qlo, qhi);
+                let (pa, pb) = (core::mem::replace(pa, a), core::mem::replace(pb, b));
+                // A cell's node is its level's first plus its Morton code, whose bits of `x`,
+                // `y` and `z` are or-ed: a row computes those of `y` and `z` once.
+                let first = node_index(*level, 0);
+                let mut row = |y: u32, z: u32, x0: u32, x1: u32| {
+                    let yz = morton([0, y, z]);
+                    for x in x0..x1 + 1 {
+                        let mut i = self.nodes.head(first + (yz | morton([x, 0, 0])));
+                        while i != NONE {
+                            best = best.min(visit(i, best));
+                            i = self.links[i as usize].next;
+                        }
+                    }
+                };
+                for z in a[2]..b[2] + 1 {
+                    let z_read = pa[2] <= z && z <= pb[2];
+                    for y in a[1]..b[1] + 1 {
+                        let read = z_read && pa[1] <= y && y <= pb[1];
+                        if !read || pa[0] > pb[0] {
+                            row(y, z, a[0], b[0]);
+                            continue;
+                        }
+                        // A row the last piece read in part: only its cells outside
+                        // `pa.x..=pb.x`, on either side.
+                        if a[0] < pa[0] {
+                            row(y, z, a[0], b[0].min(pa[0] - 1));
+                        }
+                        if pb[0] < b[0] {
+                            row(y, z, a[0].max(pb[0] + 1), b[0]);
+                        }
+                    }
                 }
-                ControlFlow::Continue(())
-            });
+            }
             if tb >= t1 {
                 break;
             }
-            prev = Some(range);
             k += 1;
         }
     }
@@ -528,7 +548,7 @@ impl Octree {
     /// order (all of them if there are fewer). Empty for `k == 0` or a non-finite `point`.
     ///
     /// An expanding search: starting from the distance to the bounds plus a part of the
-    /// spacing `k` spheres spread evenly over the bounds would have, each round computes the exact
+    /// edge of `k` cells of the most populated level, each round computes the exact
     /// distance of every sphere of the nodes within the radius (plus a relative pad, as the
     /// node test rounds differently from the `f32` box corners) and doubles the radius until
     /// `k` spheres are within it or every sphere was seen. A sphere not seen is farther than
@@ -539,7 +559,7 @@ impl Octree {
         if k == 0 || n == 0 || !point.is_finite() {
             return Vec::new();
         }
-        let start = nearest_start(point, &self.lattice.bounds, k, n);
+        let start = self.nearest_start(point, k);
         let mut out = Vec::new();
         nearest_expanding(k, n, start, &mut out, |radius, out| {
             let reach = radius + geom::distance_pad(point, radius);
@@ -552,6 +572,22 @@ impl Octree {
             out.len()
         });
         out
+    }
+
+    /// Where a search for the `k` spheres nearest `point` starts
+    /// ([`nearest_start_in_cells`]): from the cells of the level holding the most spheres
+    /// below the root (the root's cell if none does), not from the region's size, which a
+    /// growing tree keeps well above its spheres' span. `+∞` for an empty tree.
+    pub(crate) fn nearest_start(&self, point: Vec3, k: usize) -> f32 {
+        if self.live == 0 {
+            return f32::INFINITY;
+        }
+        let level = (1..=self.lattice.depth)
+            .max_by_key(|&l| (self.per_level[l as usize], core::cmp::Reverse(l)))
+            .filter(|&l| self.per_level[l as usize] > 0)
+            .unwrap_or(0);
+        let cell = self.lattice.bounds.extent().max_element() / (1u32 << level) as f32;
+        nearest_start_in_cells(point, &self.lattice.bounds, k, cell)
     }
 
     /// Calls `f(level, cell)` for every node that holds at least one sphere, parents before
