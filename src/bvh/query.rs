@@ -5,6 +5,7 @@
 //! stop as soon as their visitor returns [`ControlFlow::Break`], and say whether it did.
 
 use super::Bvh;
+use super::lanes::{GROUP, Group};
 use super::node::{INLINE_STACK, Node, SmallStack};
 use crate::geom::{
     self, Aabb, SimdBox, check_aabb, check_sphere, inverse_dir, point_aabb_distance, ray_is_valid,
@@ -12,7 +13,7 @@ use crate::geom::{
 use crate::pair::ProxyKey;
 use crate::search::{FirstHit, nearest_expanding, nearest_start};
 use core::ops::ControlFlow;
-use glam::{Vec3, Vec3A};
+use glam::{Vec3, Vec3A, Vec4};
 use slotmap::Key;
 
 /// One segment's slab test against many boxes, each grown by `inflate`: the same answer as
@@ -28,6 +29,11 @@ struct Slab {
     inflate: f32,
     /// No direction component is zero: the NaN-free test applies.
     finite: bool,
+    /// `origin`, `inv` and `inflate` with each component in all four lanes, for
+    /// [`Slab::group_mask`].
+    origin4: [Vec4; 3],
+    inv4: [Vec4; 3],
+    inflate4: Vec4,
 }
 
 impl Slab {
@@ -38,7 +44,29 @@ impl Slab {
             inv,
             inflate,
             finite: inv.is_finite(),
+            origin4: [0, 1, 2].map(|a| Vec4::splat(origin[a])),
+            inv4: [0, 1, 2].map(|a| Vec4::splat(inv[a])),
+            inflate4: Vec4::splat(inflate),
         }
+    }
+
+    /// Bit `k` set iff [`Slab::entry`] of box `k` of `group` by `limit` is some, for a
+    /// segment with no zero direction component (`finite`): the same operations on the same
+    /// floats, lane by lane (`t_near` is the largest of the axes' and 0, `t_far` the smallest
+    /// of the axes' and `limit`).
+    #[inline(always)]
+    fn group_mask(&self, group: &Group, limit: f32) -> u32 {
+        debug_assert!(self.finite);
+        let (min, max) = group.faces();
+        let mut near = Vec4::ZERO;
+        let mut far = Vec4::splat(limit);
+        for a in 0..3 {
+            let t1 = (min[a] - self.inflate4 - self.origin4[a]) * self.inv4[a];
+            let t2 = (max[a] + self.inflate4 - self.origin4[a]) * self.inv4[a];
+            near = near.max(t1.min(t2));
+            far = far.min(t1.max(t2));
+        }
+        near.cmple(far).bitmask()
     }
 
     /// The segment's entry `t` into `b` grown by `inflate`, if it enters it by `limit`.
@@ -286,8 +314,28 @@ impl Bvh {
             }
             let node = &self.nodes[n as usize];
             if node.is_leaf() {
-                for i in node.range() {
-                    consider(self.keys[i], &self.boxes[i], &mut best);
+                let range = node.range();
+                match self.lanes.leaf(range.start, range.len()) {
+                    // Four boxes per test; each that passes is tested again (it may lie
+                    // behind a hit found since).
+                    Some(leaf) if slab.finite => {
+                        let mut m = 0u64;
+                        for (j, group) in leaf.blocks.iter().enumerate() {
+                            m |= u64::from(slab.group_mask(group, best)) << (GROUP * j);
+                        }
+                        m &= leaf.valid;
+                        let base = range.start - leaf.off;
+                        while m != 0 {
+                            let i = base + m.trailing_zeros() as usize;
+                            m &= m - 1;
+                            consider(self.keys[i], &self.boxes[i], &mut best);
+                        }
+                    }
+                    _ => {
+                        for i in range {
+                            consider(self.keys[i], &self.boxes[i], &mut best);
+                        }
+                    }
                 }
                 continue;
             }
