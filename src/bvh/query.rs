@@ -11,45 +11,12 @@ use crate::geom::{
     self, Aabb, SimdBox, check_aabb, check_sphere, inverse_dir, point_aabb_distance, ray_is_valid,
 };
 use crate::pair::ProxyKey;
-use crate::search::{FirstHit, nearest_expanding, nearest_start};
+use crate::search::{FirstHit, Slab, nearest_expanding, nearest_start};
 use core::ops::ControlFlow;
 use glam::{Vec3, Vec3A, Vec4};
 use slotmap::Key;
 
-/// One segment's slab test against many boxes, each grown by `inflate`: the same answer as
-/// [`SimdBox::ray_entry`] (`is_some` and `t` alike, up to the sign of a zero `t`), cheaper
-/// when no direction component is zero. Derivation: with `1 / dir` finite and nonzero on every
-/// lane (a finite nonzero `dir` component has a finite nonzero inverse) and finite or infinite
-/// but never NaN box corners, `(corner − origin) · inv` is never NaN (a NaN needs `0 · ∞` or
-/// `∞ − ∞`, and a corner's difference with a finite origin can be `±∞` only times a nonzero
-/// factor), so the NaN selects of the general test pick their own lanes and can be left out.
-struct Slab {
-    origin: Vec3A,
-    inv: Vec3A,
-    inflate: f32,
-    /// No direction component is zero: the NaN-free test applies.
-    finite: bool,
-    /// `origin`, `inv` and `inflate` with each component in all four lanes, for
-    /// [`Slab::group_mask`].
-    origin4: [Vec4; 3],
-    inv4: [Vec4; 3],
-    inflate4: Vec4,
-}
-
 impl Slab {
-    fn new(origin: Vec3, dir: Vec3, inflate: f32) -> Self {
-        let inv = Vec3A::from(inverse_dir(dir));
-        Slab {
-            origin: origin.into(),
-            inv,
-            inflate,
-            finite: inv.is_finite(),
-            origin4: [0, 1, 2].map(|a| Vec4::splat(origin[a])),
-            inv4: [0, 1, 2].map(|a| Vec4::splat(inv[a])),
-            inflate4: Vec4::splat(inflate),
-        }
-    }
-
     /// Bit `k` set iff [`Slab::entry`] of box `k` of `group` by `limit` is some, for a
     /// segment with no zero direction component (`finite`): the same operations on the same
     /// floats, lane by lane (`t_near` is the largest of the axes' and 0, `t_far` the smallest
@@ -67,22 +34,6 @@ impl Slab {
             far = far.min(t1.max(t2));
         }
         near.cmple(far).bitmask()
-    }
-
-    /// The segment's entry `t` into `b` grown by `inflate`, if it enters it by `limit`.
-    #[inline(always)]
-    fn entry(&self, b: &SimdBox, limit: f32) -> Option<f32> {
-        let SimdBox { min, max } = b.grown(self.inflate);
-        if !self.finite {
-            return SimdBox { min, max }.ray_entry(self.origin, self.inv, limit);
-        }
-        let t1 = (min - self.origin) * self.inv;
-        let t2 = (max - self.origin) * self.inv;
-        let near = t1.min(t2).max_element();
-        let far = t1.max(t2).min_element();
-        let t_near = if near > 0.0 { near } else { 0.0 };
-        let t_far = if far < limit { far } else { limit };
-        (t_near <= t_far).then_some(t_near)
     }
 }
 

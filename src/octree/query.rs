@@ -7,9 +7,9 @@
 
 use super::cell::{Cell, morton, node_index};
 use super::{NONE, Octree, Placement};
-use crate::geom::{self, Aabb};
+use crate::geom::{self, Aabb, SimdBox};
 use crate::pair::ProxyKey;
-use crate::search::{FirstHit, nearest_expanding, nearest_start_in_cells};
+use crate::search::{FirstHit, Slab, nearest_expanding, nearest_start_in_cells};
 use core::ops::ControlFlow;
 use glam::Vec3;
 
@@ -205,28 +205,13 @@ impl Octree {
         if !geom::ray_is_valid(origin, dir, max_t) {
             return None;
         }
-        let inv = geom::inverse_dir(dir);
-        let slack = self.lattice.slack();
-        let hit = core::cell::Cell::new(FirstHit::new(max_t));
-        let limit = || hit.get().limit();
-        let _ = self.traverse(
-            |cell| {
-                self.lattice
-                    .reach_box(cell)
-                    .grown(slack)
-                    .ray_entry(origin, inv, limit())
-                    .is_some()
-            },
-            |id| {
-                let o = &self.objs[id as usize];
-                let t = geom::ray_sphere(origin, dir, o.center, o.radius, limit());
-                let mut h = hit.get();
-                h.offer(self.keys[id as usize], t);
-                hit.set(h);
-                ControlFlow::Continue(())
-            },
-        );
-        hit.get().best()
+        let mut hit = FirstHit::new(max_t);
+        self.ray_ids(origin, dir, max_t, 0.0, |id, limit| {
+            let o = &self.objs[id as usize];
+            let t = geom::ray_sphere(origin, dir, o.center, o.radius, limit);
+            hit.offer(self.keys[id as usize], t)
+        });
+        hit.best()
     }
 
     /// Calls `f(key, t)` for every sphere hit by the segment (same rules as
@@ -471,10 +456,10 @@ impl Octree {
         if !geom::ray_is_valid(origin, dir, max_t) || inflate.is_nan() || inflate < 0.0 {
             return;
         }
-        let inv = geom::inverse_dir(dir);
+        let slab = Slab::new(origin, dir, inflate);
         self.ray_ids(origin, dir, max_t, inflate, |id, best| {
             let aabb = &self.objs[id as usize].aabb;
-            match aabb.grown(inflate).ray_entry(origin, inv, best) {
+            match slab.entry(&SimdBox::new(aabb), best) {
                 Some(_) => visit(self.keys[id as usize], aabb),
                 None => best,
             }
