@@ -265,12 +265,12 @@ impl Octree {
         );
     }
 
-    /// Calls `visit(id, best)` for every sphere of every node whose reach box, grown by the
-    /// slack and by `inflate`, the segment `origin + t·dir`, `t ∈ [0, best]` enters, where
-    /// `best` starts at `max_t` and becomes `min(best, returned value)` after each visit (a NaN
-    /// return leaves it). Every sphere whose box grown by `inflate` the segment enters is
-    /// among them: the root is always entered, and below it a sphere's box lies in its node's
-    /// reach box grown by the slack.
+    /// Calls `visit(id, best)`, once each, for the spheres of the root and of every node whose
+    /// reach the segment `origin + t·dir`, `t ∈ [0, best]` may meet (grown by the slack and by
+    /// `inflate`; nearer nodes first, a few beside the segment too), where `best` starts at
+    /// `max_t` and becomes `min(best, returned value)` after each visit (a NaN return leaves
+    /// it). Every sphere whose box grown by `inflate` the segment enters is among them: below
+    /// the root a sphere's box lies in its node's reach box grown by the slack.
     fn ray_ids(
         &self,
         origin: Vec3,
