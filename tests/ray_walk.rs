@@ -364,3 +364,44 @@ fn broadphase_rays_and_nearest_equal_brute_force_over_spheres_and_bodies() {
         }
     }
 }
+
+#[test]
+fn loose_spheres_poking_out_of_the_bounds_are_hit_by_rays_passing_outside_them() {
+    // A loose sphere's box reaches half a cell of its level past the bounds: rays that run
+    // outside the bounds but through that half cell must find it, for each level.
+    let half = 16.0;
+    let bounds = Aabb::new(Vec3::splat(-half), Vec3::splat(half));
+    let mut tree = Octree::with_placement(bounds, 5, Placement::Loose).unwrap();
+    let mut live = Vec::new();
+    for (i, r) in [7.9f32, 3.9, 1.9, 0.9, 0.45].into_iter().enumerate() {
+        let c = Vec3::new(half - 0.01, 6.0 * i as f32 - 12.0, 0.3);
+        live.push((tree.insert(c, r).unwrap(), c, r));
+    }
+    tree.validate();
+    for &(_, c, r) in &live {
+        for dx in [0.25f32, 0.5, 0.9] {
+            let x = half + (r - 0.01) * dx;
+            for (o, d) in [
+                (Vec3::new(x, -3.0 * half, c.z), Vec3::Y),
+                (Vec3::new(x, c.y, 3.0 * half), Vec3::new(0.0, 0.0, -1.0)),
+                (
+                    Vec3::new(x, c.y - 2.0 * half, c.z + 0.1),
+                    Vec3::new(0.0, 1.0, 0.01),
+                ),
+            ] {
+                let max_t = 8.0 * half;
+                let want = first(
+                    live.iter()
+                        .map(|&(k, c, r)| (k, ray_sphere(o, d, c, r, max_t))),
+                );
+                assert!(want.is_some(), "the ray {o} {d} was meant to hit");
+                assert_eq!(tree.cast_ray(o, d, max_t), want, "ray {o} {d}");
+                let want = first(
+                    live.iter()
+                        .map(|&(k, c, r)| (k, sphere_cast_sphere(o, 0.0, d, max_t, c, r))),
+                );
+                assert_eq!(tree.cast_sphere(o, 0.0, d, max_t), want, "cast {o} {d}");
+            }
+        }
+    }
+}
