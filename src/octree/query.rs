@@ -30,6 +30,35 @@ const RAY_PIECE_SLACK: f32 = 1e-5;
 /// cell once per piece).
 const MAX_PIECE_CELLS: f32 = 8.0;
 
+/// The per-sphere reads of the queries, in one place: what they need of a sphere's record
+/// and of its node's list, whatever the layout of those.
+impl Octree {
+    /// The stored box of sphere `id` (`center ± radius`).
+    #[inline(always)]
+    fn box_of(&self, id: u32) -> &Aabb {
+        &self.objs[id as usize].aabb
+    }
+
+    /// The centre and radius of sphere `id`, exactly as given.
+    #[inline(always)]
+    fn sphere_of(&self, id: u32) -> (Vec3, f32) {
+        let o = &self.objs[id as usize];
+        (o.center, o.radius)
+    }
+
+    /// True if sphere `id` lives in the root.
+    #[inline(always)]
+    fn in_root(&self, id: u32) -> bool {
+        self.objs[id as usize].node == 0
+    }
+
+    /// The sphere after `i` in its node's list, `NONE` at the end.
+    #[inline(always)]
+    fn next_in_list(&self, i: u32) -> u32 {
+        self.links[i as usize].next
+    }
+}
+
 impl Octree {
     /// Depth-first over occupied nodes from the root: `enter(cell)` decides whether to visit a
     /// node's spheres (`visit(id)`) and children; the root is always entered. The first
@@ -50,7 +79,7 @@ impl Octree {
                 let mut i = self.nodes.head_at(slot);
                 while i != NONE && !stopped.get() {
                     stopped.set(visit(i).is_break());
-                    i = self.links[i as usize].next;
+                    i = self.next_in_list(i);
                 }
             },
         );
@@ -93,7 +122,7 @@ impl Octree {
             let mut i = self.nodes.head(node);
             while i != NONE {
                 visit(i)?;
-                i = self.links[i as usize].next;
+                i = self.next_in_list(i);
             }
             ControlFlow::Continue(())
         };
@@ -156,7 +185,7 @@ impl Octree {
         mut f: impl FnMut(ProxyKey) -> ControlFlow<()>,
     ) -> ControlFlow<()> {
         self.candidates(aabb, |id| {
-            if self.objs[id as usize].aabb.overlaps(aabb) {
+            if self.box_of(id).overlaps(aabb) {
                 f(self.keys[id as usize])
             } else {
                 ControlFlow::Continue(())
@@ -187,7 +216,7 @@ impl Octree {
             return ControlFlow::Continue(());
         }
         self.candidates(&Aabb::from_center_radius(center, radius), |id| {
-            let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
+            let (c, r) = self.sphere_of(id);
             if geom::spheres_touch(c, r, center, radius) {
                 f(self.keys[id as usize])
             } else {
@@ -207,8 +236,8 @@ impl Octree {
         }
         let mut hit = FirstHit::new(max_t);
         self.ray_ids(origin, dir, max_t, 0.0, |id, limit| {
-            let o = &self.objs[id as usize];
-            let t = geom::ray_sphere(origin, dir, o.center, o.radius, limit);
+            let (c, r) = self.sphere_of(id);
+            let t = geom::ray_sphere(origin, dir, c, r, limit);
             hit.offer(self.keys[id as usize], t)
         });
         hit.best()
@@ -256,7 +285,7 @@ impl Octree {
                     .is_some()
             },
             |id| {
-                let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
+                let (c, r) = self.sphere_of(id);
                 if let Some(t) = hit(c, r) {
                     f(self.keys[id as usize], t);
                 }
@@ -284,7 +313,7 @@ impl Octree {
         let mut i = self.nodes.head(0);
         while i != NONE {
             best = best.min(visit(i, best));
-            i = self.links[i as usize].next;
+            i = self.next_in_list(i);
         }
         let Some(deepest) = (1..=self.lattice.depth)
             .rev()
@@ -329,11 +358,7 @@ impl Octree {
             && piece_cells <= MAX_PIECE_CELLS)
         {
             self.ray_ids_walk(origin, dir, best, inflate, |id, b| {
-                if self.objs[id as usize].node == 0 {
-                    b
-                } else {
-                    visit(id, b)
-                }
+                if self.in_root(id) { b } else { visit(id, b) }
             });
             return;
         }
@@ -380,7 +405,7 @@ impl Octree {
                         let mut i = self.nodes.head(first + (yz | morton([x, 0, 0])));
                         while i != NONE {
                             best = best.min(visit(i, best));
-                            i = self.links[i as usize].next;
+                            i = self.next_in_list(i);
                         }
                     }
                 };
@@ -458,7 +483,7 @@ impl Octree {
         }
         let slab = Slab::new(origin, dir, inflate);
         self.ray_ids(origin, dir, max_t, inflate, |id, best| {
-            let aabb = &self.objs[id as usize].aabb;
+            let aabb = self.box_of(id);
             match slab.entry(&SimdBox::new(aabb), best) {
                 Some(_) => visit(self.keys[id as usize], aabb),
                 None => best,
@@ -495,7 +520,7 @@ impl Octree {
         }
         let cube = Aabb::from_center_radius(p, radius);
         self.near_ids(p, radius, |id| {
-            if self.objs[id as usize].aabb.overlaps(&cube) {
+            if self.box_of(id).overlaps(&cube) {
                 f(self.keys[id as usize])
             } else {
                 ControlFlow::Continue(())
@@ -521,8 +546,8 @@ impl Octree {
     ) -> Option<(ProxyKey, f32)> {
         let (mut hit, inflate) = FirstHit::sphere_cast(center, radius, dir, max_t)?;
         self.ray_ids(center, dir, max_t, inflate, |id, limit| {
-            let o = &self.objs[id as usize];
-            let t = geom::sphere_cast_sphere(center, radius, dir, limit, o.center, o.radius);
+            let (c, r) = self.sphere_of(id);
+            let t = geom::sphere_cast_sphere(center, radius, dir, limit, c, r);
             hit.offer(self.keys[id as usize], t)
         });
         hit.best()
@@ -549,8 +574,8 @@ impl Octree {
         nearest_expanding(k, n, start, &mut out, |radius, out| {
             let reach = radius + geom::distance_pad(point, radius);
             let _ = self.near_ids(point, reach, |id| {
-                let o = &self.objs[id as usize];
-                let d = geom::point_sphere_distance(point, o.center, o.radius);
+                let (c, r) = self.sphere_of(id);
+                let d = geom::point_sphere_distance(point, c, r);
                 out.push((self.keys[id as usize], d));
                 ControlFlow::Continue(())
             });
