@@ -341,7 +341,8 @@ impl BroadPhase {
     /// kept across calls stops allocating once it has held the largest round.
     ///
     /// An expanding search: from the distance to the octree's region plus a part of the
-    /// spacing `k` proxies spread evenly over it would have, each round takes every proxy
+    /// spacing `k` proxies spread evenly over it would have (or over the octree's typical
+    /// cells, if that is less), each round takes every proxy
     /// whose held box is within the radius and doubles the radius until `k` that pass the
     /// filter are within it by their exact distance (or every proxy was seen). A proxy not
     /// seen is farther than the radius.
@@ -357,7 +358,8 @@ impl BroadPhase {
         if k == 0 || n == 0 || !point.is_finite() {
             return;
         }
-        let start = nearest_start(point, &self.occupied_bounds(), k, n);
+        let start = nearest_start(point, &self.occupied_bounds(), k, n)
+            .min(self.octree.nearest_start(point, k));
         nearest_expanding(k, n, start, out, |radius, out| {
             let reach = radius + geom::distance_pad(point, radius);
             let mut seen = 0;
