@@ -61,7 +61,7 @@ impl Bvh {
         if !t.nodes.is_empty() {
             stack.push((0, 0));
         }
-        drain_own(&t, stack, &mut f);
+        drain_own(&t, stack, &mut Noted::new(), &mut f);
         self.pending_self_pairs(&mut scratch.sweep_a, &mut f);
     }
 
@@ -111,7 +111,7 @@ impl Bvh {
         {
             stack.push((0, 0));
         }
-        drain_cross(&ta, &tb, stack, &mut f);
+        drain_cross(&ta, &tb, stack, &mut Noted::new(), &mut f);
         self.pending_cross_pairs(other, scratch, &mut f);
     }
 
@@ -151,12 +151,15 @@ impl Bvh {
 }
 
 /// Scratch of [`Bvh::for_each_pair_split`], owned by its caller and reused: the items handed
-/// out (each list with a second buffer for its next level), and one [`PairScratch`] per task.
+/// out (each list with a second buffer for its next round), the order tasks take them in, and
+/// one [`PairScratch`] per task.
 #[cfg(feature = "parallel")]
 #[derive(Clone, Debug, Default)]
 pub(crate) struct SplitScratch {
     own: [Vec<(u32, u32)>; 2],
     cross: [Vec<(u32, u32)>; 2],
+    /// `(weight, item)` of every item, heaviest first; `item` indexes `own` then `cross`.
+    order: Vec<(u32, u32)>,
     tasks: Vec<PairScratch>,
 }
 
@@ -167,6 +170,7 @@ impl SplitScratch {
         (self.own.iter().chain(&self.cross))
             .map(|v| v.capacity() * 8)
             .sum::<usize>()
+            + self.order.capacity() * 8
             + self.tasks.capacity() * core::mem::size_of::<PairScratch>()
             + self
                 .tasks
@@ -176,23 +180,33 @@ impl SplitScratch {
     }
 }
 
-/// Items a split pair pass aims to hand each task: the items' sizes differ by orders of
-/// magnitude, and rayon's work stealing evens the threads out only when each has several.
+/// Items a split pair pass aims to make per task: an item weighs at most the whole
+/// descents' weight over this many per task, so that the threads, taking the heaviest items
+/// first, end within about one light item of each other.
 #[cfg(feature = "parallel")]
 const ITEMS_PER_TASK: usize = 8;
+
+/// The most items a split pair pass makes per task, whatever their weights (a cap on the
+/// serial expansion for trees whose cross items stay heavy).
+#[cfg(feature = "parallel")]
+const MAX_ITEMS_PER_TASK: usize = 64;
 
 #[cfg(feature = "parallel")]
 impl Bvh {
     /// The pairs of [`Bvh::for_each_pair`] and of [`Bvh::for_each_pair_with`]`(other)`, found
     /// in `out.len()` tasks over rayon's current pool: task `c` calls `emit(&mut out[c], a, b)`
     /// for each pair it finds, `a` in `self` (each pair is found by one task, once; which one
-    /// is unspecified).
+    /// depends on the threads' timing).
     ///
-    /// The items of both descents are first expanded level by level on the calling thread
-    /// (an item is replaced by its children's items, as the descents themselves do, and
-    /// leaf-level items stay) until there are [`ITEMS_PER_TASK`] per task or nothing left to
-    /// expand. Items partition the pairs, so each task then runs the serial descents from its
-    /// stretch of the items with its own stack. The pending boxes' pairs go to task 0.
+    /// The items of both descents are first expanded on the calling thread (an item is
+    /// replaced by its children's items, as the descents themselves do) until none weighs
+    /// more than `1 / (tasks · ITEMS_PER_TASK)` of their total or can be expanded. An item's
+    /// weight is the node count of its subtree, the smaller one's for a cross item: a self
+    /// item's descent costs about that, and a cross item's no more than a descent of its
+    /// smaller side. Items partition the pairs, so each task then takes items, heaviest first,
+    /// from one shared counter, and runs the serial descents from each with its own stack:
+    /// a thread that lags (or is not scheduled) takes fewer, and no thread waits at the end
+    /// for more than one item of another. The pending boxes' pairs go to task 0 first.
     pub(crate) fn for_each_pair_split<S, E>(
         &self,
         other: &Bvh,
@@ -203,6 +217,7 @@ impl Bvh {
         S: Send,
         E: Fn(&mut S, ProxyKey, ProxyKey) + Sync,
     {
+        use core::sync::atomic::{AtomicUsize, Ordering};
         use rayon::prelude::*;
         let tasks = out.len();
         if tasks == 0 {
@@ -212,66 +227,112 @@ impl Bvh {
         let SplitScratch {
             own: [own, own_next],
             cross: [cross, cross_next],
+            order,
             tasks: scratches,
         } = scratch;
         own.clear();
         cross.clear();
+        let mut total = 0u64;
         if let Some(root) = ta.nodes.first() {
             own.push((0, 0));
+            total += u64::from(own_weight(&ta, 0, 0));
             if tb
                 .nodes
                 .first()
                 .is_some_and(|r| r.bounds().overlaps(&root.bounds()))
             {
                 cross.push((0, 0));
+                total += u64::from(cross_weight(&ta, &tb, 0, 0));
             }
         }
-        while own.len() + cross.len() < tasks * ITEMS_PER_TASK {
-            let grew_own = expand_own(&ta, own, own_next);
-            let grew_cross = expand_cross(&ta, &tb, cross, cross_next);
+        let limit = (total / (tasks * ITEMS_PER_TASK) as u64).max(1) as u32;
+        while own.len() + cross.len() < tasks * MAX_ITEMS_PER_TASK {
+            let grew_own = expand_own(&ta, limit, own, own_next);
+            let grew_cross = expand_cross(&ta, &tb, limit, cross, cross_next);
             if !(grew_own || grew_cross) {
                 break;
             }
         }
+        order.clear();
+        order.extend(
+            own.iter()
+                .map(|&(a, b)| own_weight(&ta, a, b))
+                .chain(cross.iter().map(|&(a, b)| cross_weight(&ta, &tb, a, b)))
+                .zip(0..),
+        );
+        order.sort_unstable_by(|x, y| y.cmp(x));
         if scratches.len() < tasks {
             scratches.resize_with(tasks, PairScratch::default);
         }
-        let (own, cross) = (&own[..], &cross[..]);
-        let total = own.len() + cross.len();
+        let (own, cross, order) = (&own[..], &cross[..], &order[..]);
+        let next = AtomicUsize::new(0);
         let (ta, tb) = (&ta, &tb);
         out.par_iter_mut()
             .zip(&mut scratches[..tasks])
             .enumerate()
             .for_each(|(c, (o, s))| {
                 let mut f = |a, b| emit(o, a, b);
-                let (lo, hi) = (total * c / tasks, total * (c + 1) / tasks);
-                let split = |at: usize| at.min(own.len());
-                s.stack.clear();
-                s.stack.extend_from_slice(&own[split(lo)..split(hi)]);
-                drain_own(ta, &mut s.stack, &mut f);
-                let past = |at: usize| at.max(own.len()) - own.len();
-                s.stack.extend_from_slice(&cross[past(lo)..past(hi)]);
-                drain_cross(ta, tb, &mut s.stack, &mut f);
                 if c == 0 {
                     self.pending_self_pairs(&mut s.sweep_a, &mut f);
                     self.pending_cross_pairs(other, s, &mut f);
+                }
+                let mut noted = Noted::new();
+                while let Some(&(_, item)) = order.get(next.fetch_add(1, Ordering::Relaxed)) {
+                    let item = item as usize;
+                    s.stack.clear();
+                    if let Some(&own_item) = own.get(item) {
+                        s.stack.push(own_item);
+                        drain_own(ta, &mut s.stack, &mut noted, &mut f);
+                    } else {
+                        s.stack.push(cross[item - own.len()]);
+                        drain_cross(ta, tb, &mut s.stack, &mut noted, &mut f);
+                    }
                 }
             });
     }
 }
 
-/// Replaces the self-traversal items of `cur` by their children's items (see [`drain_own`]),
-/// leaf-level items kept, with `next` as the second buffer; true if any item had children.
+/// The node count of the subtree of `n`: in the depth-first array it ends where the subtree
+/// of its last second child, down the right spine, does.
 #[cfg(feature = "parallel")]
-fn expand_own(t: &Tree, cur: &mut Vec<(u32, u32)>, next: &mut Vec<(u32, u32)>) -> bool {
+fn subtree_nodes(t: &Tree, n: u32) -> u32 {
+    let mut m = n;
+    while !t.nodes[m as usize].is_leaf() {
+        m = t.nodes[m as usize].first;
+    }
+    m + 1 - n
+}
+
+/// The weight of a self-traversal item (see [`Bvh::for_each_pair_split`]).
+#[cfg(feature = "parallel")]
+fn own_weight(t: &Tree, a: u32, b: u32) -> u32 {
+    if a == b {
+        subtree_nodes(t, a)
+    } else {
+        cross_weight(t, t, a, b)
+    }
+}
+
+/// The weight of a cross item (see [`Bvh::for_each_pair_split`]).
+#[cfg(feature = "parallel")]
+fn cross_weight(ta: &Tree, tb: &Tree, a: u32, b: u32) -> u32 {
+    subtree_nodes(ta, a).min(subtree_nodes(tb, b))
+}
+
+/// Replaces the self-traversal items of `cur` that weigh more than `limit` by their
+/// children's items (see [`drain_own`]), the others kept, with `next` as the second buffer;
+/// true if any item was replaced.
+#[cfg(feature = "parallel")]
+fn expand_own(t: &Tree, limit: u32, cur: &mut Vec<(u32, u32)>, next: &mut Vec<(u32, u32)>) -> bool {
     next.clear();
     let mut grew = false;
     for &(a, b) in cur.iter() {
         let na = &t.nodes[a as usize];
-        if a == b && !na.is_leaf() {
+        let light = own_weight(t, a, b) <= limit;
+        if !light && a == b && !na.is_leaf() {
             own_children(t, a, na, next);
             grew = true;
-        } else if a != b && !(na.is_leaf() && t.nodes[b as usize].is_leaf()) {
+        } else if !light && a != b && !(na.is_leaf() && t.nodes[b as usize].is_leaf()) {
             cross_children(t, t, a, b, next);
             grew = true;
         } else {
@@ -287,13 +348,15 @@ fn expand_own(t: &Tree, cur: &mut Vec<(u32, u32)>, next: &mut Vec<(u32, u32)>) -
 fn expand_cross(
     ta: &Tree,
     tb: &Tree,
+    limit: u32,
     cur: &mut Vec<(u32, u32)>,
     next: &mut Vec<(u32, u32)>,
 ) -> bool {
     next.clear();
     let mut grew = false;
     for &(a, b) in cur.iter() {
-        if ta.nodes[a as usize].is_leaf() && tb.nodes[b as usize].is_leaf() {
+        let leaves = ta.nodes[a as usize].is_leaf() && tb.nodes[b as usize].is_leaf();
+        if leaves || cross_weight(ta, tb, a, b) <= limit {
             next.push((a, b));
         } else {
             cross_children(ta, tb, a, b, next);
@@ -312,11 +375,15 @@ fn expand_cross(
 /// itself), so descending partitions them again, and a cross item whose node boxes do not
 /// overlap holds no pair because node boxes contain their primitives'. Every pair below the
 /// items is thus produced by exactly one leaf-level item, once.
-fn drain_own(t: &Tree, stack: &mut Vec<(u32, u32)>, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
-    let mut noted = Noted::new();
+fn drain_own(
+    t: &Tree,
+    stack: &mut Vec<(u32, u32)>,
+    noted: &mut Noted,
+    f: &mut impl FnMut(ProxyKey, ProxyKey),
+) {
     while let Some((a, b)) = stack.pop() {
         if a != b {
-            cross_step(t, t, a, b, stack, &mut noted, f);
+            cross_step(t, t, a, b, stack, noted, f);
             continue;
         }
         let node = &t.nodes[a as usize];
@@ -346,11 +413,11 @@ fn drain_cross(
     ta: &Tree,
     tb: &Tree,
     stack: &mut Vec<(u32, u32)>,
+    noted: &mut Noted,
     f: &mut impl FnMut(ProxyKey, ProxyKey),
 ) {
-    let mut noted = Noted::new();
     while let Some((a, b)) = stack.pop() {
-        cross_step(ta, tb, a, b, stack, &mut noted, f);
+        cross_step(ta, tb, a, b, stack, noted, f);
     }
 }
 
@@ -626,7 +693,7 @@ mod tests {
                 }
             }
             want.sort_unstable();
-            for threads in [1, 2, 3] {
+            for threads in [1, 2, 3, 8] {
                 let pool = rayon::ThreadPoolBuilder::new()
                     .num_threads(threads)
                     .build()
