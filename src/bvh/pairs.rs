@@ -539,9 +539,9 @@ fn leaf_self_pairs(t: &Tree, node: &Node, f: &mut impl FnMut(ProxyKey, ProxyKey)
 /// box of either leaf that misses the other leaf's box pairs with nothing there, so the boxes
 /// of each leaf that meet the other leaf's box are noted in a bit mask first, and only those
 /// are tested against each other: two leaves that overlap at a corner cost one pass over each,
-/// not the product. The tests run [`GROUP`] boxes at a time ([`Lanes`]), a noted box of `na`
-/// against the blocks of `nb` that hold a noted box; their results are bit masks, and the
-/// pairs are read from the set bits, so the loops branch on their counts, not on the tests
+/// not the product. The tests run [`GROUP`] boxes at a time, each noted box of the leaf with
+/// fewer against the other's noted boxes packed into blocks ([`Noted::pairs`]); their results
+/// are bit masks, and the pairs are read from the set bits, so the loops branch on their counts, not on the tests
 /// (whose outcomes the branch predictor cannot guess). Leaves too long for one mask, which
 /// only a `max_leaf_size` above 61 makes, take the plain loop.
 #[inline]
@@ -580,27 +580,20 @@ fn leaf_pairs(
     if near_a == 0 {
         return;
     }
-    // The noted boxes of b, packed into blocks of their own: each noted box of a is then
-    // tested against `ceil(noted / 4)` blocks however the noted boxes lie in b's blocks.
-    let mut n = 0;
-    for k in bits(near_b) {
-        noted.blocks[n / GROUP].set(n, &tb.boxes[rb.start + k - lb.off]);
-        noted.keys[n] = keys_b[k - lb.off];
-        n += 1;
-    }
-    let (blocks, keys) = (&noted.blocks[..n.div_ceil(GROUP)], &noted.keys[..n]);
-    let boxes_a = &ta.boxes[ra];
-    for i in bits(near_a) {
-        let q = Splat::of(&boxes_a[i - la.off]);
-        for (g, block) in blocks.iter().enumerate() {
-            // The last block's lanes past `n` hold boxes of an earlier leaf pair.
-            let live = low_bits(n - GROUP * g);
-            for k in bits(u64::from(block.overlaps(&q)) & live) {
-                f(keys_a[i - la.off], keys[GROUP * g + k]);
-            }
-        }
+    // The side with fewer noted boxes is splatted, box by box, and tested against the other
+    // side's noted boxes packed into blocks.
+    let a = (&ta.boxes[ra], keys_a, la.off, near_a);
+    let b = (&tb.boxes[rb], keys_b, lb.off, near_b);
+    if near_a.count_ones() <= near_b.count_ones() {
+        noted.pairs(a, b, f);
+    } else {
+        noted.pairs(b, a, &mut |kb, ka| f(ka, kb));
     }
 }
+
+/// The noted boxes of one leaf: its boxes, keys, the bit of its first box, and the mask of the
+/// noted ones.
+type NotedSide<'a> = (&'a [SimdBox], &'a [ProxyKey], usize, u64);
 
 /// The noted boxes of one leaf of a leaf pair, packed into blocks, and their keys: a
 /// descent's scratch, reused by each of its leaf pairs.
@@ -614,6 +607,38 @@ impl Noted {
         Noted {
             blocks: [Group::EMPTY; 64 / GROUP],
             keys: [ProxyKey::default(); 64],
+        }
+    }
+
+    /// Calls `f(a, b)` for every overlapping pair of a noted box `a` of `splat` and a noted
+    /// box `b` of `pack`. The noted boxes of `pack` are packed into blocks of their own, the
+    /// last one's spare lanes empty (they overlap nothing), so that each noted box of `splat`
+    /// is tested against `ceil(noted / 4)` blocks however the noted boxes lie in their leaf,
+    /// and its pairs are read from one mask over all of them.
+    #[inline]
+    fn pairs(&mut self, splat: NotedSide, pack: NotedSide, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
+        let (boxes, keys, off, near) = pack;
+        let mut n = 0;
+        for k in bits(near) {
+            self.blocks[n / GROUP].set(n, &boxes[k - off]);
+            self.keys[n] = keys[k - off];
+            n += 1;
+        }
+        for k in n..n.next_multiple_of(GROUP) {
+            self.blocks[k / GROUP].set(k, &SimdBox::EMPTY);
+        }
+        let (blocks, packed) = (&self.blocks[..n.div_ceil(GROUP)], &self.keys[..n]);
+        let (boxes, keys, off, near) = splat;
+        for i in bits(near) {
+            let q = Splat::of(&boxes[i - off]);
+            let mut m = 0u64;
+            for (g, block) in blocks.iter().enumerate() {
+                m |= u64::from(block.overlaps(&q)) << (GROUP * g);
+            }
+            let key = keys[i - off];
+            for k in bits(m) {
+                f(key, packed[k]);
+            }
         }
     }
 }
