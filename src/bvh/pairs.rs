@@ -55,6 +55,10 @@ impl Bvh {
         scratch: &mut PairScratch,
         mut f: impl FnMut(ProxyKey, ProxyKey),
     ) {
+        debug_assert!(
+            !self.has_deferred(),
+            "pairs of a tree with deferred enlargements"
+        );
         let stack = &mut scratch.stack;
         stack.clear();
         let t = Tree::of(self);
@@ -103,6 +107,10 @@ impl Bvh {
         scratch: &mut PairScratch,
         mut f: impl FnMut(ProxyKey, ProxyKey),
     ) {
+        debug_assert!(
+            !(self.has_deferred() || other.has_deferred()),
+            "pairs of a tree with deferred enlargements"
+        );
         let stack = &mut scratch.stack;
         stack.clear();
         let (ta, tb) = (Tree::of(self), Tree::of(other));
@@ -219,6 +227,10 @@ impl Bvh {
     {
         use core::sync::atomic::{AtomicUsize, Ordering};
         use rayon::prelude::*;
+        debug_assert!(
+            !(self.has_deferred() || other.has_deferred()),
+            "pairs of a tree with deferred enlargements"
+        );
         let tasks = out.len();
         if tasks == 0 {
             return;
