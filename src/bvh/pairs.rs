@@ -583,12 +583,15 @@ fn leaf_pairs(
         }
         return;
     };
-    // The boxes of b near a's box, then those of a near b's box.
+    // The boxes of b near a's box, then those of a near the union of those (a box of a that
+    // misses it misses each of them, and is tighter than b's leaf box).
     let near_b = lb.mask(&Splat::of(&na.bounds()));
     if near_b == 0 {
         return;
     }
-    let near_a = la.mask(&Splat::of(&nb.bounds()));
+    let boxes_b = &tb.boxes[rb.clone()];
+    let noted_b = bits(near_b).fold(SimdBox::EMPTY, |u, k| u.union(&boxes_b[k - lb.off]));
+    let near_a = la.mask(&Splat::of(&noted_b));
     if near_a == 0 {
         return;
     }
