@@ -590,6 +590,14 @@ fn leaf_pairs(
         return;
     }
     let boxes_b = &tb.boxes[rb.clone()];
+    if near_b & (near_b - 1) == 0 {
+        // One box of b: its pairs are one mask over a's blocks, without noting a.
+        let k = near_b.trailing_zeros() as usize - lb.off;
+        for i in bits(la.mask(&Splat::of(&boxes_b[k]))) {
+            f(keys_a[i - la.off], keys_b[k]);
+        }
+        return;
+    }
     let noted_b = bits(near_b).fold(SimdBox::EMPTY, |u, k| u.union(&boxes_b[k - lb.off]));
     let near_a = la.mask(&Splat::of(&noted_b));
     if near_a == 0 {
