@@ -186,6 +186,48 @@ impl SplitScratch {
                 .map(PairScratch::heap_bytes)
                 .sum::<usize>()
     }
+
+    /// Expands the items of both descents over `ta` and `ta` × `tb` for `tasks` tasks and
+    /// orders them heaviest first (see [`Bvh::for_each_pair_split`]).
+    fn prepare(&mut self, ta: &Tree, tb: &Tree, tasks: usize) {
+        let SplitScratch {
+            own: [own, own_next],
+            cross: [cross, cross_next],
+            order,
+            ..
+        } = self;
+        own.clear();
+        cross.clear();
+        let mut total = 0u64;
+        if let Some(root) = ta.nodes.first() {
+            own.push((0, 0));
+            total += u64::from(own_weight(ta, 0, 0));
+            if tb
+                .nodes
+                .first()
+                .is_some_and(|r| r.bounds().overlaps(&root.bounds()))
+            {
+                cross.push((0, 0));
+                total += u64::from(cross_weight(ta, tb, 0, 0));
+            }
+        }
+        let limit = (total / (tasks * ITEMS_PER_TASK) as u64).max(1) as u32;
+        while own.len() + cross.len() < tasks * MAX_ITEMS_PER_TASK {
+            let grew_own = expand_own(ta, limit, own, own_next);
+            let grew_cross = expand_cross(ta, tb, limit, cross, cross_next);
+            if !(grew_own || grew_cross) {
+                break;
+            }
+        }
+        order.clear();
+        order.extend(
+            own.iter()
+                .map(|&(a, b)| own_weight(ta, a, b))
+                .chain(cross.iter().map(|&(a, b)| cross_weight(ta, tb, a, b)))
+                .zip(0..),
+        );
+        order.sort_unstable_by(|x, y| y.cmp(x));
+    }
 }
 
 /// Items a split pair pass aims to make per task: an item weighs at most the whole
@@ -236,43 +278,13 @@ impl Bvh {
             return;
         }
         let (ta, tb) = (Tree::of(self), Tree::of(other));
+        scratch.prepare(&ta, &tb, tasks);
         let SplitScratch {
-            own: [own, own_next],
-            cross: [cross, cross_next],
+            own: [own, _],
+            cross: [cross, _],
             order,
             tasks: scratches,
         } = scratch;
-        own.clear();
-        cross.clear();
-        let mut total = 0u64;
-        if let Some(root) = ta.nodes.first() {
-            own.push((0, 0));
-            total += u64::from(own_weight(&ta, 0, 0));
-            if tb
-                .nodes
-                .first()
-                .is_some_and(|r| r.bounds().overlaps(&root.bounds()))
-            {
-                cross.push((0, 0));
-                total += u64::from(cross_weight(&ta, &tb, 0, 0));
-            }
-        }
-        let limit = (total / (tasks * ITEMS_PER_TASK) as u64).max(1) as u32;
-        while own.len() + cross.len() < tasks * MAX_ITEMS_PER_TASK {
-            let grew_own = expand_own(&ta, limit, own, own_next);
-            let grew_cross = expand_cross(&ta, &tb, limit, cross, cross_next);
-            if !(grew_own || grew_cross) {
-                break;
-            }
-        }
-        order.clear();
-        order.extend(
-            own.iter()
-                .map(|&(a, b)| own_weight(&ta, a, b))
-                .chain(cross.iter().map(|&(a, b)| cross_weight(&ta, &tb, a, b)))
-                .zip(0..),
-        );
-        order.sort_unstable_by(|x, y| y.cmp(x));
         if scratches.len() < tasks {
             scratches.resize_with(tasks, PairScratch::default);
         }
@@ -717,6 +729,72 @@ mod tests {
         }
         bvh.validate();
         bvh
+    }
+
+    /// Regression: the split once handed each task a contiguous stretch of its items, and
+    /// the diagonal items, which hold most of the pairs, fell to one or two tasks (one task of
+    /// eight found 44 % of `bodies`' pairs while its thread's partner idled). Now the items
+    /// are expanded by weight and taken heaviest first: no item holds more than a small share
+    /// of the pairs, and the items together hold each pair once.
+    #[test]
+    fn split_items_are_light() {
+        let mut rng = Rng::new(31);
+        let config = BvhConfig {
+            max_leaf_size: 32,
+            traversal_cost: 16.0,
+            ..BvhConfig::default()
+        };
+        let spread = |rng: &mut Rng, n: usize, half: f32| -> Vec<Aabb> {
+            (0..n)
+                .map(|_| {
+                    let c = rng.vec3_in(Vec3::splat(-half), Vec3::splat(half));
+                    Aabb::new(c, c + rng.vec3_in(Vec3::splat(0.2), Vec3::splat(1.6)))
+                })
+                .collect()
+        };
+        let (a, _) = Bvh::from_aabbs(config, &spread(&mut rng, 6000, 30.0)).unwrap();
+        let (b, _) = Bvh::from_aabbs(config, &spread(&mut rng, 600, 30.0)).unwrap();
+        let (ta, tb) = (Tree::of(&a), Tree::of(&b));
+        let mut want = Vec::new();
+        a.for_each_pair_using(&mut PairScratch::default(), |x, y| {
+            want.push(Pair::new(x, y));
+        });
+        a.for_each_pair_with_using(&b, &mut PairScratch::default(), |x, y| {
+            want.push(Pair::new(x, y));
+        });
+        want.sort_unstable();
+        let mut scratch = SplitScratch::default();
+        for tasks in [2, 8, 32] {
+            scratch.prepare(&ta, &tb, tasks);
+            let SplitScratch {
+                own: [own, _],
+                cross: [cross, _],
+                order,
+                ..
+            } = &scratch;
+            assert!(order.windows(2).all(|w| w[0] >= w[1]), "heaviest first");
+            let (mut got, mut most, mut stack) = (Vec::new(), 0, Vec::new());
+            for &(_, item) in order {
+                let before = got.len();
+                let mut f = |x, y| got.push(Pair::new(x, y));
+                let item = item as usize;
+                if let Some(&own_item) = own.get(item) {
+                    stack.push(own_item);
+                    drain_own(&ta, &mut stack, &mut Noted::new(), &mut f);
+                } else {
+                    stack.push(cross[item - own.len()]);
+                    drain_cross(&ta, &tb, &mut stack, &mut Noted::new(), &mut f);
+                }
+                most = most.max(got.len() - before);
+            }
+            got.sort_unstable();
+            assert_eq!(got, want, "tasks {tasks}");
+            assert!(
+                most * 2 * tasks <= want.len(),
+                "tasks {tasks}: one item holds {most} of {} pairs",
+                want.len()
+            );
+        }
     }
 
     /// The split descents find each pair of `a` × `a` and `a` × `b` once, whatever the task
