@@ -88,6 +88,7 @@ impl Bvh {
     /// reference for [`Bvh::refit`]'s quality check. Keys stay valid. O(n log n); allocates
     /// only when the tree grew past its largest size so far.
     pub fn rebuild(&mut self) {
+        self.deferred.clear();
         let mut s = core::mem::take(&mut self.scratch);
         self.drop_tombstones(&mut s.ids);
         let n = self.boxes.len();

@@ -10,6 +10,9 @@
 //! - [`Bvh::update`] writes the box; if it left its leaf's box, the leaf and its ancestors are
 //!   enlarged (walking up only while an ancestor does not contain it), so the tree stays
 //!   conservative. [`Bvh::refit`] later tightens every node.
+//!   Inside the crate, `update_box_deferred` grows only the leaf and notes it, for a caller
+//!   that refits before its next pass anyway or enlarges the noted leaves' ancestors once
+//!   (`enlarge_deferred`); no query or pair pass may run in between.
 //! - [`Bvh::insert`] appends the box to a *pending* list that queries and pairs test
 //!   linearly (pending × tree by tree queries, pending × pending by sort-and-sweep on x) until
 //!   the next rebuild.
@@ -199,6 +202,9 @@ pub struct Bvh {
     scratch: BuildScratch,
     /// Scratch of the `&mut self` pair traversals.
     pair_scratch: PairScratch,
+    /// Leaves grown by [`Bvh::update_box_deferred`] whose ancestors are not enlarged yet
+    /// (a leaf may appear more than once); empty whenever the tree is exact.
+    deferred: Vec<u32>,
 }
 
 impl Bvh {
@@ -223,6 +229,7 @@ impl Bvh {
             refits: 0,
             scratch: BuildScratch::default(),
             pair_scratch: PairScratch::default(),
+            deferred: Vec::new(),
         })
     }
 
@@ -294,6 +301,7 @@ impl Bvh {
             + (self.parent.capacity() + self.leaf_of.capacity()) * 4
             + self.pair_scratch.heap_bytes()
             + self.scratch.heap_bytes()
+            + self.deferred.capacity() * 4
     }
 
     fn check_room(&self) -> Result<(), Error> {
@@ -335,6 +343,39 @@ impl Bvh {
             self.enlarge_ancestors(self.leaf_of[id], b);
         }
         Ok(())
+    }
+
+    /// [`Bvh::update_box`] that leaves the ancestors alone: the box is written and its leaf's
+    /// box grown to hold it, and the leaf is noted if it grew. Until the next
+    /// [`Bvh::enlarge_deferred`], [`Bvh::refit`] or [`Bvh::rebuild`], interior boxes may miss
+    /// the box, so no query or pair pass may run (the pair passes check it in debug builds).
+    /// A caller that refits before its next pass (a full pass) pays no walk up at all, and one
+    /// that does not enlarges each grown leaf's ancestors once, however many of its boxes moved.
+    #[allow(
+        dead_code,
+        reason = "for the broadphase's update path that defers its work to the step; tested here"
+    )]
+    #[inline]
+    pub(crate) fn update_box_deferred(&mut self, key: ProxyKey, b: &SimdBox) -> Result<(), Error> {
+        let id = *self.ids.get(key).ok_or(Error::UnknownProxy)? as usize;
+        self.boxes[id] = *b;
+        if id < self.tree_len {
+            self.lanes.set(id, b);
+            let leaf_index = self.leaf_of[id];
+            let leaf = &mut self.nodes[leaf_index as usize];
+            let old = leaf.bounds();
+            if !old.contains(b) {
+                leaf.set_box(&old.union(b));
+                self.deferred.push(leaf_index);
+            }
+        }
+        Ok(())
+    }
+
+    /// True if [`Bvh::update_box_deferred`] grew leaves whose ancestors are not enlarged yet.
+    #[must_use]
+    pub(crate) fn has_deferred(&self) -> bool {
+        !self.deferred.is_empty()
     }
 
     /// Removes `key`'s box; its key is never valid again. `Err(UnknownProxy)` for a stale or

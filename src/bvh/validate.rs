@@ -12,6 +12,10 @@ impl Bvh {
     /// agree; tombstones hold [`Aabb::EMPTY`](crate::Aabb::EMPTY) and live boxes are finite
     /// and not inverted. O(n); for tests and debugging.
     pub fn validate(&self) {
+        assert!(
+            self.deferred.is_empty(),
+            "leaves grown by update_box_deferred whose ancestors were not enlarged"
+        );
         let n_nodes = self.nodes.len();
         assert_eq!(
             self.keys.len(),
