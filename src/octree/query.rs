@@ -178,7 +178,7 @@ impl Octree {
         mut f: impl FnMut(ProxyKey) -> ControlFlow<()>,
     ) -> ControlFlow<()> {
         self.candidates(aabb, |id| {
-            if self.objs[id as usize].aabb.overlaps(aabb) {
+            if self.objs[id as usize].aabb().overlaps(aabb) {
                 f(self.keys[id as usize])
             } else {
                 ControlFlow::Continue(())
@@ -453,7 +453,7 @@ impl Octree {
         }
         let inv = geom::inverse_dir(dir);
         self.ray_ids(origin, dir, max_t, inflate, |id, best| {
-            let aabb = &self.objs[id as usize].aabb;
+            let aabb = &self.objs[id as usize].aabb();
             match aabb.grown(inflate).ray_entry(origin, inv, best) {
                 Some(_) => visit(self.keys[id as usize], aabb),
                 None => best,
@@ -490,7 +490,7 @@ impl Octree {
         }
         let cube = Aabb::from_center_radius(p, radius);
         self.near_ids(p, radius, |id| {
-            if self.objs[id as usize].aabb.overlaps(&cube) {
+            if self.objs[id as usize].aabb().overlaps(&cube) {
                 f(self.keys[id as usize])
             } else {
                 ControlFlow::Continue(())

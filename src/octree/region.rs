@@ -169,7 +169,7 @@ impl Regrow {
         let cell = CELL_DIAMETERS * 2.0 * r;
         let mut full = Aabb::EMPTY;
         for o in objs.iter().filter(|o| o.node != NONE) {
-            full = full.union(&o.aabb);
+            full = full.union(&o.aabb());
         }
         let wide = |b: &Aabb| b.extent().max_element() * GROW;
         let fits = |side: f32| side.is_finite() && side <= cell * (1u32 << MAX_DEPTH) as f32;
@@ -339,14 +339,14 @@ fn quantile_box(s: &mut Vec<f32>, objs: &[Obj], q: usize) -> Aabb {
         s.extend(
             objs.iter()
                 .filter(|o| o.node != NONE)
-                .map(|o| o.aabb.min[axis]),
+                .map(|o| o.aabb().min[axis]),
         );
         b.min[axis] = *s.select_nth_unstable_by(q, f32::total_cmp).1;
         s.clear();
         s.extend(
             objs.iter()
                 .filter(|o| o.node != NONE)
-                .map(|o| o.aabb.max[axis]),
+                .map(|o| o.aabb().max[axis]),
         );
         let hi = s.len() - 1 - q;
         b.max[axis] = *s.select_nth_unstable_by(hi, f32::total_cmp).1;

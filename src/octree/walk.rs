@@ -158,7 +158,6 @@ impl Scratch {
     fn par_heap_bytes(&self) -> usize {
         self.par.heap_bytes()
     }
-
     #[cfg(not(feature = "parallel"))]
     fn par_heap_bytes(&self) -> usize {
         0
@@ -368,7 +367,7 @@ impl Octree {
                 continue;
             }
             hot[pos as usize] = Hot {
-                bx: SimdBox::new(&o.aabb),
+                bx: o.simd_box(),
                 qmin: o.qmin,
                 qmax: o.qmax,
                 pos,
@@ -560,7 +559,7 @@ impl Parts<'_> {
             let o = &tree.objs[id];
             *nk = x >> 32;
             *h = Hot {
-                bx: SimdBox::new(&o.aabb),
+                bx: o.simd_box(),
                 qmin: o.qmin,
                 qmax: o.qmax,
                 pos: base + j as u32,
