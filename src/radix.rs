@@ -308,20 +308,52 @@ pub(crate) fn sort_bits_by<T: Copy + Default>(
     lo: u32,
     bits: u32,
 ) {
-    let n = items.len();
+    tmp.resize(items.len(), T::default());
+    if sort_core(items, tmp, counts, key, lo, bits) {
+        core::mem::swap(items, tmp);
+    }
+}
+
+/// [`sort_bits`] of a slice with a second buffer of the same length, for a caller sorting
+/// parts of one buffer in place: returns true if the sorted items ended in `tmp` (an odd
+/// number of passes moved them), false if in `items`.
+pub(crate) fn sort_bits_in(
+    items: &mut [u64],
+    tmp: &mut [u64],
+    counts: &mut Vec<u32>,
+    lo: u32,
+    bits: u32,
+) -> bool {
+    debug_assert_eq!(items.len(), tmp.len());
+    sort_core(items, tmp, counts, |&x| x, lo, bits)
+}
+
+/// The passes of [`sort_bits_by`], moving the items between `a` and `b` (equal lengths);
+/// true if they end in `b`.
+#[inline]
+fn sort_core<T: Copy>(
+    a: &mut [T],
+    b: &mut [T],
+    counts: &mut Vec<u32>,
+    key: impl Fn(&T) -> u64,
+    lo: u32,
+    bits: u32,
+) -> bool {
+    let n = a.len();
     let radix = 1usize << MAX_DIGIT_BITS;
     let mask = (radix - 1) as u64;
     let passes = bits.div_ceil(MAX_DIGIT_BITS) as usize;
     counts.clear();
     counts.resize(radix * passes, 0);
-    for x in items.iter() {
+    for x in a.iter() {
         let x = key(x);
         for p in 0..passes {
             let d = ((x >> (lo + p as u32 * MAX_DIGIT_BITS)) & mask) as usize;
             counts[p * radix + d] += 1;
         }
     }
-    tmp.resize(n, T::default());
+    let (mut src, mut dst) = (a, b);
+    let mut in_b = false;
     for p in 0..passes {
         let c = &mut counts[p * radix..(p + 1) * radix];
         if c.iter().any(|&k| k as usize == n) {
@@ -334,13 +366,15 @@ pub(crate) fn sort_bits_by<T: Copy + Default>(
             sum += here;
         }
         let shift = lo + p as u32 * MAX_DIGIT_BITS;
-        for x in items.iter() {
+        for x in src.iter() {
             let d = ((key(x) >> shift) & mask) as usize;
-            tmp[c[d] as usize] = *x;
+            dst[c[d] as usize] = *x;
             c[d] += 1;
         }
-        core::mem::swap(items, tmp);
+        core::mem::swap(&mut src, &mut dst);
+        in_b = !in_b;
     }
+    in_b
 }
 
 /// Grows `v` to half again its length once it is within a quarter of its capacity: a sort's

@@ -332,10 +332,13 @@ impl Octree {
         }
         let limit = region::overflow_limit(self.live).max(2 * self.overflow_after as usize);
         if self.overflow as usize > limit || self.live > 2 * self.regrow.rooted {
-            match self
-                .regrow
-                .propose(&self.objs, self.live, self.hint, self.lattice.placement)
-            {
+            match self.regrow.propose(
+                &self.objs,
+                self.live,
+                self.hint,
+                self.lattice.placement,
+                self.passes.walk.lend(),
+            ) {
                 Some(p) => self.reroot(&p),
                 None => {
                     // No finite region covers the world: keep this one, and wait for twice
@@ -347,10 +350,13 @@ impl Octree {
             return;
         }
         if self.regrow.tick() {
-            match self
-                .regrow
-                .propose(&self.objs, self.live, self.hint, self.lattice.placement)
-            {
+            match self.regrow.propose(
+                &self.objs,
+                self.live,
+                self.hint,
+                self.lattice.placement,
+                self.passes.walk.lend(),
+            ) {
                 Some(p) if region::worth_it(&self.lattice, &p) => self.reroot(&p),
                 _ => self.regrow.back_off(),
             }
@@ -436,7 +442,6 @@ impl Octree {
             + self.keys.capacity() * 8
             + self.nodes.heap_bytes()
             + self.passes.heap_bytes()
-            + self.regrow.heap_bytes()
     }
 
     /// Moves and/or resizes a sphere. `Err(UnknownProxy)` for a stale or foreign key, `Err`
