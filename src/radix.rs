@@ -134,15 +134,15 @@ pub(crate) fn part_of(splitters: &[u64], key: u64) -> usize {
 
 /// Sorts keys that their producers have already cut into `parts` parts into `out`, over
 /// rayon's current pool: `buckets[i][p]` holds producer `i`'s keys of part `p`. Each part is
-/// copied into its stretch of `out` and radix sorted there by its own task, with `tmp[p]` as
-/// its second buffer; `bounds` gets the parts' first positions and the key count last. The
+/// copied into its stretch of `out` and radix sorted there by its own task, with the same stretch
+/// of `tmp` as its second buffer; `bounds` gets the parts' first positions and the key count last. The
 /// keys (distinct packed pairs of slots below `layout`'s bound) end sorted whatever the cut.
 #[cfg(feature = "parallel")]
 pub(crate) fn sort_parts(
     buckets: &[Vec<Vec<u64>>],
     parts: usize,
     out: &mut Vec<u64>,
-    tmp: &mut Vec<Vec<u64>>,
+    tmp: &mut Vec<u64>,
     bounds: &mut Vec<usize>,
     layout: PairBits,
 ) {
@@ -153,15 +153,13 @@ pub(crate) fn sort_parts(
         bounds.push(bounds[p] + len);
     }
     out.resize(bounds[parts], 0);
-    if tmp.len() < parts {
-        tmp.resize_with(parts, Vec::new);
-    }
+    tmp.resize(bounds[parts], 0);
     let job = Gather {
         buckets,
         bounds,
         layout,
     };
-    job.fill(0, &mut tmp[..parts], out);
+    job.fill(0, parts, tmp, out);
 }
 
 /// What every part of [`sort_parts`] reads.
@@ -174,10 +172,11 @@ struct Gather<'a> {
 
 #[cfg(feature = "parallel")]
 impl Gather<'_> {
-    /// Sorts parts `first..first + tmp.len()` into `out`, their stretch of the output,
-    /// halving the parts between two tasks until one is left.
-    fn fill(&self, first: usize, tmp: &mut [Vec<u64>], out: &mut [u64]) {
-        if let [tmp] = tmp {
+    /// Sorts parts `first..first + parts` into `out`, their stretch of the output, with
+    /// `tmp`, the same stretch of the second buffer, halving the parts between two tasks
+    /// until one is left.
+    fn fill(&self, first: usize, parts: usize, tmp: &mut [u64], out: &mut [u64]) {
+        if parts == 1 {
             let mut at = 0;
             for b in self.buckets {
                 let keys = &b[first];
@@ -187,27 +186,25 @@ impl Gather<'_> {
             sort_slice(out, tmp, self.layout);
             return;
         }
-        let mid = tmp.len() / 2;
+        let mid = parts / 2;
         let at = self.bounds[first + mid] - self.bounds[first];
-        let (ta, tb) = tmp.split_at_mut(mid);
+        let (ta, tb) = tmp.split_at_mut(at);
         let (oa, ob) = out.split_at_mut(at);
         rayon::join(
-            || self.fill(first, ta, oa),
-            || self.fill(first + mid, tb, ob),
+            || self.fill(first, mid, ta, oa),
+            || self.fill(first + mid, parts - mid, tb, ob),
         );
     }
 }
 
-/// [`sort_u64`] of a slice: the keys are copied back if they end in `tmp`.
+/// [`sort_u64`] of a slice with a second buffer of the same length: the keys are copied back
+/// if they end in `tmp`.
 #[cfg(feature = "parallel")]
-fn sort_slice(keys: &mut [u64], tmp: &mut Vec<u64>, layout: PairBits) {
-    let n = keys.len();
-    if n < 64 {
+fn sort_slice(keys: &mut [u64], tmp: &mut [u64], layout: PairBits) {
+    if keys.len() < 64 {
         keys.sort_unstable();
         return;
     }
-    tmp.clear();
-    tmp.resize(n, 0);
     if sort_in(keys, tmp, layout) {
         keys.copy_from_slice(tmp);
     }
