@@ -314,6 +314,7 @@ pub(crate) fn sort_bits_by<T: Copy + Default>(
 /// [`sort_bits`] of a slice with a second buffer of the same length, for a caller sorting
 /// parts of one buffer in place: returns true if the sorted items ended in `tmp` (an odd
 /// number of passes moved them), false if in `items`.
+#[cfg(feature = "parallel")]
 pub(crate) fn sort_bits_in(
     items: &mut [u64],
     tmp: &mut [u64],
