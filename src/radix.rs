@@ -395,6 +395,17 @@ pub(crate) fn grow_slots<T>(v: &mut Vec<T>, len: usize) {
     }
 }
 
+/// Makes room for `len` items in a list refilled by every pass (the octree's walk order and
+/// runs): exactly the first time, so a world that keeps its count keeps no spare, and by an
+/// eighth past `len` ([`grow_slots`]) once it outgrows that, not by `Vec`'s doubling.
+pub(crate) fn room_for<T>(v: &mut Vec<T>, len: usize) {
+    if v.capacity() == 0 {
+        grow_to(v, len);
+    } else {
+        grow_slots(v, len);
+    }
+}
+
 /// [`grow_to`] as a hint for a size the user gave: room the allocator cannot give (or a size
 /// past `isize::MAX` bytes) is not reserved, without an error or a panic.
 pub(crate) fn try_grow_to<T>(v: &mut Vec<T>, want: usize) {

@@ -14,8 +14,8 @@ use super::{NONE, Octree};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
 #[cfg(feature = "parallel")]
-use crate::radix::{ahead, grow_to, sort_bits_in};
-use crate::radix::{sort_bits, sort_bits_by};
+use crate::radix::{ahead, sort_bits_in};
+use crate::radix::{room_for, sort_bits, sort_bits_by};
 use crate::sweep::{self, Ordered};
 use core::borrow::Borrow;
 
@@ -315,7 +315,14 @@ impl Octree {
             ..
         } = s;
         let key_bits = walk_key_bits(self.lattice.depth);
+        // Every buffer sized by the sphere count grows by `room_for`, not by doubling.
+        let n = self.live;
+        room_for(node_key, n);
+        room_for(hot, n);
+        room_for(keys, n);
+        room_for(rank, self.objs.len());
         if key_bits <= 32 {
+            room_for(items, n);
             items.clear();
             items.extend(
                 self.objs
@@ -333,6 +340,7 @@ impl Octree {
                 keys,
             );
         } else {
+            room_for(wide, n);
             wide.clear();
             wide.extend(
                 self.objs
@@ -475,7 +483,11 @@ impl Octree {
         }
         let n = self.live;
         debug_assert_eq!(par.bounds[np] as usize, n);
-        grow_to(items, n);
+        // Grown by `room_for`, as in the serial sort.
+        room_for(items, n);
+        room_for(hot, n);
+        room_for(node_key, n);
+        room_for(keys, n);
         items.resize(n, 0);
         hot.resize(n, Hot::EMPTY);
         node_key.resize(n, 0);
