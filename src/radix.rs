@@ -466,6 +466,32 @@ mod tests {
         }
     }
 
+    /// `sort_bits_in` sorts a slice stably by the key bits, its answer in whichever buffer
+    /// it says, for every pass count (the walk order's keys take one to three).
+    #[cfg(feature = "parallel")]
+    #[test]
+    fn sort_bits_in_says_where_the_sorted_items_are() {
+        let mut next = xorshift(0x0123_4567_89AB_CDEF);
+        for (n, bits) in [
+            (0, 8),
+            (1, 8),
+            (300, 8),
+            (3000, 11),
+            (3000, 12),
+            (5000, 22),
+            (5000, 33),
+        ] {
+            let mut items: Vec<u64> = (0..n as u64)
+                .map(|id| ((next() & ((1 << bits) - 1)) << 32) | id)
+                .collect();
+            let mut want = items.clone();
+            want.sort_by_key(|x| x >> 32);
+            let (mut tmp, mut counts) = (vec![0; n], Vec::new());
+            let in_tmp = sort_bits_in(&mut items, &mut tmp, &mut counts, 32, bits);
+            assert_eq!(if in_tmp { tmp } else { items }, want, "n {n} bits {bits}");
+        }
+    }
+
     /// The compact key orders pairs as the full keys do, at the extremes of every layout.
     #[test]
     fn compact_keys_keep_the_order() {

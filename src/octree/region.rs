@@ -362,3 +362,38 @@ fn quantile_box(s: &mut Vec<u64>, objs: &[Obj], q: usize) -> Aabb {
     }
     b
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The lent buffers select floats as `f32::total_cmp` orders them: `ordered` keeps that
+    /// order (signed zeros, subnormals and infinities included) and `from_ordered` undoes it.
+    #[test]
+    fn ordered_keys_sort_as_total_cmp() {
+        let xs = [
+            f32::NEG_INFINITY,
+            -3.5e30,
+            -1.0,
+            -f32::MIN_POSITIVE,
+            -1e-45,
+            -0.0,
+            0.0,
+            1e-45,
+            f32::MIN_POSITIVE,
+            0.25,
+            1.0,
+            7.0e20,
+            f32::INFINITY,
+        ];
+        for &a in &xs {
+            assert_eq!(from_ordered(ordered(a)).to_bits(), a.to_bits());
+            for &b in &xs {
+                assert_eq!(ordered(a).cmp(&ordered(b)), a.total_cmp(&b), "{a} vs {b}");
+            }
+        }
+        let mut s = Vec::new();
+        assert_eq!(median(&mut s, [3.0, -1.0, 2.0, 8.0, 0.5].into_iter()), 2.0);
+        assert_eq!(median(&mut s, core::iter::empty()), 0.0);
+    }
+}
