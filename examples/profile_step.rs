@@ -1,5 +1,5 @@
 //! Times one scene step for profiling: `cargo run --release --example profile_step --
-//! --scene gas|clustered|churn --n 100000 --steps 30 --depth D --what octree|broadphase|feed`.
+//! --scene gas|clustered|churn|idle --n 100000 --steps 30 --depth D --what octree|broadphase|feed`.
 //!
 //! Runs 5 warm-up steps, then `--steps` measured ones, and prints the median ns/object/step,
 //! the pair count of the last step and (for `octree`) the tree's stats. Each step advances the
@@ -7,7 +7,8 @@
 //! pairs are `Octree::pairs_into` (unsorted), with `broadphase` the whole `BroadPhase::step`
 //! (sorted list plus added / removed). `feed` runs the scene's frames (with `churn`'s removes
 //! and inserts) through `scene::Feed` into a `BroadPhase`, as `vs_rapier` does, and times
-//! only `Feed::apply` and `BroadPhase::step`, not the scene's motion. `batch` times the same
+//! only `Feed::apply` and `BroadPhase::step`, not the scene's motion (`idle`, `--what feed`
+//! only: the `gas` spheres at rest but for `--moving P` % of them). `batch` times the same
 //! motion fed four ways, each into a fresh `BroadPhase`: one `update_spheres` batch per step,
 //! one `update_sphere` call per sphere, and `Feed::apply` batched and per object; for each
 //! it prints the median ns/object of the moves alone and of the moves plus `step()` (the
@@ -16,7 +17,7 @@
 //! `--toggle-collect=*measured*` counts only the measured steps.
 
 use broadleaf::fixtures::cli::{self, Flags, Stop};
-use broadleaf::fixtures::scene::{Churn, DT, Feed, Frame, Gas, Scene};
+use broadleaf::fixtures::scene::{Churn, DT, Feed, Frame, Gas, Idle, Scene};
 use broadleaf::octree::{MAX_DEPTH, Octree, Placement};
 use broadleaf::{BroadPhase, Config, Pair, ProxyKey, Vec3};
 use std::hint::black_box;
@@ -25,14 +26,16 @@ use std::time::Instant;
 const WARMUP: usize = 5;
 
 const USAGE: &str = "\
-usage: profile_step [--scene gas|clustered|churn] [--n N] [--steps S] [--depth D]
+usage: profile_step [--scene gas|clustered|churn|idle] [--n N] [--steps S] [--depth D]
                     [--what octree|broadphase|feed|batch] [--placement strict|loose]
-  --scene S      the scene (default gas)
+                    [--moving P]
+  --scene S      the scene (default gas; idle only with --what feed)
   --n N          spheres (default 100000)
   --steps S      measured steps after 5 warm-up ones (default 30)
   --depth D      the octree's depth (default: depth_for / depth_for_loose of the scene)
   --what W       what to time (default octree; see the file's docs)
-  --placement P  the octree's placement (default: Config::default()'s)";
+  --placement P  the octree's placement (default: Config::default()'s)
+  --moving P     idle: the percentage of spheres that move (default 10)";
 
 struct Args {
     scene: &'static str,
@@ -41,6 +44,7 @@ struct Args {
     depth: Option<u32>,
     what: &'static str,
     placement: Placement,
+    moving: f64,
 }
 
 fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
@@ -51,15 +55,22 @@ fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
         depth: None,
         what: "octree",
         placement: Config::default().octree_placement,
+        moving: 10.0,
     };
     let mut flags = Flags::new(argv);
     while let Some(flag) = flags.next_flag()? {
         match flag.as_str() {
             "--scene" => {
-                let scenes = ["gas", "clustered", "churn"].map(|s| (s, s));
+                let scenes = ["gas", "clustered", "churn", "idle"].map(|s| (s, s));
                 a.scene = flags.choice(&flag, &scenes)?;
             }
             "--n" => a.n = flags.parse(&flag)?,
+            "--moving" => {
+                a.moving = flags.parse(&flag)?;
+                if !(0.0..=100.0).contains(&a.moving) {
+                    return Err(Stop::Error(format!("--moving {}: 0 to 100", a.moving)));
+                }
+            }
             "--steps" => a.steps = flags.parse(&flag)?,
             "--depth" => {
                 let depth: u32 = flags.parse(&flag)?;
@@ -78,6 +89,9 @@ fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
             }
             _ => return Err(Stop::unknown(&flag)),
         }
+    }
+    if a.scene == "idle" && a.what != "feed" {
+        return Err(Stop::Error("--scene idle: only with --what feed".into()));
     }
     Ok(a)
 }
@@ -154,6 +168,7 @@ fn main() {
         "feed" => {
             let mut scene: Box<dyn Scene> = match args.scene {
                 "churn" => Box::new(Churn::new(args.n, 1)),
+                "idle" => Box::new(Idle::new(args.n, 1, args.moving)),
                 _ => Box::new(gas.clone()),
             };
             let mut bp = BroadPhase::new(Config {

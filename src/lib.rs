@@ -62,6 +62,12 @@
 //! (collision groups, a key to exclude, a predicate), gives casts the nearest hit the filter
 //! passes, lets a visitor stop with [`ControlFlow::Break`](core::ops::ControlFlow), and fills
 //! a buffer of the caller's instead of allocating. Both are exact, as the shapes were given.
+//!
+//! An update only stores the new shape; [`BroadPhase::step`] moves the proxies in the
+//! structures, all at once and in slot order. Queries between an update and the next step
+//! still see every latest shape: the structures skip the proxies updated since the last step
+//! and the query tests those proxies' new shapes one by one, so it costs one test per proxy
+//! updated since then (nothing once the step has run). Query after the step where you can.
 //! [`Octree`] and [`Bvh`] have the stopping form too (`try_query_aabb`, `try_query_sphere`).
 //! ```
 //! use broadleaf::{BroadPhase, Config, QueryFilter, Vec3};
@@ -112,7 +118,10 @@
 //!   a caller's `ThreadPool::install` runs in, else the global pool), with the same `pairs`,
 //!   `added`, `removed` and keys at any thread count, bit for bit. It splits only with more
 //!   than one thread and at least 10 000 spheres (the octree's pass is what splits; the BVH
-//!   passes run as one task beside it; the incremental pass stays serial). On one thread it
+//!   passes run as one task beside it; the incremental pass stays serial). The step's first
+//!   act, applying the updates, splits its spheres' boxes and octree placements over the pool
+//!   under the same conditions when at least one proxy in eight was updated, outside the
+//!   incremental regime; the octree's relinks stay serial. On one thread it
 //!   allocates nothing per step in steady state; with more, rarely (per-task lists growing to
 //!   a new peak, and, for a caller outside the pool, rayon's job queue about once in 63 steps).
 //! - `serde`: [`BroadPhase`] implements serde's `Serialize` and `Deserialize`, for snapshots

@@ -1,10 +1,11 @@
 //! What the structures' and the broadphase's searches share: how a sphere cast opens, the
-//! running first hit of a cast, where a k-nearest search starts and its expanding-radius loop.
+//! running first hit of a cast, the slab test of one segment against many boxes, where a
+//! k-nearest search starts and its expanding-radius loop.
 //! Depends on `geom` and `pair` only.
 
-use crate::geom::{self, Aabb};
+use crate::geom::{self, Aabb, SimdBox};
 use crate::pair::ProxyKey;
-use glam::Vec3;
+use glam::{Vec3, Vec3A, Vec4};
 
 /// A nearest search's first radius beyond the searched objects' bounds, as a fraction of the
 /// spacing `k` objects spread evenly over those bounds would have: below 1, a first round
@@ -63,6 +64,57 @@ impl FirstHit {
     }
 }
 
+/// One segment's slab test against many boxes, each grown by `inflate`: the same answer as
+/// [`SimdBox::ray_entry`] (`is_some` and `t` alike, up to the sign of a zero `t`), cheaper
+/// when no direction component is zero. Derivation: with `1 / dir` finite and nonzero on every
+/// lane (a finite nonzero `dir` component has a finite nonzero inverse) and finite or infinite
+/// but never NaN box corners, `(corner − origin) · inv` is never NaN (a NaN needs `0 · ∞` or
+/// `∞ − ∞`, and a corner's difference with a finite origin can be `±∞` only times a nonzero
+/// factor), so the NaN selects of the general test pick their own lanes and can be left out.
+pub(crate) struct Slab {
+    pub(crate) origin: Vec3A,
+    pub(crate) inv: Vec3A,
+    pub(crate) inflate: f32,
+    /// No direction component is zero: the NaN-free test applies.
+    pub(crate) finite: bool,
+    /// `origin`, `inv` and `inflate` with each component in all four lanes, for
+    /// the BVH's four-box leaf test.
+    pub(crate) origin4: [Vec4; 3],
+    pub(crate) inv4: [Vec4; 3],
+    pub(crate) inflate4: Vec4,
+}
+
+impl Slab {
+    pub(crate) fn new(origin: Vec3, dir: Vec3, inflate: f32) -> Self {
+        let inv = Vec3A::from(geom::inverse_dir(dir));
+        Slab {
+            origin: origin.into(),
+            inv,
+            inflate,
+            finite: inv.is_finite(),
+            origin4: [0, 1, 2].map(|a| Vec4::splat(origin[a])),
+            inv4: [0, 1, 2].map(|a| Vec4::splat(inv[a])),
+            inflate4: Vec4::splat(inflate),
+        }
+    }
+
+    /// The segment's entry `t` into `b` grown by `inflate`, if it enters it by `limit`.
+    #[inline(always)]
+    pub(crate) fn entry(&self, b: &SimdBox, limit: f32) -> Option<f32> {
+        let SimdBox { min, max } = b.grown(self.inflate);
+        if !self.finite {
+            return SimdBox { min, max }.ray_entry(self.origin, self.inv, limit);
+        }
+        let t1 = (min - self.origin) * self.inv;
+        let t2 = (max - self.origin) * self.inv;
+        let near = t1.min(t2).max_element();
+        let far = t1.max(t2).min_element();
+        let t_near = if near > 0.0 { near } else { 0.0 };
+        let t_far = if far < limit { far } else { limit };
+        (t_near <= t_far).then_some(t_near)
+    }
+}
+
 /// Where a search for the `k` nearest of `n` objects lying in `bounds` starts: the distance
 /// from `point` to `bounds` plus [`NEAREST_START`] of the spacing `k` objects spread evenly
 /// over them would have. Any start is exact (the loop widens until it has its answer); this
@@ -70,6 +122,16 @@ impl FirstHit {
 pub(crate) fn nearest_start(point: Vec3, bounds: &Aabb, k: usize, n: usize) -> f32 {
     let spread = (k as f32 / n as f32).min(1.0).cbrt();
     let spacing = NEAREST_START * bounds.extent().max_element().max(0.0) * spread;
+    geom::point_aabb_distance(point, bounds) + spacing
+}
+
+/// Where a search for the `k` nearest objects of a structure that knows the cell its typical
+/// object lives in (the octree's most populated level) starts: the distance from `point` to
+/// `bounds` plus [`NEAREST_START`] of the edge of `k` such cells. Cells sized for their
+/// objects hold about one each wherever the objects are, so this stays near the spacing
+/// however much empty room the region around them has.
+pub(crate) fn nearest_start_in_cells(point: Vec3, bounds: &Aabb, k: usize, cell: f32) -> f32 {
+    let spacing = NEAREST_START * cell.max(0.0) * (k as f32).cbrt();
     geom::point_aabb_distance(point, bounds) + spacing
 }
 

@@ -456,3 +456,52 @@ fn a_world_waking_up_runs_the_full_pass_at_once() {
     want.sort();
     assert_eq!(bp.pairs(), &want[..]);
 }
+
+/// Movers at one speed, given fat boxes in the same step, do not keep leaving them together:
+/// after the first waves the escapes of a step stay within twice their mean (a margin factor
+/// fixed per proxy gives each a fixed period, and the proxies of one period escaped in bursts
+/// of three times the mean with near-empty steps between). Pairs equal the model every step.
+#[test]
+fn movers_at_one_speed_escape_spread_over_the_steps() {
+    let mut rng = Rng::new(31);
+    let mut model = Model::new(0.0);
+    let mut bp = BroadPhase::new(Config::default());
+    let side = 60.0;
+    let mut world: Vec<(ProxyKey, ModelShape, Option<Vec3>)> = (0..8000)
+        .map(|i| {
+            let shape = ModelShape::Sphere {
+                center: rng.vec3_in(Vec3::ZERO, Vec3::splat(side)),
+                radius: 0.5,
+            };
+            let key = model.insert(&mut bp, shape);
+            // One in ten moves 5 cm a step in a random direction.
+            let v = (i % 10 == 0).then(|| {
+                let d = rng.offset(1.0);
+                d.normalize_or(Vec3::X) * 0.05
+            });
+            (key, shape, v)
+        })
+        .collect();
+    let mut escapes = Vec::new();
+    for step in 0..60 {
+        for (key, shape, v) in &mut world {
+            let Some(vel) = v else { continue };
+            let c = shape.center() + *vel;
+            if c.min_element() < 0.0 || c.max_element() > side {
+                *vel = -*vel;
+            }
+            *shape = shape.moved(*vel);
+            model.update(&mut bp, *key, *shape);
+        }
+        model.check_step(&mut bp, &format!("step {step}"));
+        if bp.stats().pass == Pass::Incremental {
+            escapes.push(bp.stats().enlarged);
+        }
+    }
+    assert!(escapes.len() > 40, "stayed incremental: {escapes:?}");
+    let late = &escapes[escapes.len() - 30..];
+    let mean = late.iter().sum::<usize>() as f64 / late.len() as f64;
+    let max = *late.iter().max().unwrap() as f64;
+    assert!(mean > 20.0, "movers escape every few steps: {late:?}");
+    assert!(max <= 2.0 * mean, "escapes come in bursts: {late:?}");
+}

@@ -24,13 +24,33 @@ fn margin(speed: f32, size: f32) -> f32 {
         .max(size * MIN_MARGIN)
 }
 
-/// A per-slot factor in `[1, 2)` on the fat margin. Proxies given fat boxes in the same step
-/// at the same speed would otherwise all leave them in the same later step (a burst of
-/// queries); spread margins spread the escapes.
+/// A factor in `[1, 2)` on the fat margin, hashed from the slot and the step the box is made
+/// at. Proxies given fat boxes in the same step at the same speed would otherwise all leave
+/// them in the same later step (a burst of queries); spread margins spread the escapes. A
+/// factor fixed per slot would give each proxy a fixed period in whole steps, and the
+/// proxies of equal periods would keep escaping together: hashing in the step redraws it at
+/// every new fat box.
 #[inline]
-fn jitter(slot: u32) -> f32 {
-    let h = slot.wrapping_mul(0x9E37_79B9) >> 8;
+fn jitter(slot: u32, now: u32) -> f32 {
+    let h = (slot ^ now.wrapping_mul(0x85EB_CA6B)).wrapping_mul(0x9E37_79B9) >> 8;
     1.0 + h as f32 / (1u32 << 24) as f32
+}
+
+/// The speed (metres per step, largest axis) of a box that moved from `old` to `new` since
+/// step `stamp`, at step `now`; and whether that outgrows the smallest fat margin
+/// ([`outgrows_min_margin`]).
+#[inline(always)]
+pub(super) fn motion(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> (f32, bool) {
+    let moved = ((new.min + new.max) - (old.min + old.max))
+        .abs()
+        .max_element()
+        * 0.5;
+    let steps = now.wrapping_sub(stamp).max(1);
+    let speed = moved / steps as f32;
+    (
+        speed,
+        outgrows_min_margin(speed, new.extent().max_element()),
+    )
 }
 
 /// True if a box of largest extent `size` moving `speed` per step gets a margin above the
@@ -45,17 +65,9 @@ impl BroadPhase {
     /// `exact`), for its fat margin and the pass estimate.
     #[inline]
     pub(super) fn note_motion(&mut self, s: usize, exact: &SimdBox) {
-        let old = self.store.exact[s];
-        let moved = ((exact.min + exact.max) - (old.min + old.max))
-            .abs()
-            .max_element()
-            * 0.5;
-        let steps = self.now.wrapping_sub(self.store.stamp[s]).max(1);
-        let speed = moved / steps as f32;
+        let (speed, fast) = motion(&self.store.exact[s], exact, self.store.stamp[s], self.now);
         self.store.speed[s] = speed;
-        if outgrows_min_margin(speed, exact.extent().max_element()) {
-            self.fast_movers += 1;
-        }
+        self.fast_movers += usize::from(fast);
         self.store.stamp[s] = self.now;
     }
 
@@ -126,7 +138,7 @@ impl BroadPhase {
         } else {
             let resting = self.now.wrapping_sub(self.store.stamp[s]) > 1;
             let speed = if resting { 0.0 } else { self.store.speed[s] };
-            margin(speed, exact.extent().max_element()) * jitter(slot)
+            margin(speed, exact.extent().max_element()) * jitter(slot, self.now)
         };
         // The exact shape, [`grown`] by the fat margin.
         let exact_shape = match self.store.shape[s] {

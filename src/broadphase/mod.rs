@@ -10,11 +10,14 @@
 //! keeps the candidate pairs of overlapping fat boxes, re-tests only what moved, and queries
 //! the structures for the proxies that left their fat box.
 //!
+//! An update stores the new shape and marks the slot; the step applies it ([`apply`]).
+//!
 //! The files: this one holds the type and its public API; [`config`] the settings,
 //! [`fat`] the fat-box layer (motion, fat boxes, the marks a step reads), [`slack`] what the
 //! incremental pass need not re-test, [`step`] the passes,
 //! [`query`] the queries, [`snapshot`] the serde form and [`validate`] the invariants.
 
+mod apply;
 mod config;
 mod fat;
 mod query;
@@ -195,6 +198,15 @@ pub struct BroadPhase {
     any_groups: bool,
     /// Slots updated (or inserted) since the last step, each once (`flag::MOVED`).
     movers: Vec<u32>,
+    /// Live slots updated since the last step and not yet applied (`flag::STALE`), all
+    /// listed in `movers`.
+    stale: usize,
+    /// The radix sort's scratch for `movers` (see [`apply`]).
+    movers_tmp: Vec<u32>,
+    movers_counts: Vec<u32>,
+    /// The parallel apply's sphere placements, by slot (see [`apply`]).
+    #[cfg(feature = "parallel")]
+    placed: Vec<crate::octree::Placed>,
     /// Slots given a new fat box since the last step, each once (`flag::ESCAPED`).
     escaped: Vec<u32>,
     /// Slots re-anchored this step, each once (`flag::LOUD`).
@@ -290,6 +302,11 @@ impl BroadPhase {
             cached: false,
             any_groups: false,
             movers: Vec::new(),
+            stale: 0,
+            movers_tmp: Vec::new(),
+            movers_counts: Vec::new(),
+            #[cfg(feature = "parallel")]
+            placed: Vec::new(),
             escaped: Vec::new(),
             loud: Vec::new(),
             pending: Vec::new(),
@@ -328,14 +345,16 @@ impl BroadPhase {
     }
 
     /// The octree holding the spheres, under the broadphase's keys, for debug views and
-    /// stats. Each sphere is held as `center ± (radius + margin)`, or a larger box around it
+    /// stats, as the last [`BroadPhase::step`] left it (updates since then are applied by the
+    /// next one). Each sphere is held as `center ± (radius + margin)`, or a larger box around it
     /// while the incremental pass runs; its level is where that box lives.
     #[must_use]
     pub fn octree(&self) -> &Octree {
         &self.octree
     }
 
-    /// The BVH holding the dynamic or the static bodies, under the broadphase's keys. Each
+    /// The BVH holding the dynamic or the static bodies, under the broadphase's keys, as the
+    /// last [`BroadPhase::step`] left it. Each
     /// body is held as its box grown by the margin, or a larger box around it while the
     /// incremental pass runs.
     #[must_use]
@@ -356,6 +375,8 @@ impl BroadPhase {
             + self.statics.heap_bytes()
             + v(
                 self.movers.capacity()
+                    + self.movers_tmp.capacity()
+                    + self.movers_counts.capacity()
                     + self.escaped.capacity()
                     + self.loud.capacity()
                     + self.pending.capacity(),
@@ -383,6 +404,7 @@ impl BroadPhase {
     #[cfg(feature = "parallel")]
     fn par_heap_bytes(&self) -> usize {
         self.par.heap_bytes()
+            + self.placed.capacity() * core::mem::size_of::<crate::octree::Placed>()
     }
 
     #[cfg(not(feature = "parallel"))]
@@ -468,20 +490,22 @@ impl BroadPhase {
     }
 
     /// Moves or resizes a sphere. `Err(UnknownProxy)` for a stale key, `Err(WrongKind)` for a
-    /// body's key, or a geometry error; on `Err` nothing changes.
+    /// body's key, or a geometry error; on `Err` nothing changes. Only the shape is stored
+    /// here: the next [`BroadPhase::step`] moves it in the octree, and queries see it at once
+    /// (see the crate docs' "Queries").
     #[inline]
     pub fn update_sphere(&mut self, key: ProxyKey, center: Vec3, radius: f32) -> Result<(), Error> {
         let slot = self.check_sphere_update(key, center, radius)?;
-        self.set_sphere(key, slot, center, radius);
+        self.set_sphere(slot, center, radius);
         Ok(())
     }
 
     /// Sets a body's world AABB (its kind stays). `Err(UnknownProxy)` for a stale key,
     /// `Err(WrongKind)` for a sphere's key, or a geometry error; on `Err` nothing changes.
+    /// Stored like [`BroadPhase::update_sphere`]'s.
     pub fn update_body(&mut self, key: ProxyKey, aabb: Aabb) -> Result<(), Error> {
         let slot = self.check_body_update(key, &aabb)?;
-        let kind = self.body_kind(slot);
-        self.set_body(key, slot, &aabb, kind);
+        self.set_body(slot, &aabb);
         Ok(())
     }
 
@@ -495,8 +519,7 @@ impl BroadPhase {
                 .map_err(|error| BatchError { index, error })?;
         }
         for &(key, center, radius) in updates {
-            let slot = crate::pair::slot(key);
-            self.set_sphere(key, slot, center, radius);
+            self.set_sphere(crate::pair::slot(key), center, radius);
         }
         Ok(())
     }
@@ -510,10 +533,8 @@ impl BroadPhase {
             self.check_body_update(*key, aabb)
                 .map_err(|error| BatchError { index, error })?;
         }
-        for &(key, aabb) in updates {
-            let slot = crate::pair::slot(key);
-            let kind = self.body_kind(slot);
-            self.set_body(key, slot, &aabb, kind);
+        for (key, aabb) in updates {
+            self.set_body(crate::pair::slot(*key), aabb);
         }
         Ok(())
     }
@@ -540,62 +561,42 @@ impl BroadPhase {
         }
     }
 
-    fn body_kind(&self, slot: u32) -> BodyKind {
-        if self.store.kind[slot as usize] == Kind::Static {
-            BodyKind::Static
-        } else {
-            BodyKind::Dynamic
-        }
-    }
-
-    /// Applies a checked update of the live sphere `key` in `slot`: the new exact box, and in
-    /// the octree either the exact sphere (full pass regime) or, if the exact box left the old
-    /// fat box, a new fat sphere. Centre and radius arrive as values, not as a `Shape` built by
-    /// the caller: reading such a temporary back as one wide load right after its field-wise
-    /// stores stalls on store forwarding.
+    /// Stores a checked update of the live sphere in `slot`: the new shape, written once, and
+    /// the slot marked stale; the next step applies it (see [`apply`]). Centre and radius
+    /// arrive as values and are written field by field: a whole `Shape` built on the stack and
+    /// copied with wide loads stalls on the store forwarding of its narrow stores.
     #[inline]
-    fn set_sphere(&mut self, key: ProxyKey, slot: u32, center: Vec3, radius: f32) {
-        let s = slot as usize;
-        let grown = fat::grown_sphere(center, radius, self.config.margin);
-        let (exact, r) = (grown.aabb, grown.radius);
-        self.note_motion(s, &exact);
-        // Field by field: a whole new `Shape` is built on the stack and copied with wide loads
-        // that stall on the store forwarding of its narrow stores.
-        match &mut self.store.shape[s] {
+    fn set_sphere(&mut self, slot: u32, center: Vec3, radius: f32) {
+        match &mut self.store.shape[slot as usize] {
             Shape::Sphere {
                 center: c,
                 radius: r,
             } => (*c, *r) = (center, radius),
             other => *other = Shape::Sphere { center, radius },
         }
-        self.store.exact[s] = exact;
-        if self.cached {
-            self.refresh_fat(slot, &exact);
-        } else {
-            // The octree holds the exact sphere (`held` is kept only while fat boxes are); the
-            // next step is a full pass, which reads no escape marks.
-            self.octree.update_live(key, center, r);
-            self.mark(slot, flag::MOVED);
-        }
+        self.mark_stale(slot);
     }
 
-    /// [`BroadPhase::set_sphere`] for a body of `kind` with its new box.
+    /// [`BroadPhase::set_sphere`] for a body with its new box (its kind stays).
     #[inline]
-    fn set_body(&mut self, key: ProxyKey, slot: u32, aabb: &Aabb, kind: BodyKind) {
-        let s = slot as usize;
-        let exact = fat::grown(Shape::Body { aabb: *aabb, kind }, self.config.margin).aabb;
-        self.note_motion(s, &exact);
-        match &mut self.store.shape[s] {
-            Shape::Body { aabb: a, .. } => *a = *aabb,
-            other => *other = Shape::Body { aabb: *aabb, kind },
+    fn set_body(&mut self, slot: u32, aabb: &Aabb) {
+        if let Shape::Body { aabb: a, .. } = &mut self.store.shape[slot as usize] {
+            *a = *aabb;
         }
-        self.store.exact[s] = exact;
-        if self.cached {
-            self.refresh_fat(slot, &exact);
-        } else {
-            let placed = self.tree_mut(kind).update_box(key, &exact);
-            debug_assert!(placed.is_ok(), "a live body missing from its BVH");
-            self.mark(slot, flag::MOVED);
+        self.mark_stale(slot);
+    }
+
+    /// Marks `slot` updated and not yet applied, listing it in `movers` once.
+    #[inline]
+    fn mark_stale(&mut self, slot: u32) {
+        let f = &mut self.store.flags[slot as usize];
+        let old = *f;
+        *f = old | flag::MOVED | flag::STALE;
+        if old & flag::STALE == 0 {
+            self.stale += 1;
+            if old & flag::MOVED == 0 {
+                self.movers.push(slot);
+            }
         }
     }
 
@@ -608,6 +609,9 @@ impl BroadPhase {
             Shape::Body { kind, .. } => self.tree_mut(kind).remove(key),
         };
         debug_assert!(removed.is_ok(), "a live proxy missing from its structure");
+        if self.store.flags[slot as usize] & flag::STALE != 0 {
+            self.stale -= 1;
+        }
         self.store.free(slot);
         self.removals += 1;
         Ok(())
@@ -674,6 +678,8 @@ impl BroadPhase {
     /// them may look proxies up ([`BroadPhase::shape`], [`BroadPhase::groups`]). Steady state
     /// allocates nothing: every list is kept and reused.
     pub fn step(&mut self) {
+        // The updates since the last step reach the structures first, in slot order.
+        self.apply_updates();
         // The octree's region follows the spheres: re-rooted here, before any pass or query.
         self.octree.maintain();
         let plan = self.plan();

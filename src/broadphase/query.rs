@@ -1,7 +1,10 @@
 //! Box, sphere, ray, sphere-cast and nearest queries of a [`BroadPhase`], and the
 //! [`QueryFilter`] an engine's queries pass: the structures find the proxies whose held boxes
 //! (exact, or fat around the exact ones) the query meets, each is re-tested against its exact
-//! shape, and only then offered to the filter.
+//! shape, and only then offered to the filter. Slots updated since the last step are held by
+//! the structures at their last applied boxes: the queries skip them there and test their
+//! latest shapes in a scan of the stale slots (see [`super::apply`]), so a query sees every
+//! update at once and costs `O(stale)` more until the next step.
 //!
 //! Each query comes twice: the plain form (`query_aabb`, `cast_ray`, `nearest`, …) sees every
 //! proxy and visits every match; the `_with` form (`query_aabb_with`, `cast_ray_with`,
@@ -140,7 +143,7 @@ impl BroadPhase {
         let q = SimdBox::new(aabb);
         let mut test = |k: ProxyKey| {
             let s = crate::pair::slot(k) as usize;
-            if self.store.exact[s].overlaps(&q) && self.passes(filter, k, s) {
+            if !self.is_stale(s) && self.store.exact[s].overlaps(&q) && self.passes(filter, k, s) {
                 f(k)
             } else {
                 ControlFlow::Continue(())
@@ -148,7 +151,15 @@ impl BroadPhase {
         };
         self.octree.try_query_aabb_unchecked(aabb, &mut test)?;
         self.dynamic.try_query_aabb_unchecked(aabb, &mut test)?;
-        self.statics.try_query_aabb_unchecked(aabb, &mut test)
+        self.statics.try_query_aabb_unchecked(aabb, &mut test)?;
+        self.for_each_stale(|s| {
+            let k = self.store.key(s as u32);
+            if self.exact_box(&self.store.shape[s]).overlaps(&q) && self.passes(filter, k, s) {
+                f(k)
+            } else {
+                ControlFlow::Continue(())
+            }
+        })
     }
 
     /// The nearest proxy hit by the segment `origin + t·dir`, `t ∈ [0, max_t]`, with its `t`
@@ -244,6 +255,9 @@ impl BroadPhase {
     ) -> Option<(ProxyKey, f32)> {
         let t_of = |key: ProxyKey, limit: f32| {
             let s = crate::pair::slot(key) as usize;
+            if self.is_stale(s) {
+                return None;
+            }
             let t = hit_of(&self.store.shape[s], limit)?;
             self.passes(filter, key, s).then_some(t)
         };
@@ -262,6 +276,13 @@ impl BroadPhase {
             .ray_candidates(origin, dir, limit, inflate, |k, _| {
                 hit.offer(k, t_of(k, hit.limit()))
             });
+        // The stale slots the structures skipped, at their latest shapes.
+        let _ = self.for_each_stale(|s| {
+            let k = self.store.key(s as u32);
+            let t = hit_of(&self.store.shape[s], hit.limit());
+            hit.offer(k, t.filter(|_| self.passes(filter, k, s)));
+            ControlFlow::Continue(())
+        });
         hit.best()
     }
 
@@ -320,7 +341,8 @@ impl BroadPhase {
     /// kept across calls stops allocating once it has held the largest round.
     ///
     /// An expanding search: from the distance to the octree's region plus a part of the
-    /// spacing `k` proxies spread evenly over it would have, each round takes every proxy
+    /// spacing `k` proxies spread evenly over it would have (or over the octree's typical
+    /// cells, if that is less), each round takes every proxy
     /// whose held box is within the radius and doubles the radius until `k` that pass the
     /// filter are within it by their exact distance (or every proxy was seen). A proxy not
     /// seen is farther than the radius.
@@ -336,7 +358,8 @@ impl BroadPhase {
         if k == 0 || n == 0 || !point.is_finite() {
             return;
         }
-        let start = nearest_start(point, &self.occupied_bounds(), k, n);
+        let start = nearest_start(point, &self.occupied_bounds(), k, n)
+            .min(self.octree.nearest_start(point, k));
         nearest_expanding(k, n, start, out, |radius, out| {
             let reach = radius + geom::distance_pad(point, radius);
             let mut seen = 0;
@@ -380,11 +403,28 @@ impl BroadPhase {
         radius: f32,
         mut f: impl FnMut(ProxyKey, usize) -> ControlFlow<()>,
     ) -> ControlFlow<()> {
-        let slot = |k: ProxyKey| crate::pair::slot(k) as usize;
-        self.octree.near(p, radius, |k| f(k, slot(k)))?;
-        self.dynamic
-            .within_distance(p, radius, |k, _| f(k, slot(k)))?;
-        self.statics
-            .within_distance(p, radius, |k, _| f(k, slot(k)))
+        let mut fresh = |k: ProxyKey| {
+            let s = crate::pair::slot(k) as usize;
+            if self.is_stale(s) {
+                ControlFlow::Continue(())
+            } else {
+                f(k, s)
+            }
+        };
+        self.octree.near(p, radius, &mut fresh)?;
+        self.dynamic.within_distance(p, radius, |k, _| fresh(k))?;
+        self.statics.within_distance(p, radius, |k, _| fresh(k))?;
+        // The stale slots the structures skipped, whose latest box meets the cube `p ± radius`.
+        let cube = SimdBox::new(&Aabb {
+            min: p - Vec3::splat(radius),
+            max: p + Vec3::splat(radius),
+        });
+        self.for_each_stale(|s| {
+            if SimdBox::new(&self.store.shape[s].aabb()).overlaps(&cube) {
+                f(self.store.key(s as u32), s)
+            } else {
+                ControlFlow::Continue(())
+            }
+        })
     }
 }

@@ -30,8 +30,9 @@
 //! the parts of the pair sort as it finds them (at the quantiles of the last step's pairs),
 //! each part is sorted by its own task, and the event diff is split the same way. Each pair is
 //! found by one producer, once, and every part covers a key range, so the lists are the
-//! serial pass's at any thread count. What stays serial: the updates (the caller's), the
-//! refits, the sphere × body queries (one task), and the incremental pass.
+//! serial pass's at any thread count. What stays serial: the octree's relinks and the body
+//! leaves of the updates' apply (see [`super::apply`]), the refits, the sphere × body queries
+//! (one task), and the incremental pass.
 
 use super::fat::LOOKAHEAD_STEPS;
 use super::*;
@@ -70,7 +71,7 @@ const LEAVE_AT_ONCE: f64 = 2.0;
 /// handing out the octree's chunks costs about what the second thread saves (measured on
 /// `gas`).
 #[cfg(feature = "parallel")]
-const PARALLEL_MIN_SPHERES: usize = 10_000;
+pub(super) const PARALLEL_MIN_SPHERES: usize = 10_000;
 /// The dynamic bodies from which a full pass splits over the pool whatever the spheres: a
 /// body costs the pass several times what a sphere does, so fewer of them pay for the split.
 #[cfg(feature = "parallel")]

@@ -37,6 +37,10 @@ pub(super) mod flag {
     /// Its candidates' recorded status may differ from the status at the anchors: it is
     /// re-anchored at the next incremental step (see `slack`).
     pub(crate) const PENDING: u8 = 16;
+    /// Updated since the last step and not yet applied: its shape is the new one, its exact
+    /// box, motion record and its structure's box are still the last step's (see `apply`).
+    /// Always set with `MOVED`.
+    pub(crate) const STALE: u8 = 32;
 }
 
 /// The highest slot index: slots are packed two to a `u64` pair with the top bit spare.
@@ -93,6 +97,12 @@ impl Store {
     /// Slot count (live and free): the bound of every per-slot array.
     pub(super) fn slots(&self) -> usize {
         self.version.len()
+    }
+
+    /// Slots the per-slot arrays have room for without growing.
+    #[cfg(feature = "parallel")]
+    pub(super) fn capacity_slots(&self) -> usize {
+        self.version.capacity()
     }
 
     /// The slot `key` names, if it names a live proxy here.

@@ -11,12 +11,14 @@ impl BroadPhase {
     /// Checks every internal invariant and panics with a message on the first broken one: each
     /// live proxy held under its key by exactly its own structure (octree, dynamic or static
     /// BVH) with the box the broadphase recorded for it (its exact box, or a fat box around
-    /// it), every structure's own invariants, the step lists, and with candidates, that they
+    /// it; for a slot updated since the last step, its last applied box), every structure's
+    /// own invariants, the step lists, and with candidates, that they
     /// are exactly the allowed pairs of overlapping held boxes and that the pair list is their
     /// overlapping part. For tests: O(n log n + candidates).
     pub fn validate(&self) {
         let st = &self.store;
         let mut live = [0usize; 3];
+        let mut stale = 0;
         for s in 0..st.slots() {
             let v = st.version[s];
             assert_eq!(
@@ -28,11 +30,16 @@ impl BroadPhase {
                 continue;
             }
             assert_eq!(st.flags[s] & flag::GONE, 0, "slot {s}: live but gone");
-            assert_eq!(
-                st.exact[s],
-                self.exact_box(&st.shape[s]),
-                "slot {s}: exact box stale"
-            );
+            if st.flags[s] & flag::STALE == 0 {
+                assert_eq!(
+                    st.exact[s],
+                    self.exact_box(&st.shape[s]),
+                    "slot {s}: exact box stale"
+                );
+            } else {
+                stale += 1;
+                assert_ne!(st.flags[s] & flag::MOVED, 0, "slot {s}: stale, not moved");
+            }
             let key = st.key(s as u32);
             let held = if self.cached { st.held[s] } else { st.exact[s] };
             let (home, held_there) = match st.shape[s] {
@@ -73,6 +80,7 @@ impl BroadPhase {
             }
         }
         assert_eq!(live.iter().sum::<usize>(), st.len(), "live count");
+        assert_eq!(stale, self.stale, "stale count");
         assert_eq!(self.octree.len(), live[0], "octree holds unknown spheres");
         assert_eq!(
             self.dynamic.len(),

@@ -52,6 +52,13 @@ impl Group {
         *lane(z1, k) = b.max.z;
     }
 
+    /// The four boxes' faces: `min.x`, `min.y`, `min.z` and `max.x`, `max.y`, `max.z`, one
+    /// lane per box (for the ray kernel of the queries).
+    #[inline(always)]
+    pub(super) fn faces(&self) -> (&[Vec4; 3], &[Vec4; 3]) {
+        (&self.min, &self.max)
+    }
+
     /// Bit `k` set iff box `k` of the block overlaps the splatted box (closed, as
     /// [`SimdBox::overlaps`]).
     #[inline(always)]

@@ -5,15 +5,58 @@
 //! stop as soon as their visitor returns [`ControlFlow::Break`], and say whether it did.
 
 use super::Bvh;
+use super::lanes::{GROUP, Group};
 use super::node::{INLINE_STACK, Node, SmallStack};
 use crate::geom::{
     self, Aabb, SimdBox, check_aabb, check_sphere, inverse_dir, point_aabb_distance, ray_is_valid,
 };
 use crate::pair::ProxyKey;
-use crate::search::{FirstHit, nearest_expanding, nearest_start};
+use crate::search::{FirstHit, Slab, nearest_expanding, nearest_start};
 use core::ops::ControlFlow;
-use glam::{Vec3, Vec3A};
+use glam::{Vec3, Vec3A, Vec4};
 use slotmap::Key;
+
+impl Slab {
+    /// Bit `k` set iff [`Slab::entry`] of box `k` of `group` by `limit` is some, for a
+    /// segment with no zero direction component (`finite`): the same operations on the same
+    /// floats, lane by lane (`t_near` is the largest of the axes' and 0, `t_far` the smallest
+    /// of the axes' and `limit`).
+    #[inline(always)]
+    fn group_mask(&self, group: &Group, limit: f32) -> u32 {
+        debug_assert!(self.finite);
+        let (min, max) = group.faces();
+        let mut near = Vec4::ZERO;
+        let mut far = Vec4::splat(limit);
+        for a in 0..3 {
+            let t1 = (min[a] - self.inflate4 - self.origin4[a]) * self.inv4[a];
+            let t2 = (max[a] + self.inflate4 - self.origin4[a]) * self.inv4[a];
+            near = near.max(t1.min(t2));
+            far = far.min(t1.max(t2));
+        }
+        near.cmple(far).bitmask()
+    }
+}
+
+/// Relative margin of [`near_filter`]'s squared radius: a few `f32` roundings of a sum of
+/// three squares, with room to spare.
+const NEAR_FILTER_MARGIN: f32 = 32.0 * f32::EPSILON;
+
+/// A test in `f32` lanes that passes every box within `radius` of `p` by
+/// [`point_aabb_distance`] (which rounds an `f64` distance once), and every box holding such a
+/// box; it may pass a few slightly farther. Derivation: the per-axis gaps `max(min − p,
+/// p − max, 0)` are correctly rounded subtractions, monotone in the corners, so a box holding
+/// another has gaps no larger, and so no larger a sum of their squares (each operation rounds
+/// monotonically); that sum is within a few roundings of the exact squared distance, which the
+/// margin on `radius²` covers. An overflow to `+∞` only happens beyond every finite radius,
+/// and an underflow only shrinks the sum.
+fn near_filter(p: Vec3, radius: f32) -> impl Fn(&SimdBox) -> bool {
+    let p = Vec3A::from(p);
+    let r2 = radius * radius * (1.0 + NEAR_FILTER_MARGIN);
+    move |b: &SimdBox| {
+        let gap = (b.min - p).max(p - b.max).max(Vec3A::ZERO);
+        gap.length_squared() <= r2
+    }
+}
 
 impl Bvh {
     /// Calls `f` with the key of every live box that overlaps `aabb` (closed: touching
@@ -194,8 +237,11 @@ impl Bvh {
         if !ray_is_valid(origin, dir, max_t) || inflate.is_nan() || inflate < 0.0 {
             return;
         }
-        let (o, inv) = (Vec3A::from(origin), Vec3A::from(inverse_dir(dir)));
-        let entry = |b: SimdBox, limit: f32| b.grown(inflate).ray_entry(o, inv, limit);
+        let slab = Slab::new(origin, dir, inflate);
+        let entry = |b: SimdBox, limit: f32| slab.entry(&b, limit);
+        // Nodes are read as one 16-byte load per corner (`Node::bounds`), whose fourth lane
+        // the slab test ignores.
+        let node_entry = |n: u32, limit: f32| entry(self.nodes[n as usize].bounds(), limit);
         let mut best = max_t;
         let mut consider = |key: ProxyKey, b: &SimdBox, best: &mut f32| {
             if !key.is_null() && entry(*b, *best).is_some() {
@@ -208,7 +254,7 @@ impl Bvh {
         let Some(root) = self.nodes.first() else {
             return;
         };
-        let Some(t_root) = entry(SimdBox::new(&root.aabb()), best) else {
+        let Some(t_root) = entry(root.bounds(), best) else {
             return;
         };
         let mut stack = SmallStack::<(u32, f32), INLINE_STACK>::new((0, 0.0));
@@ -219,14 +265,33 @@ impl Bvh {
             }
             let node = &self.nodes[n as usize];
             if node.is_leaf() {
-                for i in node.range() {
-                    consider(self.keys[i], &self.boxes[i], &mut best);
+                let range = node.range();
+                match self.lanes.leaf(range.start, range.len()) {
+                    // Four boxes per test; each that passes is tested again (it may lie
+                    // behind a hit found since).
+                    Some(leaf) if slab.finite => {
+                        let mut m = 0u64;
+                        for (j, group) in leaf.blocks.iter().enumerate() {
+                            m |= u64::from(slab.group_mask(group, best)) << (GROUP * j);
+                        }
+                        m &= leaf.valid;
+                        let base = range.start - leaf.off;
+                        while m != 0 {
+                            let i = base + m.trailing_zeros() as usize;
+                            m &= m - 1;
+                            consider(self.keys[i], &self.boxes[i], &mut best);
+                        }
+                    }
+                    _ => {
+                        for i in range {
+                            consider(self.keys[i], &self.boxes[i], &mut best);
+                        }
+                    }
                 }
                 continue;
             }
             let (a, b) = node.children(n);
-            let ta = entry(SimdBox::new(&self.nodes[a as usize].aabb()), best);
-            let tb = entry(SimdBox::new(&self.nodes[b as usize].aabb()), best);
+            let (ta, tb) = (node_entry(a, best), node_entry(b, best));
             match (ta, tb) {
                 (Some(ta), Some(tb)) if tb < ta => {
                     stack.push((a, ta));
@@ -257,10 +322,13 @@ impl Bvh {
         if !p.is_finite() || radius.is_nan() || radius < 0.0 {
             return ControlFlow::Continue(());
         }
-        let near = |b: &Aabb| point_aabb_distance(p, b) <= radius;
+        let may_be_near = near_filter(p, radius);
         let mut consider = |key: ProxyKey, b: &SimdBox| {
+            if key.is_null() || !may_be_near(b) {
+                return ControlFlow::Continue(());
+            }
             let aabb = b.aabb();
-            if !key.is_null() && near(&aabb) {
+            if point_aabb_distance(p, &aabb) <= radius {
                 f(key, &aabb)
             } else {
                 ControlFlow::Continue(())
@@ -270,7 +338,7 @@ impl Bvh {
             consider(key, b)?;
         }
         self.walk(
-            |node| near(&node.aabb()),
+            |node| may_be_near(&node.bounds()),
             |i| consider(self.keys[i], &self.boxes[i]),
         )
     }

@@ -482,6 +482,13 @@ impl Octree {
     #[inline(always)]
     fn update_id(&mut self, id: u32, center: Vec3, radius: f32) {
         let at = self.lattice.locate(center, radius);
+        self.store_located(id, center, radius, &at);
+    }
+
+    /// Stores sphere `id` at `center`, `radius`, placed at `at` (from this tree's lattice),
+    /// relinking it if its node changed.
+    #[inline(always)]
+    fn store_located(&mut self, id: u32, center: Vec3, radius: f32, at: &placement::Located) {
         let i = id as usize;
         let old_node = self.objs[i].node;
         if old_node == 0 || at.outside {
@@ -733,6 +740,45 @@ impl Octree {
         if self.nodes.is_empty(node) {
             self.nodes.mark_empty(node);
         }
+    }
+}
+
+/// A sphere's placement computed without changing the tree ([`Octree::placement_of`]): what
+/// [`Octree::update`] does first, kept for the second half ([`Octree::update_placed`]), so that
+/// a caller moving many spheres can compute their placements on several threads and store
+/// them on one.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Placed(placement::Located);
+
+impl Placed {
+    /// A placement no sphere has: a filler for buffers.
+    pub(crate) const NONE: Placed = Placed(placement::Located {
+        aabb: Aabb::EMPTY,
+        qmin: [0; 3],
+        qmax: [0; 3],
+        node: NONE,
+        outside: false,
+    });
+}
+
+/// The batched update (read-only placement, then store and relink).
+impl Octree {
+    /// Where a sphere at `center`, `radius` goes in the tree as it is now; reads only. Valid
+    /// for [`Octree::update_placed`] until the region changes ([`Octree::maintain`]).
+    #[inline(always)]
+    pub(crate) fn placement_of(&self, center: Vec3, radius: f32) -> Placed {
+        Placed(self.lattice.locate(center, radius))
+    }
+
+    /// [`Octree::update_live`] with the placement [`Octree::placement_of`] computed for the
+    /// same `center` and `radius`: stores the sphere, relinking it if its node changed.
+    #[inline(always)]
+    pub(crate) fn update_placed(&mut self, key: ProxyKey, center: Vec3, radius: f32, at: &Placed) {
+        debug_assert!(
+            self.id_of(key).is_some(),
+            "update_placed of a key not live here"
+        );
+        self.store_located(crate::pair::slot(key), center, radius, &at.0);
     }
 }
 

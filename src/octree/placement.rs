@@ -411,10 +411,10 @@ impl Lattice {
         let mut b = [0u32; 3];
         for axis in 0..3 {
             // Cells with `k·S − grow_lo <= hi` and `k·S + S − 1 + grow_hi >= lo`: `k` from
-            // `ceil((lo − grow_hi − S + 1) / S)` to `floor((hi + grow_lo) / S)`.
-            let n = i64::from(lo[axis]) - grow_hi - size + 1;
-            let first = (n.div_euclid(size) + i64::from(n.rem_euclid(size) != 0)).max(0);
-            let end = ((i64::from(hi[axis]) + grow_lo).div_euclid(size)).min(last);
+            // `ceil((lo − grow_hi − S + 1) / S) = floor((lo − grow_hi) / S)` to
+            // `floor((hi + grow_lo) / S)`; `S = 2^shift`, so each floor is an arithmetic shift.
+            let first = ((i64::from(lo[axis]) - grow_hi) >> shift).max(0);
+            let end = ((i64::from(hi[axis]) + grow_lo) >> shift).min(last);
             if end < first {
                 return ([1; 3], [0; 3]);
             }

@@ -5,11 +5,11 @@
 //! [`Octree::nearest`], for its result. The `try_` queries stop as soon as their visitor
 //! returns [`ControlFlow::Break`], and say whether it did.
 
-use super::cell::Cell;
-use super::{NONE, Octree};
-use crate::geom::{self, Aabb};
+use super::cell::{Cell, morton, node_index};
+use super::{NONE, Octree, Placement};
+use crate::geom::{self, Aabb, SimdBox};
 use crate::pair::ProxyKey;
-use crate::search::{FirstHit, nearest_expanding, nearest_start};
+use crate::search::{FirstHit, Slab, nearest_expanding, nearest_start_in_cells};
 use core::ops::ControlFlow;
 use glam::Vec3;
 
@@ -29,6 +29,35 @@ const RAY_PIECE_SLACK: f32 = 1e-5;
 /// that each would read most of what its neighbours read (a huge sphere cast would read every
 /// cell once per piece).
 const MAX_PIECE_CELLS: f32 = 8.0;
+
+/// The per-sphere reads of the queries, in one place: what they need of a sphere's record
+/// and of its node's list, whatever the layout of those.
+impl Octree {
+    /// The box of sphere `id` (`center ± radius`, recomputed: the record stores the sphere).
+    #[inline(always)]
+    fn box_of(&self, id: u32) -> Aabb {
+        self.objs[id as usize].aabb()
+    }
+
+    /// The centre and radius of sphere `id`, exactly as given.
+    #[inline(always)]
+    fn sphere_of(&self, id: u32) -> (Vec3, f32) {
+        let o = &self.objs[id as usize];
+        (o.center, o.radius)
+    }
+
+    /// True if sphere `id` lives in the root.
+    #[inline(always)]
+    fn in_root(&self, id: u32) -> bool {
+        self.objs[id as usize].node == 0
+    }
+
+    /// The sphere after `i` in its node's list, `NONE` at the end.
+    #[inline(always)]
+    fn next_in_list(&self, i: u32) -> u32 {
+        self.links[i as usize].next
+    }
+}
 
 impl Octree {
     /// Depth-first over occupied nodes from the root: `enter(cell)` decides whether to visit a
@@ -50,7 +79,7 @@ impl Octree {
                 let mut i = self.nodes.head_at(slot);
                 while i != NONE && !stopped.get() {
                     stopped.set(visit(i).is_break());
-                    i = self.links[i as usize].next;
+                    i = self.next_in_list(i);
                 }
             },
         );
@@ -71,19 +100,6 @@ impl Octree {
     fn candidates(
         &self,
         aabb: &Aabb,
-        visit: impl FnMut(u32) -> ControlFlow<()>,
-    ) -> ControlFlow<()> {
-        self.candidates_from(aabb, true, false, visit)
-    }
-
-    /// [`Octree::candidates`], the root's list left out unless `root`; with `small` the
-    /// caller knows the box spans about a deepest occupied cell (a ray piece) and the direct
-    /// lists are read without counting the cells first. The first `Break` of `visit` ends it.
-    fn candidates_from(
-        &self,
-        aabb: &Aabb,
-        root: bool,
-        small: bool,
         mut visit: impl FnMut(u32) -> ControlFlow<()>,
     ) -> ControlFlow<()> {
         let (qlo, qhi) = (
@@ -91,7 +107,7 @@ impl Octree {
             self.lattice.quantize(aabb.max),
         );
         let mut cells = 0u64;
-        for level in (1..=self.lattice.depth).filter(|_| !small) {
+        for level in 1..=self.lattice.depth {
             if self.per_level[level as usize] > 0 {
                 let (a, b) = self.lattice.reaching_cells(level, qlo, qhi);
                 cells += (0..3)
@@ -100,26 +116,17 @@ impl Octree {
             }
         }
         if cells > DIRECT_CELLS {
-            return self.traverse(
-                |cell| self.lattice.reaches(cell, qlo, qhi),
-                |id| {
-                    if root || self.objs[id as usize].node != 0 {
-                        visit(id)
-                    } else {
-                        ControlFlow::Continue(())
-                    }
-                },
-            );
+            return self.traverse(|cell| self.lattice.reaches(cell, qlo, qhi), visit);
         }
         let mut list = |node: u32| {
             let mut i = self.nodes.head(node);
             while i != NONE {
                 visit(i)?;
-                i = self.links[i as usize].next;
+                i = self.next_in_list(i);
             }
             ControlFlow::Continue(())
         };
-        if root && self.per_level[0] > 0 {
+        if self.per_level[0] > 0 {
             list(0)?;
         }
         for level in 1..=self.lattice.depth {
@@ -178,7 +185,7 @@ impl Octree {
         mut f: impl FnMut(ProxyKey) -> ControlFlow<()>,
     ) -> ControlFlow<()> {
         self.candidates(aabb, |id| {
-            if self.objs[id as usize].aabb().overlaps(aabb) {
+            if self.box_of(id).overlaps(aabb) {
                 f(self.keys[id as usize])
             } else {
                 ControlFlow::Continue(())
@@ -209,7 +216,7 @@ impl Octree {
             return ControlFlow::Continue(());
         }
         self.candidates(&Aabb::from_center_radius(center, radius), |id| {
-            let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
+            let (c, r) = self.sphere_of(id);
             if geom::spheres_touch(c, r, center, radius) {
                 f(self.keys[id as usize])
             } else {
@@ -227,28 +234,13 @@ impl Octree {
         if !geom::ray_is_valid(origin, dir, max_t) {
             return None;
         }
-        let inv = geom::inverse_dir(dir);
-        let slack = self.lattice.slack();
-        let hit = core::cell::Cell::new(FirstHit::new(max_t));
-        let limit = || hit.get().limit();
-        let _ = self.traverse(
-            |cell| {
-                self.lattice
-                    .reach_box(cell)
-                    .grown(slack)
-                    .ray_entry(origin, inv, limit())
-                    .is_some()
-            },
-            |id| {
-                let o = &self.objs[id as usize];
-                let t = geom::ray_sphere(origin, dir, o.center, o.radius, limit());
-                let mut h = hit.get();
-                h.offer(self.keys[id as usize], t);
-                hit.set(h);
-                ControlFlow::Continue(())
-            },
-        );
-        hit.get().best()
+        let mut hit = FirstHit::new(max_t);
+        self.ray_ids(origin, dir, max_t, 0.0, |id, limit| {
+            let (c, r) = self.sphere_of(id);
+            let t = geom::ray_sphere(origin, dir, c, r, limit);
+            hit.offer(self.keys[id as usize], t)
+        });
+        hit.best()
     }
 
     /// Calls `f(key, t)` for every sphere hit by the segment (same rules as
@@ -293,7 +285,7 @@ impl Octree {
                     .is_some()
             },
             |id| {
-                let (c, r) = (self.objs[id as usize].center, self.objs[id as usize].radius);
+                let (c, r) = self.sphere_of(id);
                 if let Some(t) = hit(c, r) {
                     f(self.keys[id as usize], t);
                 }
@@ -302,12 +294,12 @@ impl Octree {
         );
     }
 
-    /// Calls `visit(id, best)` for every sphere of every node whose reach box, grown by the
-    /// slack and by `inflate`, the segment `origin + t·dir`, `t ∈ [0, best]` enters, where
-    /// `best` starts at `max_t` and becomes `min(best, returned value)` after each visit (a NaN
-    /// return leaves it). Every sphere whose box grown by `inflate` the segment enters is
-    /// among them: the root is always entered, and below it a sphere's box lies in its node's
-    /// reach box grown by the slack.
+    /// Calls `visit(id, best)`, once each, for the spheres of the root and of every node whose
+    /// reach the segment `origin + t·dir`, `t ∈ [0, best]` may meet (grown by the slack and by
+    /// `inflate`; nearer nodes first, a few beside the segment too), where `best` starts at
+    /// `max_t` and becomes `min(best, returned value)` after each visit (a NaN return leaves
+    /// it). Every sphere whose box grown by `inflate` the segment enters is among them: below
+    /// the root a sphere's box lies in its node's reach box grown by the slack.
     fn ray_ids(
         &self,
         origin: Vec3,
@@ -321,7 +313,7 @@ impl Octree {
         let mut i = self.nodes.head(0);
         while i != NONE {
             best = best.min(visit(i, best));
-            i = self.links[i as usize].next;
+            i = self.next_in_list(i);
         }
         let Some(deepest) = (1..=self.lattice.depth)
             .rev()
@@ -329,13 +321,23 @@ impl Octree {
         else {
             return;
         };
-        // Spheres below the root lie in the bounds grown by half their extent (a loose
-        // level-1 cell reaches a quarter of it past the bounds).
+        // Spheres below the root lie in their cells' reach boxes grown by the slack: within
+        // the bounds (strict), or within them grown by half a cell of the shallowest occupied
+        // level (loose); twice the slack covers the rounding of the region's own corners.
         let extent = self.lattice.bounds.extent();
+        let reach = match self.lattice.placement {
+            Placement::Strict => 0.0,
+            Placement::Loose => {
+                let shallowest = (1..=deepest)
+                    .find(|&l| self.per_level[l as usize] > 0)
+                    .unwrap_or(deepest);
+                extent.max_element() / (2u32 << shallowest) as f32
+            }
+        };
         let region = self
             .lattice
             .bounds
-            .grown(extent.max_element() * 0.5 + inflate);
+            .grown(reach + 2.0 * self.lattice.slack() + inflate);
         let inv = geom::inverse_dir(dir);
         let Some(t0) = region.ray_entry(origin, inv, best) else {
             return;
@@ -356,26 +358,29 @@ impl Octree {
             && piece_cells <= MAX_PIECE_CELLS)
         {
             self.ray_ids_walk(origin, dir, best, inflate, |id, b| {
-                if self.objs[id as usize].node == 0 {
-                    b
-                } else {
-                    visit(id, b)
-                }
+                if self.in_root(id) { b } else { visit(id, b) }
             });
             return;
         }
         // Pieces in order of `t`, each a box around its stretch of the segment grown by
-        // `inflate` and a slack fixed for the whole ray (so that each axis' piece intervals
-        // only move forward: the pieces whose ranges meet a sphere's range are consecutive,
-        // and a sphere is visited in the first of them only).
+        // `inflate` and a slack fixed for the whole ray. Each axis' piece intervals only move
+        // forward, and so do the cell ranges that reach them at every level: the pieces a
+        // cell reaches are consecutive, so reading at each piece only the cells the previous
+        // piece did not reach reads every cell once, in the first piece it reaches, and every
+        // sphere with it (its exact test decides; one read early costs nothing but the test).
         let q = |t_lo: f32, t_hi: f32| {
             let (p, r) = (origin + dir * t_lo, origin + dir * t_hi);
             Aabb::new(p.min(r) - Vec3::splat(slack), p.max(r) + Vec3::splat(slack))
         };
-        let meets = |o: &super::Obj, lo: [u16; 3], hi: [u16; 3]| {
-            (0..3).all(|a| o.qmin[a] <= hi[a] && lo[a] <= o.qmax[a])
-        };
-        let mut prev: Option<([u16; 3], [u16; 3])> = None;
+        // The occupied levels below the root, each with the cell range its last piece read.
+        let mut levels = [(0u32, [1u32; 3], [0u32; 3]); super::MAX_DEPTH as usize];
+        let mut occupied = 0;
+        for level in 1..=self.lattice.depth {
+            if self.per_level[level as usize] > 0 {
+                levels[occupied].0 = level;
+                occupied += 1;
+            }
+        }
         let mut k = 0u32;
         loop {
             let ta = t0 + dt * k as f32;
@@ -384,23 +389,48 @@ impl Octree {
             }
             let tb = (t0 + dt * (k + 1) as f32).min(t1);
             let piece = q(ta, tb);
-            let range = (
+            let (qlo, qhi) = (
                 self.lattice.quantize(piece.min),
                 self.lattice.quantize(piece.max),
             );
-            let _ = self.candidates_from(&piece, false, true, |id| {
-                let o = &self.objs[id as usize];
-                let new =
-                    meets(o, range.0, range.1) && prev.is_none_or(|(lo, hi)| !meets(o, lo, hi));
-                if new {
-                    best = best.min(visit(id, best));
+            for (level, pa, pb) in &mut levels[..occupied] {
+                let (a, b) = self.lattice.reaching_cells(*level, qlo, qhi);
+                let (pa, pb) = (core::mem::replace(pa, a), core::mem::replace(pb, b));
+                // A cell's node is its level's first plus its Morton code, whose bits of `x`,
+                // `y` and `z` are or-ed: a row computes those of `y` and `z` once.
+                let first = node_index(*level, 0);
+                let mut row = |y: u32, z: u32, x0: u32, x1: u32| {
+                    let yz = morton([0, y, z]);
+                    for x in x0..x1 + 1 {
+                        let mut i = self.nodes.head(first + (yz | morton([x, 0, 0])));
+                        while i != NONE {
+                            best = best.min(visit(i, best));
+                            i = self.next_in_list(i);
+                        }
+                    }
+                };
+                for z in a[2]..b[2] + 1 {
+                    let z_read = pa[2] <= z && z <= pb[2];
+                    for y in a[1]..b[1] + 1 {
+                        let read = z_read && pa[1] <= y && y <= pb[1];
+                        if !read || pa[0] > pb[0] {
+                            row(y, z, a[0], b[0]);
+                            continue;
+                        }
+                        // A row the last piece read in part: only its cells outside
+                        // `pa.x..=pb.x`, on either side.
+                        if a[0] < pa[0] {
+                            row(y, z, a[0], b[0].min(pa[0] - 1));
+                        }
+                        if pb[0] < b[0] {
+                            row(y, z, a[0].max(pb[0] + 1), b[0]);
+                        }
+                    }
                 }
-                ControlFlow::Continue(())
-            });
+            }
             if tb >= t1 {
                 break;
             }
-            prev = Some(range);
             k += 1;
         }
     }
@@ -451,11 +481,11 @@ impl Octree {
         if !geom::ray_is_valid(origin, dir, max_t) || inflate.is_nan() || inflate < 0.0 {
             return;
         }
-        let inv = geom::inverse_dir(dir);
+        let slab = Slab::new(origin, dir, inflate);
         self.ray_ids(origin, dir, max_t, inflate, |id, best| {
-            let aabb = &self.objs[id as usize].aabb();
-            match aabb.grown(inflate).ray_entry(origin, inv, best) {
-                Some(_) => visit(self.keys[id as usize], aabb),
+            let aabb = self.box_of(id);
+            match slab.entry(&SimdBox::new(&aabb), best) {
+                Some(_) => visit(self.keys[id as usize], &aabb),
                 None => best,
             }
         });
@@ -490,7 +520,7 @@ impl Octree {
         }
         let cube = Aabb::from_center_radius(p, radius);
         self.near_ids(p, radius, |id| {
-            if self.objs[id as usize].aabb().overlaps(&cube) {
+            if self.box_of(id).overlaps(&cube) {
                 f(self.keys[id as usize])
             } else {
                 ControlFlow::Continue(())
@@ -516,8 +546,8 @@ impl Octree {
     ) -> Option<(ProxyKey, f32)> {
         let (mut hit, inflate) = FirstHit::sphere_cast(center, radius, dir, max_t)?;
         self.ray_ids(center, dir, max_t, inflate, |id, limit| {
-            let o = &self.objs[id as usize];
-            let t = geom::sphere_cast_sphere(center, radius, dir, limit, o.center, o.radius);
+            let (c, r) = self.sphere_of(id);
+            let t = geom::sphere_cast_sphere(center, radius, dir, limit, c, r);
             hit.offer(self.keys[id as usize], t)
         });
         hit.best()
@@ -528,7 +558,7 @@ impl Octree {
     /// order (all of them if there are fewer). Empty for `k == 0` or a non-finite `point`.
     ///
     /// An expanding search: starting from the distance to the bounds plus a part of the
-    /// spacing `k` spheres spread evenly over the bounds would have, each round computes the exact
+    /// edge of `k` cells of the most populated level, each round computes the exact
     /// distance of every sphere of the nodes within the radius (plus a relative pad, as the
     /// node test rounds differently from the `f32` box corners) and doubles the radius until
     /// `k` spheres are within it or every sphere was seen. A sphere not seen is farther than
@@ -539,19 +569,35 @@ impl Octree {
         if k == 0 || n == 0 || !point.is_finite() {
             return Vec::new();
         }
-        let start = nearest_start(point, &self.lattice.bounds, k, n);
+        let start = self.nearest_start(point, k);
         let mut out = Vec::new();
         nearest_expanding(k, n, start, &mut out, |radius, out| {
             let reach = radius + geom::distance_pad(point, radius);
             let _ = self.near_ids(point, reach, |id| {
-                let o = &self.objs[id as usize];
-                let d = geom::point_sphere_distance(point, o.center, o.radius);
+                let (c, r) = self.sphere_of(id);
+                let d = geom::point_sphere_distance(point, c, r);
                 out.push((self.keys[id as usize], d));
                 ControlFlow::Continue(())
             });
             out.len()
         });
         out
+    }
+
+    /// Where a search for the `k` spheres nearest `point` starts
+    /// ([`nearest_start_in_cells`]): from the cells of the level holding the most spheres
+    /// below the root (the root's cell if none does), not from the region's size, which a
+    /// growing tree keeps well above its spheres' span. `+∞` for an empty tree.
+    pub(crate) fn nearest_start(&self, point: Vec3, k: usize) -> f32 {
+        if self.live == 0 {
+            return f32::INFINITY;
+        }
+        let level = (1..=self.lattice.depth)
+            .max_by_key(|&l| (self.per_level[l as usize], core::cmp::Reverse(l)))
+            .filter(|&l| self.per_level[l as usize] > 0)
+            .unwrap_or(0);
+        let cell = self.lattice.bounds.extent().max_element() / (1u32 << level) as f32;
+        nearest_start_in_cells(point, &self.lattice.bounds, k, cell)
     }
 
     /// Calls `f(level, cell)` for every node that holds at least one sphere, parents before

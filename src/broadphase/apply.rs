@@ -1,0 +1,220 @@
+//! An update is a store; the step applies it.
+//!
+//! [`BroadPhase::update_sphere`] and [`BroadPhase::update_body`] (and their batches) check
+//! their input, write the new shape into the slot's entry of the dense shape array, and mark
+//! the slot `MOVED | STALE` (listing it in `movers` once, however often it is updated). Nothing
+//! else happens at the call: the exact box, the motion record and the structure's box are the
+//! last step's until the next [`BroadPhase::step`], whose first act is
+//! [`BroadPhase::apply_updates`]: one pass over the stale slots in slot order (a walk over every
+//! slot's flags when many are stale, else the mover list, radix-sorted by slot when the
+//! caller's order was another), each given
+//! - its exact box (the shape grown by `Config::margin`) and its motion since it was last
+//!   applied (for its fat margin and the pass estimate: a key updated several times between
+//!   two steps counts one move, from where it was applied last to its last shape);
+//! - its place in its structure: outside the incremental regime the exact box (the octree
+//!   relinks a sphere whose node changed; a BVH leaf is written, its ancestors refitted once
+//!   by the pass that follows), inside it the fat box it still lies in, or a new one.
+//!
+//! Slot order makes the pass stream through every per-slot array and the octree's records,
+//! whatever order the caller updated in (a churn's reused keys come in none).
+//!
+//! **Between an update and the next step** the structures hold the stale slots at their last
+//! applied boxes, so the queries ([`super::query`]) skip a stale slot where a structure
+//! reports it and test every stale slot's latest shape after the structures' walk instead: a
+//! query costs `O(stale)` more until the next step applies them (nothing at all once the step
+//! ran, or when nothing was updated). [`BroadPhase::shape`], [`BroadPhase::aabb`] and snapshots
+//! read the latest shapes; [`BroadPhase::octree`] and [`BroadPhase::bvh`] show the structures as
+//! the last step left them.
+
+use super::store::flag;
+use super::{BroadPhase, Shape, fat};
+use crate::radix::sort_bits_by;
+
+/// The stale slots are applied by walking every slot's flags once at least one slot in this
+/// many is stale, and by sorting the mover list below that.
+const DENSE_FRACTION: usize = 8;
+/// Tasks per thread of the parallel apply, so that a thread that finishes its ranges early
+/// takes over part of a slower one's.
+#[cfg(feature = "parallel")]
+const TASKS_PER_THREAD: usize = 4;
+
+impl BroadPhase {
+    /// Applies every update since the last step, in slot order (see the module docs).
+    pub(super) fn apply_updates(&mut self) {
+        if self.stale == 0 {
+            return;
+        }
+        let slots = self.store.slots();
+        #[cfg(feature = "parallel")]
+        if self.apply_par() {
+            self.stale = 0;
+            return;
+        }
+        if self.stale >= slots / DENSE_FRACTION {
+            // Most slots are stale: one streaming walk over the flags is cheaper than sorting
+            // the mover list (whose order then stays the caller's).
+            for s in 0..slots {
+                let f = &mut self.store.flags[s];
+                if *f & flag::STALE != 0 {
+                    *f &= !flag::STALE;
+                    self.apply(s as u32);
+                }
+            }
+        } else {
+            if !self.movers.is_sorted() {
+                let bits = u32::BITS - (slots as u32).leading_zeros();
+                sort_bits_by(
+                    &mut self.movers,
+                    &mut self.movers_tmp,
+                    &mut self.movers_counts,
+                    |&s| u64::from(s),
+                    0,
+                    bits,
+                );
+            }
+            for i in 0..self.movers.len() {
+                let slot = self.movers[i];
+                let f = &mut self.store.flags[slot as usize];
+                if *f & flag::STALE != 0 {
+                    *f &= !flag::STALE;
+                    self.apply(slot);
+                }
+            }
+        }
+        self.stale = 0;
+    }
+
+    /// Applies the stored shape of the stale live `slot`: its exact box, its motion, and its
+    /// structure's box (outside the incremental regime the exact one, inside it a fat one).
+    /// Always inlined into both walks: the centre then stays in registers.
+    #[inline(always)]
+    fn apply(&mut self, slot: u32) {
+        let s = slot as usize;
+        let key = self.store.key(slot);
+        match self.store.shape[s] {
+            Shape::Sphere { center, radius } => {
+                let grown = fat::grown_sphere(center, radius, self.config.margin);
+                self.note_motion(s, &grown.aabb);
+                self.store.exact[s] = grown.aabb;
+                if self.cached {
+                    self.refresh_fat(slot, &grown.aabb);
+                } else {
+                    self.octree.update_live(key, center, grown.radius);
+                }
+            }
+            shape @ Shape::Body { kind, .. } => {
+                let exact = fat::grown(shape, self.config.margin).aabb;
+                self.note_motion(s, &exact);
+                self.store.exact[s] = exact;
+                if self.cached {
+                    self.refresh_fat(slot, &exact);
+                } else {
+                    let placed = self.tree_mut(kind).update_box(key, &exact);
+                    debug_assert!(placed.is_ok(), "a live body missing from its BVH");
+                }
+            }
+        }
+    }
+
+    /// The dense walk with its spheres' share split over rayon's current pool, outside the
+    /// incremental regime, with more than one thread and at least `PARALLEL_MIN_SPHERES`
+    /// spheres, at least one slot in [`DENSE_FRACTION`] stale; false (nothing done) otherwise.
+    /// Each task takes a range of slots and computes, for its stale spheres, the exact box, the
+    /// motion and the octree placement (reading the tree only); then one walk in slot order
+    /// stores the placements in the octree (relinking the spheres whose node changed) and
+    /// applies the bodies. Every slot's outcome depends only on its own shape, so the result is
+    /// the serial walk's at any thread count.
+    #[cfg(feature = "parallel")]
+    fn apply_par(&mut self) -> bool {
+        use super::store::Kind;
+        use crate::octree::Placed;
+        use rayon::prelude::*;
+        let slots = self.store.slots();
+        let threads = rayon::current_num_threads();
+        if self.cached
+            || threads < 2
+            || self.octree.len() < super::step::PARALLEL_MIN_SPHERES
+            || self.stale < slots / DENSE_FRACTION
+        {
+            return false;
+        }
+        let chunk = slots.div_ceil(threads * TASKS_PER_THREAD).max(1);
+        if self.placed.len() < slots {
+            // Exactly the slots: the per-slot arrays grow by an eighth, not by doubling.
+            crate::radix::grow_to(&mut self.placed, self.store.capacity_slots());
+            self.placed.resize(slots, Placed::NONE);
+        }
+        let (margin, now, octree) = (self.config.margin, self.now, &self.octree);
+        let st = &mut self.store;
+        let (shape, flags) = (&st.shape, &st.flags);
+        let fast: usize = st
+            .exact
+            .par_chunks_mut(chunk)
+            .zip(st.speed.par_chunks_mut(chunk))
+            .zip(st.stamp.par_chunks_mut(chunk))
+            .zip(self.placed.par_chunks_mut(chunk))
+            .enumerate()
+            .map(|(c, (((exact, speed), stamp), placed))| {
+                let mut fast = 0;
+                for i in 0..exact.len() {
+                    let s = c * chunk + i;
+                    let Shape::Sphere { center, radius } = shape[s] else {
+                        continue;
+                    };
+                    if flags[s] & flag::STALE == 0 {
+                        continue;
+                    }
+                    let grown = fat::grown_sphere(center, radius, margin);
+                    let (v, f) = fat::motion(&exact[i], &grown.aabb, stamp[i], now);
+                    (exact[i], speed[i], stamp[i]) = (grown.aabb, v, now);
+                    fast += usize::from(f);
+                    placed[i] = octree.placement_of(center, grown.radius);
+                }
+                fast
+            })
+            .sum();
+        self.fast_movers += fast;
+        for s in 0..slots {
+            let f = &mut self.store.flags[s];
+            if *f & flag::STALE == 0 {
+                continue;
+            }
+            *f &= !flag::STALE;
+            if self.store.kind[s] != Kind::Sphere {
+                self.apply(s as u32);
+                continue;
+            }
+            if let Shape::Sphere { center, radius } = self.store.shape[s] {
+                let key = self.store.key(s as u32);
+                let r = fat::grown_sphere(center, radius, margin).radius;
+                self.octree.update_placed(key, center, r, &self.placed[s]);
+            }
+        }
+        true
+    }
+
+    /// True if `slot` was updated since the last step and the update is not applied yet: the
+    /// structures hold its last applied box, its shape is the latest.
+    #[inline]
+    pub(super) fn is_stale(&self, slot: usize) -> bool {
+        self.store.flags[slot] & flag::STALE != 0
+    }
+
+    /// Calls `f(slot)` for every stale live slot (see [`BroadPhase::is_stale`]), in the order
+    /// they were first updated; nothing, in O(1), when there are none.
+    #[inline]
+    pub(super) fn for_each_stale(
+        &self,
+        mut f: impl FnMut(usize) -> core::ops::ControlFlow<()>,
+    ) -> core::ops::ControlFlow<()> {
+        if self.stale == 0 {
+            return core::ops::ControlFlow::Continue(());
+        }
+        for &m in &self.movers {
+            if self.is_stale(m as usize) {
+                f(m as usize)?;
+            }
+        }
+        core::ops::ControlFlow::Continue(())
+    }
+}
