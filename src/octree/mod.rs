@@ -753,7 +753,6 @@ pub(crate) struct Placed(placement::Located);
 impl Placed {
     /// A placement no sphere has: a filler for buffers.
     pub(crate) const NONE: Placed = Placed(placement::Located {
-        aabb: Aabb::EMPTY,
         qmin: [0; 3],
         qmax: [0; 3],
         node: NONE,
