@@ -134,15 +134,15 @@ pub(crate) fn part_of(splitters: &[u64], key: u64) -> usize {
 
 /// Sorts keys that their producers have already cut into `parts` parts into `out`, over
 /// rayon's current pool: `buckets[i][p]` holds producer `i`'s keys of part `p`. Each part is
-/// copied into its stretch of `out` and radix sorted there by its own task, with `tmp[p]` as
-/// its second buffer; `bounds` gets the parts' first positions and the key count last. The
+/// copied into its stretch of `out` and radix sorted there by its own task, with the same stretch
+/// of `tmp` as its second buffer; `bounds` gets the parts' first positions and the key count last. The
 /// keys (distinct packed pairs of slots below `layout`'s bound) end sorted whatever the cut.
 #[cfg(feature = "parallel")]
 pub(crate) fn sort_parts(
     buckets: &[Vec<Vec<u64>>],
     parts: usize,
     out: &mut Vec<u64>,
-    tmp: &mut Vec<Vec<u64>>,
+    tmp: &mut Vec<u64>,
     bounds: &mut Vec<usize>,
     layout: PairBits,
 ) {
@@ -153,15 +153,13 @@ pub(crate) fn sort_parts(
         bounds.push(bounds[p] + len);
     }
     out.resize(bounds[parts], 0);
-    if tmp.len() < parts {
-        tmp.resize_with(parts, Vec::new);
-    }
+    tmp.resize(bounds[parts], 0);
     let job = Gather {
         buckets,
         bounds,
         layout,
     };
-    job.fill(0, &mut tmp[..parts], out);
+    job.fill(0, parts, tmp, out);
 }
 
 /// What every part of [`sort_parts`] reads.
@@ -174,10 +172,11 @@ struct Gather<'a> {
 
 #[cfg(feature = "parallel")]
 impl Gather<'_> {
-    /// Sorts parts `first..first + tmp.len()` into `out`, their stretch of the output,
-    /// halving the parts between two tasks until one is left.
-    fn fill(&self, first: usize, tmp: &mut [Vec<u64>], out: &mut [u64]) {
-        if let [tmp] = tmp {
+    /// Sorts parts `first..first + parts` into `out`, their stretch of the output, with
+    /// `tmp`, the same stretch of the second buffer, halving the parts between two tasks
+    /// until one is left.
+    fn fill(&self, first: usize, parts: usize, tmp: &mut [u64], out: &mut [u64]) {
+        if parts == 1 {
             let mut at = 0;
             for b in self.buckets {
                 let keys = &b[first];
@@ -187,27 +186,25 @@ impl Gather<'_> {
             sort_slice(out, tmp, self.layout);
             return;
         }
-        let mid = tmp.len() / 2;
+        let mid = parts / 2;
         let at = self.bounds[first + mid] - self.bounds[first];
-        let (ta, tb) = tmp.split_at_mut(mid);
+        let (ta, tb) = tmp.split_at_mut(at);
         let (oa, ob) = out.split_at_mut(at);
         rayon::join(
-            || self.fill(first, ta, oa),
-            || self.fill(first + mid, tb, ob),
+            || self.fill(first, mid, ta, oa),
+            || self.fill(first + mid, parts - mid, tb, ob),
         );
     }
 }
 
-/// [`sort_u64`] of a slice: the keys are copied back if they end in `tmp`.
+/// [`sort_u64`] of a slice with a second buffer of the same length: the keys are copied back
+/// if they end in `tmp`.
 #[cfg(feature = "parallel")]
-fn sort_slice(keys: &mut [u64], tmp: &mut Vec<u64>, layout: PairBits) {
-    let n = keys.len();
-    if n < 64 {
+fn sort_slice(keys: &mut [u64], tmp: &mut [u64], layout: PairBits) {
+    if keys.len() < 64 {
         keys.sort_unstable();
         return;
     }
-    tmp.clear();
-    tmp.resize(n, 0);
     if sort_in(keys, tmp, layout) {
         keys.copy_from_slice(tmp);
     }
@@ -308,20 +305,53 @@ pub(crate) fn sort_bits_by<T: Copy + Default>(
     lo: u32,
     bits: u32,
 ) {
-    let n = items.len();
+    tmp.resize(items.len(), T::default());
+    if sort_core(items, tmp, counts, key, lo, bits) {
+        core::mem::swap(items, tmp);
+    }
+}
+
+/// [`sort_bits`] of a slice with a second buffer of the same length, for a caller sorting
+/// parts of one buffer in place: returns true if the sorted items ended in `tmp` (an odd
+/// number of passes moved them), false if in `items`.
+#[cfg(feature = "parallel")]
+pub(crate) fn sort_bits_in(
+    items: &mut [u64],
+    tmp: &mut [u64],
+    counts: &mut Vec<u32>,
+    lo: u32,
+    bits: u32,
+) -> bool {
+    debug_assert_eq!(items.len(), tmp.len());
+    sort_core(items, tmp, counts, |&x| x, lo, bits)
+}
+
+/// The passes of [`sort_bits_by`], moving the items between `a` and `b` (equal lengths);
+/// true if they end in `b`.
+#[inline]
+fn sort_core<T: Copy>(
+    a: &mut [T],
+    b: &mut [T],
+    counts: &mut Vec<u32>,
+    key: impl Fn(&T) -> u64,
+    lo: u32,
+    bits: u32,
+) -> bool {
+    let n = a.len();
     let radix = 1usize << MAX_DIGIT_BITS;
     let mask = (radix - 1) as u64;
     let passes = bits.div_ceil(MAX_DIGIT_BITS) as usize;
     counts.clear();
     counts.resize(radix * passes, 0);
-    for x in items.iter() {
+    for x in a.iter() {
         let x = key(x);
         for p in 0..passes {
             let d = ((x >> (lo + p as u32 * MAX_DIGIT_BITS)) & mask) as usize;
             counts[p * radix + d] += 1;
         }
     }
-    tmp.resize(n, T::default());
+    let (mut src, mut dst) = (a, b);
+    let mut in_b = false;
     for p in 0..passes {
         let c = &mut counts[p * radix..(p + 1) * radix];
         if c.iter().any(|&k| k as usize == n) {
@@ -334,13 +364,15 @@ pub(crate) fn sort_bits_by<T: Copy + Default>(
             sum += here;
         }
         let shift = lo + p as u32 * MAX_DIGIT_BITS;
-        for x in items.iter() {
+        for x in src.iter() {
             let d = ((key(x) >> shift) & mask) as usize;
-            tmp[c[d] as usize] = *x;
+            dst[c[d] as usize] = *x;
             c[d] += 1;
         }
-        core::mem::swap(items, tmp);
+        core::mem::swap(&mut src, &mut dst);
+        in_b = !in_b;
     }
+    in_b
 }
 
 /// Grows `v` to half again its length once it is within a quarter of its capacity: a sort's
@@ -360,6 +392,17 @@ pub(crate) fn grow_slots<T>(v: &mut Vec<T>, len: usize) {
     const MIN_GROWTH: usize = 64;
     if v.capacity() < len {
         grow_to(v, len + (len / 8).max(MIN_GROWTH));
+    }
+}
+
+/// Makes room for `len` items in a list refilled by every pass (the octree's walk order and
+/// runs): exactly the first time, so a world that keeps its count keeps no spare, and by an
+/// eighth past `len` ([`grow_slots`]) once it outgrows that, not by `Vec`'s doubling.
+pub(crate) fn room_for<T>(v: &mut Vec<T>, len: usize) {
+    if v.capacity() == 0 {
+        grow_to(v, len);
+    } else {
+        grow_slots(v, len);
     }
 }
 
@@ -420,6 +463,32 @@ mod tests {
                 );
                 assert_eq!(keys, want, "n {n} slots {slots}");
             }
+        }
+    }
+
+    /// `sort_bits_in` sorts a slice stably by the key bits, its answer in whichever buffer
+    /// it says, for every pass count (the walk order's keys take one to three).
+    #[cfg(feature = "parallel")]
+    #[test]
+    fn sort_bits_in_says_where_the_sorted_items_are() {
+        let mut next = xorshift(0x0123_4567_89AB_CDEF);
+        for (n, bits) in [
+            (0, 8),
+            (1, 8),
+            (300, 8),
+            (3000, 11),
+            (3000, 12),
+            (5000, 22),
+            (5000, 33),
+        ] {
+            let mut items: Vec<u64> = (0..n as u64)
+                .map(|id| ((next() & ((1 << bits) - 1)) << 32) | id)
+                .collect();
+            let mut want = items.clone();
+            want.sort_by_key(|x| x >> 32);
+            let (mut tmp, mut counts) = (vec![0; n], Vec::new());
+            let in_tmp = sort_bits_in(&mut items, &mut tmp, &mut counts, 32, bits);
+            assert_eq!(if in_tmp { tmp } else { items }, want, "n {n} bits {bits}");
         }
     }
 

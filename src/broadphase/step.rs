@@ -101,8 +101,7 @@ pub(super) struct Parallel {
     found: Vec<Vec<Vec<u64>>>,
     /// The split BVH passes' items and per-task stacks.
     split: crate::bvh::SplitScratch,
-    /// The pair sort's second buffers (one per part) and its parts' bounds.
-    sort_tmp: Vec<Vec<u64>>,
+    /// The pair sort's parts' bounds (its second buffer is the serial sort's `sort_buf`).
     sort_bounds: Vec<usize>,
     /// Per part of the event diff: its `added` and `removed`.
     diff: Vec<[Vec<u64>; 2]>,
@@ -118,7 +117,6 @@ impl Parallel {
         let lists = |v: &[Vec<u64>]| v.iter().map(Vec::capacity).sum::<usize>();
         (self.splitters.capacity()
             + self.found.iter().map(|f| lists(f)).sum::<usize>()
-            + lists(&self.sort_tmp)
             + self.sort_bounds.capacity()
             + self.diff.iter().map(|d| lists(d)).sum::<usize>()
             + self.cur_at.capacity()
@@ -496,14 +494,14 @@ impl BroadPhase {
             &par.found[..producers],
             parts,
             &mut self.fresh,
-            &mut par.sort_tmp,
+            &mut self.sort_buf,
             &mut par.sort_bounds,
             layout,
         );
         for list in par.found[..producers].iter_mut().flatten() {
             ahead(list);
         }
-        par.sort_tmp.iter_mut().for_each(ahead);
+        ahead(&mut self.sort_buf);
     }
 
     /// The incremental pass (see the module docs and [`super::slack`]): the pair list and the

@@ -47,6 +47,7 @@ use super::walk::{self, Hot, SHORT_CROSS, SHORT_SELF, Sweeps, Tester, Walk, runs
 use super::{MAX_DEPTH, Octree, PassCost};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
+use crate::radix::room_for;
 
 /// The four forward neighbour rows `(dy, dz)` of a cell (see the module docs).
 const ROWS: [[i32; 2]; 4] = [[1, 0], [-1, 1], [0, 1], [1, 1]];
@@ -304,6 +305,13 @@ impl Scratch {
         if cross && self.run_of.len() < heads {
             self.run_of.resize(heads, [0, 0]);
         }
+        // Sized before they fill (`room_for`), not grown by doubling as they fill.
+        let count = node_key.windows(2).filter(|w| w[0] != w[1]).count() + 1;
+        room_for(&mut self.run_key, count + 1);
+        room_for(&mut self.run_start, count + 1);
+        if cross {
+            room_for(&mut self.run_slot, count);
+        }
         self.run_key.clear();
         self.run_start.clear();
         self.run_slot.clear();
@@ -351,6 +359,11 @@ impl Scratch {
         }
         self.chunk_runs.push(sum);
         let runs = sum as usize;
+        room_for(&mut self.run_key, runs + 1);
+        room_for(&mut self.run_start, runs + 1);
+        if cross {
+            room_for(&mut self.run_slot, runs);
+        }
         self.run_key.resize(runs + 1, 0);
         self.run_start.resize(runs + 1, 0);
         self.run_slot.resize(if cross { runs } else { 0 }, 0);

@@ -101,14 +101,15 @@ pub enum Placement {
 
 /// Per-sphere data, indexed by id: the slot index of the sphere's key, so a caller that
 /// updates its spheres in key order streams through it, and a removal leaves a hole (`node ==
-/// NONE`) instead of moving another sphere. The pair pass reads `aabb`, `qmin`/`qmax` and
-/// `walk_key`; queries follow the node lists ([`Link`]). One cache line: an update in no
-/// particular order (a world whose keys were reused) reads and writes exactly one line here.
+/// NONE`) instead of moving another sphere. The pair pass reads the sphere (its box is
+/// [`Obj::aabb`], recomputed rather than stored), `qmin`/`qmax` and `walk_key`; queries follow
+/// the node lists ([`Link`]). 40 bytes.
 #[derive(Clone, Copy, Debug)]
-#[repr(C, align(64))]
+#[repr(C)]
 struct Obj {
-    /// `center ± radius`, the box every pair test uses. 24 bytes.
-    aabb: Aabb,
+    /// The sphere exactly as given. 16 bytes.
+    center: Vec3,
+    radius: f32,
     /// The box's corners as integer cell coordinates on the tree's integer lattice (the deepest
     /// level's cells, or their halves in loose mode), clamped to the lattice. 12 bytes.
     qmin: [u16; 3],
@@ -117,23 +118,32 @@ struct Obj {
     node: u32,
     /// The node's walk key (`Lattice::walk_key`), set on every link. 8 bytes.
     walk_key: u64,
-    /// The sphere exactly as given. 16 bytes.
-    center: Vec3,
-    radius: f32,
 }
-const _: () = assert!(core::mem::size_of::<Obj>() == 64);
+const _: () = assert!(core::mem::size_of::<Obj>() == 40);
 
 impl Obj {
     /// An id no sphere holds.
     const HOLE: Obj = Obj {
-        aabb: Aabb::EMPTY,
+        center: Vec3::ZERO,
+        radius: 0.0,
         qmin: [0; 3],
         qmax: [0; 3],
         node: NONE,
         walk_key: 0,
-        center: Vec3::ZERO,
-        radius: 0.0,
     };
+
+    /// The box every pair test uses, `center ± radius`: the box `Lattice::locate` quantised,
+    /// bit for bit.
+    #[inline]
+    fn aabb(&self) -> Aabb {
+        Aabb::from_center_radius(self.center, self.radius)
+    }
+
+    /// [`Obj::aabb`] as the passes' SIMD box.
+    #[inline]
+    fn simd_box(&self) -> crate::geom::SimdBox {
+        crate::geom::SimdBox::from_center_radius(self.center, self.radius)
+    }
 }
 
 /// A sphere's neighbours in its node's list, `NONE` at the ends; read by queries and written
@@ -322,10 +332,13 @@ impl Octree {
         }
         let limit = region::overflow_limit(self.live).max(2 * self.overflow_after as usize);
         if self.overflow as usize > limit || self.live > 2 * self.regrow.rooted {
-            match self
-                .regrow
-                .propose(&self.objs, self.live, self.hint, self.lattice.placement)
-            {
+            match self.regrow.propose(
+                &self.objs,
+                self.live,
+                self.hint,
+                self.lattice.placement,
+                self.passes.walk.lend(),
+            ) {
                 Some(p) => self.reroot(&p),
                 None => {
                     // No finite region covers the world: keep this one, and wait for twice
@@ -337,10 +350,13 @@ impl Octree {
             return;
         }
         if self.regrow.tick() {
-            match self
-                .regrow
-                .propose(&self.objs, self.live, self.hint, self.lattice.placement)
-            {
+            match self.regrow.propose(
+                &self.objs,
+                self.live,
+                self.hint,
+                self.lattice.placement,
+                self.passes.walk.lend(),
+            ) {
                 Some(p) if region::worth_it(&self.lattice, &p) => self.reroot(&p),
                 _ => self.regrow.back_off(),
             }
@@ -360,7 +376,7 @@ impl Octree {
                 continue;
             }
             let at = self.lattice.locate(o.center, o.radius);
-            (o.aabb, o.qmin, o.qmax) = (at.aabb, at.qmin, at.qmax);
+            (o.qmin, o.qmax) = (at.qmin, at.qmax);
             self.per_level[level_of(at.node) as usize] += 1;
             self.overflow += u32::from(at.outside);
             self.link(id, at.node);
@@ -426,7 +442,6 @@ impl Octree {
             + self.keys.capacity() * 8
             + self.nodes.heap_bytes()
             + self.passes.heap_bytes()
-            + self.regrow.heap_bytes()
     }
 
     /// Moves and/or resizes a sphere. `Err(UnknownProxy)` for a stale or foreign key, `Err`
@@ -482,7 +497,6 @@ impl Octree {
         }
         let o = &mut self.objs[i];
         (o.center, o.radius) = (center, radius);
-        o.aabb = at.aabb;
         o.qmin = at.qmin;
         o.qmax = at.qmax;
         if old_node != at.node {
@@ -540,7 +554,7 @@ impl Octree {
     /// The sphere's AABB `center ± radius`, or `None` for a stale or foreign key.
     #[must_use]
     pub fn aabb(&self, key: ProxyKey) -> Option<Aabb> {
-        self.id_of(key).map(|id| self.objs[id as usize].aabb)
+        self.id_of(key).map(|id| self.objs[id as usize].aabb())
     }
 
     /// The sphere's centre and radius exactly as last given, or `None` for a stale key.
@@ -629,7 +643,7 @@ impl Octree {
     pub fn for_each(&self, mut f: impl FnMut(ProxyKey, Aabb)) {
         for (key, obj) in self.keys.iter().zip(&self.objs) {
             if obj.node != NONE {
-                f(*key, obj.aabb);
+                f(*key, obj.aabb());
             }
         }
     }
@@ -667,7 +681,6 @@ impl Octree {
             self.keys.resize(i + 1, ProxyKey::default());
         }
         self.objs[i] = Obj {
-            aabb: at.aabb,
             qmin: at.qmin,
             qmax: at.qmax,
             center,
@@ -687,7 +700,7 @@ impl Octree {
         let o = &self.objs[id as usize];
         o.node == 0 && {
             let (c, r) = (o.center, o.radius);
-            self.lattice.is_outside(&o.aabb, c, r)
+            self.lattice.is_outside(&o.aabb(), c, r)
         }
     }
 
@@ -740,7 +753,6 @@ pub(crate) struct Placed(placement::Located);
 impl Placed {
     /// A placement no sphere has: a filler for buffers.
     pub(crate) const NONE: Placed = Placed(placement::Located {
-        aabb: Aabb::EMPTY,
         qmin: [0; 3],
         qmax: [0; 3],
         node: NONE,

@@ -163,8 +163,6 @@ impl LooseKey {
 /// Where a sphere goes, from [`Lattice::locate`].
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Located {
-    /// `center ± radius`.
-    pub(super) aabb: Aabb,
     /// The box's corners as lattice coordinates, clamped to the lattice.
     pub(super) qmin: [u16; 3],
     pub(super) qmax: [u16; 3],
@@ -213,7 +211,7 @@ impl Lattice {
         }
     }
 
-    /// Where a sphere goes: its box, the box's lattice range, its node, and whether it is kept in
+    /// Where a sphere goes: its box's lattice range, its node, and whether it is kept in
     /// the root for not fitting.
     #[inline(always)]
     pub(super) fn locate(&self, center: Vec3, radius: f32) -> Located {
@@ -225,7 +223,6 @@ impl Lattice {
             Placement::Loose => self.loose_node(center, radius, qmin, qmax),
         };
         Located {
-            aabb,
             qmin,
             qmax,
             node,
@@ -467,7 +464,10 @@ impl Lattice {
         let level = level_of(node);
         let cell = unmorton(code_of(node, level));
         match self.placement {
-            Placement::Strict => self.check_strict(id, at, node, level, cell),
+            Placement::Strict => {
+                let aabb = Aabb::from_center_radius(c, r);
+                self.check_strict(id, &aabb, at, node, level, cell);
+            }
             Placement::Loose => self.check_loose(id, c, r, at, node, level, cell),
         }
     }
@@ -475,10 +475,18 @@ impl Lattice {
     /// Strict: an overflow sphere's box leaves the bounds and it is in the root; any other
     /// box's lattice range lies in the node's cell and straddles a mid plane of it, unless the
     /// node is deepest.
-    fn check_strict(&self, id: usize, at: &Located, node: u32, level: u32, cell: [u32; 3]) {
+    fn check_strict(
+        &self,
+        id: usize,
+        aabb: &Aabb,
+        at: &Located,
+        node: u32,
+        level: u32,
+        cell: [u32; 3],
+    ) {
         let wrong = "is not in the node placement gives";
         if at.outside {
-            let left = !self.bounds.contains(&at.aabb);
+            let left = !self.bounds.contains(aabb);
             assert!(node == 0 && left, "id {id} {wrong}: it overflows the root");
             return;
         }

@@ -33,10 +33,10 @@ const MAX_PIECE_CELLS: f32 = 8.0;
 /// The per-sphere reads of the queries, in one place: what they need of a sphere's record
 /// and of its node's list, whatever the layout of those.
 impl Octree {
-    /// The stored box of sphere `id` (`center ± radius`).
+    /// The box of sphere `id` (`center ± radius`, recomputed: the record stores the sphere).
     #[inline(always)]
-    fn box_of(&self, id: u32) -> &Aabb {
-        &self.objs[id as usize].aabb
+    fn box_of(&self, id: u32) -> Aabb {
+        self.objs[id as usize].aabb()
     }
 
     /// The centre and radius of sphere `id`, exactly as given.
@@ -484,8 +484,8 @@ impl Octree {
         let slab = Slab::new(origin, dir, inflate);
         self.ray_ids(origin, dir, max_t, inflate, |id, best| {
             let aabb = self.box_of(id);
-            match slab.entry(&SimdBox::new(aabb), best) {
-                Some(_) => visit(self.keys[id as usize], aabb),
+            match slab.entry(&SimdBox::new(&aabb), best) {
+                Some(_) => visit(self.keys[id as usize], &aabb),
                 None => best,
             }
         });

@@ -101,7 +101,7 @@ pub(super) struct Proposal {
     pub(super) span_center: Vec3,
 }
 
-/// The growing policy's state: when to audit, and the scratch of [`propose`].
+/// The growing policy's state: when to audit, and where the last re-root centred the region.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Regrow {
     /// Live spheres at the last re-root (0 before the first).
@@ -112,22 +112,18 @@ pub(super) struct Regrow {
     /// Calls to `maintain` left until the next audit, and the current period.
     countdown: u32,
     period: u32,
-    /// One value per live sphere, for the median and the quantiles.
-    scratch: Vec<f32>,
-    /// The occupancy count's cell codes, one per live sphere, and its radix sort's scratch.
-    codes: Vec<u64>,
-    codes_tmp: Vec<u64>,
-    counts: Vec<u32>,
+}
+
+/// Scratch a re-root proposal borrows from the pair passes' walk-order buffers (which hold
+/// nothing between passes): one value per live sphere for the median and the quantiles, then
+/// the occupancy count's cell codes, and the radix sort's second buffer and counts.
+pub(super) struct Lent<'a> {
+    pub(super) values: &'a mut Vec<u64>,
+    pub(super) tmp: &'a mut Vec<u64>,
+    pub(super) counts: &'a mut Vec<u32>,
 }
 
 impl Regrow {
-    /// Heap bytes held (capacities).
-    pub(super) fn heap_bytes(&self) -> usize {
-        self.scratch.capacity() * 4
-            + (self.codes.capacity() + self.codes_tmp.capacity()) * 8
-            + self.counts.capacity() * 4
-    }
-
     /// Resets the audit clock after a re-root of `live` spheres around `span_center` (`None`:
     /// no region was found, the tree kept its own).
     pub(super) fn rooted(&mut self, live: usize, span_center: Option<Vec3>) {
@@ -160,16 +156,19 @@ impl Regrow {
         live: usize,
         hint: Option<Aabb>,
         placement: Placement,
+        lent: Lent<'_>,
     ) -> Option<Proposal> {
         if live == 0 {
             return None;
         }
-        let s = &mut self.scratch;
+        // Exactly one value per live sphere: the walk order's sort fills the same buffer.
+        crate::radix::grow_to(lent.values, live);
+        let s = &mut *lent.values;
         let r = median(s, objs.iter().filter(|o| o.node != NONE).map(|o| o.radius));
         let cell = CELL_DIAMETERS * 2.0 * r;
         let mut full = Aabb::EMPTY;
         for o in objs.iter().filter(|o| o.node != NONE) {
-            full = full.union(&o.aabb);
+            full = full.union(&o.aabb());
         }
         let wide = |b: &Aabb| b.extent().max_element() * GROW;
         let fits = |side: f32| side.is_finite() && side <= cell * (1u32 << MAX_DEPTH) as f32;
@@ -215,7 +214,7 @@ impl Regrow {
             side / (1u32 << MAX_DEPTH) as f32
         };
         let doublings = if finest > 0.0 && finest.is_finite() && live >= MIN_SPHERES_TO_COARSEN {
-            self.doublings(objs, live, span.min, finest, side)
+            doublings(objs, live, span.min, finest, side, lent)
         } else {
             0
         };
@@ -255,47 +254,39 @@ impl Regrow {
     }
 }
 
-impl Regrow {
-    /// How many times to double the cell `cell` so that the spheres per occupied cell stay
-    /// below [`SPHERES_PER_CELL`] (cells no wider than `side`). Counts the distinct cells of
-    /// the live spheres' centres on a grid from `origin` (an estimate: the tree's own lattice is
-    /// offset from it), by sorting their interleaved cell coordinates once: a cell twice as
-    /// wide is the code shifted by 3 bits, so each coarser count is one scan of the sorted
-    /// codes. O(n); runs only when a region is proposed.
-    fn doublings(&mut self, objs: &[Obj], live: usize, origin: Vec3, cell: f32, side: f32) -> u32 {
-        let top = ((1u32 << OCCUPANCY_BITS) - 1) as f32;
-        let codes = &mut self.codes;
-        codes.clear();
-        codes.extend(objs.iter().filter(|o| o.node != NONE).map(|o| {
-            let q = ((o.center - origin) / cell).clamp(Vec3::ZERO, Vec3::splat(top));
-            spread(q.x as u64) | spread(q.y as u64) << 1 | spread(q.z as u64) << 2
-        }));
-        crate::radix::sort_bits(
-            codes,
-            &mut self.codes_tmp,
-            &mut self.counts,
-            0,
-            3 * OCCUPANCY_BITS,
-        );
-        let mut doublings = 0;
-        while doublings < MAX_DEPTH && cell * (2u32 << doublings) as f32 <= side {
-            let shift = 3 * (doublings + 1);
-            let mut occupied = 0usize;
-            let mut last = None;
-            for &c in codes.iter() {
-                let c = c >> shift;
-                if last != Some(c) {
-                    occupied += 1;
-                    last = Some(c);
-                }
+/// How many times to double the cell `cell` so that the spheres per occupied cell stay
+/// below [`SPHERES_PER_CELL`] (cells no wider than `side`). Counts the distinct cells of
+/// the live spheres' centres on a grid from `origin` (an estimate: the tree's own lattice is
+/// offset from it), by sorting their interleaved cell coordinates once: a cell twice as
+/// wide is the code shifted by 3 bits, so each coarser count is one scan of the sorted
+/// codes. O(n); runs only when a region is proposed.
+fn doublings(objs: &[Obj], live: usize, origin: Vec3, cell: f32, side: f32, lent: Lent<'_>) -> u32 {
+    let top = ((1u32 << OCCUPANCY_BITS) - 1) as f32;
+    let codes = lent.values;
+    codes.clear();
+    codes.extend(objs.iter().filter(|o| o.node != NONE).map(|o| {
+        let q = ((o.center - origin) / cell).clamp(Vec3::ZERO, Vec3::splat(top));
+        spread(q.x as u64) | spread(q.y as u64) << 1 | spread(q.z as u64) << 2
+    }));
+    crate::radix::sort_bits(codes, lent.tmp, lent.counts, 0, 3 * OCCUPANCY_BITS);
+    let mut doublings = 0;
+    while doublings < MAX_DEPTH && cell * (2u32 << doublings) as f32 <= side {
+        let shift = 3 * (doublings + 1);
+        let mut occupied = 0usize;
+        let mut last = None;
+        for &c in codes.iter() {
+            let c = c >> shift;
+            if last != Some(c) {
+                occupied += 1;
+                last = Some(c);
             }
-            if live as f32 >= SPHERES_PER_CELL * occupied as f32 {
-                break;
-            }
-            doublings += 1;
         }
-        doublings
+        if live as f32 >= SPHERES_PER_CELL * occupied as f32 {
+            break;
+        }
+        doublings += 1;
     }
+    doublings
 }
 
 /// The bits of `v` below [`OCCUPANCY_BITS`] spread to every third bit (Morton interleave).
@@ -319,37 +310,90 @@ pub(super) fn worth_it(current: &Lattice, fresh: &Proposal) -> bool {
     finer || (current.placement == Placement::Strict && coarser)
 }
 
+/// `x` as an integer that sorts as `f32::total_cmp` does (the sign bit flipped for positive
+/// values, every bit for negative ones): the lent `u64` buffers then select floats.
+fn ordered(x: f32) -> u64 {
+    let b = x.to_bits();
+    u64::from(if b >> 31 == 1 { !b } else { b | 1 << 31 })
+}
+
+/// The float [`ordered`] maps to `k`.
+fn from_ordered(k: u64) -> f32 {
+    let b = k as u32;
+    f32::from_bits(if b >> 31 == 1 { b & !(1 << 31) } else { !b })
+}
+
+/// The `k`-th smallest of the values in `s` (as [`ordered`] keys), by `f32::total_cmp`.
+fn select(s: &mut [u64], k: usize) -> f32 {
+    from_ordered(*s.select_nth_unstable(k).1)
+}
+
 /// The median of `values` (the upper one of an even count), 0 for none; `s` is scratch.
-fn median(s: &mut Vec<f32>, values: impl Iterator<Item = f32>) -> f32 {
+fn median(s: &mut Vec<u64>, values: impl Iterator<Item = f32>) -> f32 {
     s.clear();
-    s.extend(values);
+    s.extend(values.map(ordered));
     if s.is_empty() {
         return 0.0;
     }
     let mid = s.len() / 2;
-    *s.select_nth_unstable_by(mid, f32::total_cmp).1
+    select(s, mid)
 }
 
 /// Per axis, from the `q`-th lowest box minimum to the `q`-th highest box maximum of the live
 /// spheres (`q` counted from 0, so `q` boxes lie below and `q` above); `s` is scratch.
-fn quantile_box(s: &mut Vec<f32>, objs: &[Obj], q: usize) -> Aabb {
+fn quantile_box(s: &mut Vec<u64>, objs: &[Obj], q: usize) -> Aabb {
     let mut b = Aabb::EMPTY;
     for axis in 0..3 {
         s.clear();
         s.extend(
             objs.iter()
                 .filter(|o| o.node != NONE)
-                .map(|o| o.aabb.min[axis]),
+                .map(|o| ordered(o.aabb().min[axis])),
         );
-        b.min[axis] = *s.select_nth_unstable_by(q, f32::total_cmp).1;
+        b.min[axis] = select(s, q);
         s.clear();
         s.extend(
             objs.iter()
                 .filter(|o| o.node != NONE)
-                .map(|o| o.aabb.max[axis]),
+                .map(|o| ordered(o.aabb().max[axis])),
         );
         let hi = s.len() - 1 - q;
-        b.max[axis] = *s.select_nth_unstable_by(hi, f32::total_cmp).1;
+        b.max[axis] = select(s, hi);
     }
     b
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The lent buffers select floats as `f32::total_cmp` orders them: `ordered` keeps that
+    /// order (signed zeros, subnormals and infinities included) and `from_ordered` undoes it.
+    #[test]
+    fn ordered_keys_sort_as_total_cmp() {
+        let xs = [
+            f32::NEG_INFINITY,
+            -3.5e30,
+            -1.0,
+            -f32::MIN_POSITIVE,
+            -1e-45,
+            -0.0,
+            0.0,
+            1e-45,
+            f32::MIN_POSITIVE,
+            0.25,
+            1.0,
+            7.0e20,
+            f32::INFINITY,
+        ];
+        for &a in &xs {
+            assert_eq!(from_ordered(ordered(a)).to_bits(), a.to_bits());
+            for &b in &xs {
+                assert_eq!(ordered(a).cmp(&ordered(b)), a.total_cmp(&b), "{a} vs {b}");
+            }
+        }
+        let mut s = Vec::new();
+        assert_eq!(median(&mut s, [3.0, -1.0, 2.0, 8.0, 0.5].into_iter()), 2.0);
+        assert_eq!(median(&mut s, core::iter::empty()), 0.0);
+    }
 }

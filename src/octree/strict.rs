@@ -44,6 +44,7 @@ use super::placement::StrictKey;
 use super::walk::{self, Hot, SHORT_SELF, Sweeps, Tester, Walk, is_short_cross, runs};
 use super::{Octree, PassCost};
 use crate::pair::ProxyKey;
+use crate::radix::room_for;
 use crate::sweep;
 
 /// One level of the path from the root to the current node.
@@ -198,6 +199,8 @@ impl Scratch {
     /// Readies the buffers for a pass over `hot`: the sweep groups, the octant buffer and a
     /// path holding only the root.
     fn start(&mut self, hot: &[Hot], node_key: &[u64], depth: u32) {
+        room_for(&mut self.group, hot.len());
+        room_for(&mut self.hot_oct, hot.len());
         self.group.clear();
         // Without a branch per axis: bit `a` of `straddles` is set if the sphere straddles
         // the axis-`a` mid plane of its node (`(q ^ q') >> (shift − 1) != 0`, written as

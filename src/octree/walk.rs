@@ -9,12 +9,13 @@
 //! that array.
 
 use super::placement::walk_key_bits;
+use super::region::Lent;
 use super::{NONE, Octree};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
 #[cfg(feature = "parallel")]
-use crate::radix::ahead;
-use crate::radix::{sort_bits, sort_bits_by};
+use crate::radix::{ahead, sort_bits_in};
+use crate::radix::{room_for, sort_bits, sort_bits_by};
 use crate::sweep::{self, Ordered};
 use core::borrow::Borrow;
 
@@ -74,9 +75,9 @@ pub(super) struct Sweeps {
 /// Buffers of the walk order, reused by every pass; they never shrink.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Scratch {
-    /// `(walk key << 32) | id`, sorted, and the radix sort's second buffer.
+    /// `(walk key << 32) | id`, sorted (the radix sort's second buffer is `node_key`, which
+    /// the sorted items are then copied into).
     items: Vec<u64>,
-    items_tmp: Vec<u64>,
     /// `(walk key, id)` for trees too deep for a 32-bit key (depth 10), and the radix sort's
     /// second buffer for them.
     wide: Vec<(u64, u32)>,
@@ -116,12 +117,11 @@ struct ParSort {
     bounds: Vec<u32>,
 }
 
-/// One part's buffers: its `(walk key << 32) | id`, and the radix sort's scratch.
+/// One part's radix counts (its items and their second buffer are its stretches of
+/// `Scratch::items` and `Scratch::node_key`).
 #[cfg(feature = "parallel")]
 #[derive(Clone, Debug, Default)]
 struct PartSort {
-    items: Vec<u64>,
-    tmp: Vec<u64>,
     counts: Vec<u32>,
 }
 
@@ -135,17 +135,27 @@ impl ParSort {
             + self
                 .parts
                 .iter()
-                .map(|p| p.counts.capacity() * 4 + (p.items.capacity() + p.tmp.capacity()) * 8)
+                .map(|p| p.counts.capacity() * 4)
                 .sum::<usize>()
     }
 }
 
 impl Scratch {
+    /// The buffers a re-root proposal borrows between passes (see [`Lent`]): the sort's
+    /// items, the walk keys as its second buffer, and the counts.
+    pub(super) fn lend(&mut self) -> Lent<'_> {
+        Lent {
+            values: &mut self.items,
+            tmp: &mut self.node_key,
+            counts: &mut self.counts,
+        }
+    }
+
     /// Heap bytes held (capacities).
     pub(super) fn heap_bytes(&self) -> usize {
         use core::mem::size_of_val;
         let v = |n: usize, one: usize| n * one;
-        v(self.items.capacity() + self.items_tmp.capacity(), 8)
+        v(self.items.capacity(), 8)
             + v(self.wide.capacity() + self.wide_tmp.capacity(), 16)
             + v(self.counts.capacity() + self.rank.capacity(), 4)
             + v(self.hot.capacity(), size_of_val(&Hot::EMPTY))
@@ -158,7 +168,6 @@ impl Scratch {
     fn par_heap_bytes(&self) -> usize {
         self.par.heap_bytes()
     }
-
     #[cfg(not(feature = "parallel"))]
     fn par_heap_bytes(&self) -> usize {
         0
@@ -296,7 +305,6 @@ impl Octree {
     fn sort_into_walk_order(&self, s: &mut Scratch) {
         let Scratch {
             items,
-            items_tmp,
             wide,
             wide_tmp,
             counts,
@@ -307,7 +315,14 @@ impl Octree {
             ..
         } = s;
         let key_bits = walk_key_bits(self.lattice.depth);
+        // Every buffer sized by the sphere count grows by `room_for`, not by doubling.
+        let n = self.live;
+        room_for(node_key, n);
+        room_for(hot, n);
+        room_for(keys, n);
+        room_for(rank, self.objs.len());
         if key_bits <= 32 {
+            room_for(items, n);
             items.clear();
             items.extend(
                 self.objs
@@ -316,7 +331,7 @@ impl Octree {
                     .filter(|(_, o)| o.node != NONE)
                     .map(|(id, o)| (o.walk_key << 32) | id as u64),
             );
-            sort_bits(items, items_tmp, counts, 32, key_bits);
+            sort_bits(items, node_key, counts, 32, key_bits);
             self.scatter(
                 items.iter().map(|&x| (x >> 32, x as u32)),
                 rank,
@@ -325,6 +340,7 @@ impl Octree {
                 keys,
             );
         } else {
+            room_for(wide, n);
             wide.clear();
             wide.extend(
                 self.objs
@@ -368,7 +384,7 @@ impl Octree {
                 continue;
             }
             hot[pos as usize] = Hot {
-                bx: SimdBox::new(&o.aabb),
+                bx: o.simd_box(),
                 qmin: o.qmin,
                 qmax: o.qmax,
                 pos,
@@ -403,6 +419,7 @@ impl Octree {
             return;
         }
         let Scratch {
+            items,
             hot,
             node_key,
             keys,
@@ -466,6 +483,12 @@ impl Octree {
         }
         let n = self.live;
         debug_assert_eq!(par.bounds[np] as usize, n);
+        // Grown by `room_for`, as in the serial sort.
+        room_for(items, n);
+        room_for(hot, n);
+        room_for(node_key, n);
+        room_for(keys, n);
+        items.resize(n, 0);
         hot.resize(n, Hot::EMPTY);
         node_key.resize(n, 0);
         keys.resize(n, ProxyKey::default());
@@ -478,7 +501,7 @@ impl Octree {
             bounds: &par.bounds,
             key_bits,
         };
-        job.fill(0, &mut par.parts[..np], hot, node_key, keys);
+        job.fill(0, &mut par.parts[..np], items, hot, node_key, keys);
     }
 }
 
@@ -494,28 +517,31 @@ struct Parts<'a> {
 #[cfg(feature = "parallel")]
 impl Parts<'_> {
     /// Fills the walk-ordered copies of parts `first..first + parts.len()`, whose positions
-    /// `hot`, `node_key` and `keys` are, halving the parts between two tasks until one is left.
+    /// `items`, `hot`, `node_key` and `keys` are, halving the parts between two tasks until
+    /// one is left.
     fn fill(
         &self,
         first: usize,
         parts: &mut [PartSort],
+        items: &mut [u64],
         hot: &mut [Hot],
         node_key: &mut [u64],
         keys: &mut [ProxyKey],
     ) {
         if let [part] = parts {
-            self.fill_one(first, part, hot, node_key, keys);
+            self.fill_one(first, part, items, hot, node_key, keys);
             return;
         }
         let mid = parts.len() / 2;
         let at = (self.bounds[first + mid] - self.bounds[first]) as usize;
         let (pa, pb) = parts.split_at_mut(mid);
+        let (ia, ib) = items.split_at_mut(at);
         let (ha, hb) = hot.split_at_mut(at);
         let (na, nb) = node_key.split_at_mut(at);
         let (ka, kb) = keys.split_at_mut(at);
         rayon::join(
-            || self.fill(first, pa, ha, na, ka),
-            || self.fill(first + mid, pb, hb, nb, kb),
+            || self.fill(first, pa, ia, ha, na, ka),
+            || self.fill(first + mid, pb, ib, hb, nb, kb),
         );
     }
 
@@ -528,44 +554,35 @@ impl Parts<'_> {
         &self,
         p: usize,
         part: &mut PartSort,
+        items: &mut [u64],
         hot: &mut [Hot],
         node_key: &mut [u64],
         keys: &mut [ProxyKey],
     ) {
         let np = self.bounds.len() - 1;
         let base = self.bounds[p];
-        part.items.clear();
+        let mut at = 0;
         for listed in self.buckets.iter().skip(p).step_by(np) {
-            part.items.extend_from_slice(listed);
+            items[at..at + listed.len()].copy_from_slice(listed);
+            at += listed.len();
         }
-        ahead(&mut part.items);
-        ahead(&mut part.tmp);
-        debug_assert_eq!(part.items.len(), hot.len());
-        sort_bits(
-            &mut part.items,
-            &mut part.tmp,
-            &mut part.counts,
-            32,
-            self.key_bits,
-        );
+        debug_assert_eq!(at, hot.len());
+        // `node_key` is the sort's second buffer: the sorted items end in one of the two, and
+        // each is read at the position its walk key is then stored at.
+        let in_tmp = sort_bits_in(items, node_key, &mut part.counts, 32, self.key_bits);
         let tree = self.tree;
-        for (j, ((&x, nk), (h, k))) in part
-            .items
-            .iter()
-            .zip(node_key.iter_mut())
-            .zip(hot.iter_mut().zip(keys.iter_mut()))
-            .enumerate()
-        {
+        for j in 0..hot.len() {
+            let x = if in_tmp { node_key[j] } else { items[j] };
             let id = x as u32 as usize;
             let o = &tree.objs[id];
-            *nk = x >> 32;
-            *h = Hot {
-                bx: SimdBox::new(&o.aabb),
+            node_key[j] = x >> 32;
+            hot[j] = Hot {
+                bx: o.simd_box(),
                 qmin: o.qmin,
                 qmax: o.qmax,
                 pos: base + j as u32,
             };
-            *k = tree.keys[id];
+            keys[j] = tree.keys[id];
         }
     }
 }
