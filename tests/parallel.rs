@@ -7,7 +7,7 @@
 //!
 //! The worlds keep more spheres than the broadphase's parallel threshold
 //! (`PARALLEL_MIN_SPHERES`, 10 000), or for the worlds of bodies alone more dynamic bodies than
-//! its other threshold (`PARALLEL_MIN_BODIES`, 4096), and enough pairs for its pair sort and
+//! its other threshold (`PARALLEL_MIN_BODIES`, 16 384), and enough pairs for its pair sort and
 //! diff to split (4096 per part), so the split passes are the ones checked: with bodies alone,
 //! the BVH descents handed out in items to many tasks.
 
@@ -28,9 +28,9 @@ const THRESHOLD: usize = 10_000;
 const START: usize = 13_500;
 /// The broadphase's `PARALLEL_MIN_BODIES`: the worlds of bodies alone never have fewer
 /// dynamic bodies.
-const BODY_THRESHOLD: usize = 4096;
+const BODY_THRESHOLD: usize = 16_384;
 /// Bodies at the start of a world of bodies alone (about 85 % dynamic).
-const BODY_START: usize = 6000;
+const BODY_START: usize = 22_000;
 
 /// Thread counts every world runs at.
 const THREADS: [usize; 4] = [1, 2, 3, 8];

@@ -74,8 +74,10 @@ const LEAVE_AT_ONCE: f64 = 2.0;
 pub(super) const PARALLEL_MIN_SPHERES: usize = 10_000;
 /// The dynamic bodies from which a full pass splits over the pool whatever the spheres: a
 /// body costs the pass several times what a sphere does, so fewer of them pay for the split.
+/// Below it the BVH pass is short enough that a worker asleep since the last step wakes up
+/// when the pass is nearly over, and the split's own work makes two threads slower than one.
 #[cfg(feature = "parallel")]
-const PARALLEL_MIN_BODIES: usize = 4096;
+const PARALLEL_MIN_BODIES: usize = 16_384;
 /// Pairs per part of the parallel pair sort and event diff, at least: a part's fixed costs
 /// (the sort's counters, handing out the task) outweigh the split below it.
 #[cfg(feature = "parallel")]
