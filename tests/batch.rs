@@ -9,7 +9,7 @@
 mod common;
 
 use broadleaf::{Aabb, BatchError, BroadPhase, Config, Error, ProxyKey, Vec3};
-use common::{Model, ModelShape, Rng};
+use common::{Model, ModelShape, Rng, uniform};
 use proptest::prelude::*;
 
 /// What is wrong with an entry, if anything.
@@ -45,16 +45,16 @@ fn entry() -> impl Strategy<Value = Entry> {
         12 => Just(Defect::None),
         1 => (axis.clone(), any::<bool>()).prop_map(|(a, m)| Defect::Nan(a, m)),
         1 => (axis.clone(), any::<bool>(), any::<bool>()).prop_map(|(a, m, n)| Defect::Inf(a, m, n)),
-        1 => (axis, prop_oneof![Just(f32::NAN), Just(f32::INFINITY), 1e-6f32..3.0])
+        1 => (axis, prop_oneof![Just(f32::NAN), Just(f32::INFINITY), uniform(1e-6, 3.0)])
             .prop_map(|(a, g)| Defect::BadSize(a, g)),
-        1 => prop_oneof![Just(-f32::MIN_POSITIVE), -5.0f32..-1e-7].prop_map(Defect::Negative),
+        1 => prop_oneof![Just(-f32::MIN_POSITIVE), uniform(-5.0, -1e-7)].prop_map(Defect::Negative),
         1 => Just(Defect::Stale),
         1 => Just(Defect::WrongKind),
     ];
-    let offset =
-        (-1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0).prop_map(|(x, y, z)| Vec3::new(x, y, z));
+    let offset = (uniform(-1.0, 1.0), uniform(-1.0, 1.0), uniform(-1.0, 1.0))
+        .prop_map(|(x, y, z)| Vec3::new(x, y, z));
     let scale = prop_oneof![Just(1e-4f32), Just(0.05f32), Just(1.0f32), Just(700.0f32)];
-    (0usize..10, offset, scale, 0.0f32..1.5, defect).prop_map(
+    (0usize..10, offset, scale, uniform(0.0, 1.5), defect).prop_map(
         |(pick, offset, scale, size, defect)| Entry {
             pick,
             offset,

@@ -13,7 +13,7 @@
 mod common;
 
 use broadleaf::{Aabb, BroadPhase, Config, Error, ProxyKey, Vec3};
-use common::{Model, ModelShape};
+use common::{Model, ModelShape, uniform};
 use proptest::prelude::*;
 use slotmap::Key;
 
@@ -23,9 +23,9 @@ fn point() -> impl Strategy<Value = Vec3> {
     let lattice = (-24i32..=24).prop_map(|i| i as f32 * 0.5);
     prop_oneof![
         3 => (lattice.clone(), lattice.clone(), lattice).prop_map(|(x, y, z)| Vec3::new(x, y, z)),
-        2 => (-12.0f32..12.0, -12.0f32..12.0, -12.0f32..12.0)
+        2 => (uniform(-12.0, 12.0), uniform(-12.0, 12.0), uniform(-12.0, 12.0))
             .prop_map(|(x, y, z)| Vec3::new(x, y, z)),
-        1 => (prop::bool::ANY, 500.0f32..800.0, -12.0f32..12.0)
+        1 => (prop::bool::ANY, uniform(500.0, 800.0), uniform(-12.0, 12.0))
             .prop_map(|(s, x, y)| Vec3::new(if s { x } else { -x }, y, -x)),
         1 => prop_oneof![Just(1e7f32), Just(-1e15), Just(3e38), Just(-f32::MAX)]
             .prop_map(|x| Vec3::new(x, 0.5, -x)),
@@ -52,9 +52,10 @@ enum Motion {
 }
 
 fn motion() -> impl Strategy<Value = Motion> {
-    let dir = (-1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0).prop_map(|(x, y, z)| Vec3::new(x, y, z));
+    let dir = (uniform(-1.0, 1.0), uniform(-1.0, 1.0), uniform(-1.0, 1.0))
+        .prop_map(|(x, y, z)| Vec3::new(x, y, z));
     prop_oneof![
-        3 => (dir.clone(), 1e-4f32..1e-3).prop_map(|(d, len)| Motion::Nudge(d, len)),
+        3 => (dir.clone(), uniform(1e-4, 1e-3)).prop_map(|(d, len)| Motion::Nudge(d, len)),
         3 => dir.prop_map(Motion::Moderate),
         1 => point().prop_map(Motion::Teleport),
     ]

@@ -3,6 +3,10 @@
 //! boxes and spheres larger than the world; after every pair pass the sorted pair set, the
 //! queries and the rays equal brute force, and `validate()` holds.
 
+mod common;
+
+use common::uniform;
+
 use broadleaf::brute::{self, Proxy};
 use broadleaf::octree::{Octree, Placement};
 use broadleaf::{Aabb, Error, Pair, ProxyKey, Vec3, pair};
@@ -23,7 +27,10 @@ enum Op {
 /// Coordinates on a half-unit lattice (exact touching is common) or anywhere, including well
 /// outside the bounds `[-4, 4]³` scaled by the case.
 fn coord() -> impl Strategy<Value = f32> {
-    prop_oneof![(-12i32..=12).prop_map(|i| i as f32 * 0.5), -7.0f32..7.0,]
+    prop_oneof![
+        (-12i32..=12).prop_map(|i| i as f32 * 0.5),
+        uniform(-7.0, 7.0),
+    ]
 }
 
 fn point() -> impl Strategy<Value = Vec3> {
@@ -34,7 +41,7 @@ fn radius() -> impl Strategy<Value = f32> {
     prop_oneof![
         Just(0.0f32),
         (0i32..=4).prop_map(|i| i as f32 * 0.25),
-        0.0f32..1.5,
+        uniform(0.0, 1.5),
         Just(9.0f32),
     ]
 }
@@ -57,7 +64,7 @@ fn placement() -> impl Strategy<Value = Placement> {
 }
 
 fn bounds() -> impl Strategy<Value = Aabb> {
-    (-5.0f32..-1.0, 1.0f32..5.0, 0.5f32..2.0)
+    (uniform(-5.0, -1.0), uniform(1.0, 5.0), uniform(0.5, 2.0))
         .prop_map(|(lo, hi, s)| Aabb::new(Vec3::new(lo, lo * s, lo), Vec3::new(hi, hi, hi * s)))
 }
 
@@ -149,8 +156,8 @@ proptest! {
         placement in placement(),
         b in bounds(),
         ops in prop::collection::vec(op(), 1..120),
-        q in (point(), 0.0f32..4.0),
-        ray in (point(), point(), prop_oneof![Just(f32::INFINITY), 0.0f32..3.0]),
+        q in (point(), uniform(0.0, 4.0)),
+        ray in (point(), point(), prop_oneof![Just(f32::INFINITY), uniform(0.0, 3.0)]),
     ) {
         let mut t = Octree::with_placement(b, depth, placement).unwrap();
         prop_assert_eq!(t.placement(), placement);

@@ -12,8 +12,9 @@
 //!   applied (for its fat margin and the pass estimate: a key updated several times between
 //!   two steps counts one move, from where it was applied last to its last shape);
 //! - its place in its structure: outside the incremental regime the exact box (the octree
-//!   relinks a sphere whose node changed; a BVH leaf is written, its ancestors refitted once
-//!   by the pass that follows), inside it the fat box it still lies in, or a new one.
+//!   relinks a sphere whose node changed; a BVH leaf is written and grown, and once every
+//!   slot is applied each grown leaf's ancestors are enlarged in one walk up, however many of
+//!   its bodies moved), inside it the fat box it still lies in, or a new one.
 //!
 //! Slot order makes the pass stream through every per-slot array and the octree's records,
 //! whatever order the caller updated in (a churn's reused keys come in none).
@@ -44,10 +45,20 @@ impl BroadPhase {
         if self.stale == 0 {
             return;
         }
+        self.apply_stale();
+        self.stale = 0;
+        // The bodies' leaves were written without their ancestors
+        // (`Bvh::update_box_deferred`): each leaf that grew has them enlarged once, here.
+        self.dynamic.enlarge_deferred();
+        self.statics.enlarge_deferred();
+    }
+
+    /// Applies every stale slot: the dense walk (split over the pool when that pays) or the
+    /// sorted movers.
+    fn apply_stale(&mut self) {
         let slots = self.store.slots();
         #[cfg(feature = "parallel")]
         if self.apply_par() {
-            self.stale = 0;
             return;
         }
         if self.stale >= slots / DENSE_FRACTION {
@@ -81,7 +92,6 @@ impl BroadPhase {
                 }
             }
         }
-        self.stale = 0;
     }
 
     /// Applies the stored shape of the stale live `slot`: its exact box, its motion, and its
@@ -109,7 +119,7 @@ impl BroadPhase {
                 if self.cached {
                     self.refresh_fat(slot, &exact);
                 } else {
-                    let placed = self.tree_mut(kind).update_box(key, &exact);
+                    let placed = self.tree_mut(kind).update_box_deferred(key, &exact);
                     debug_assert!(placed.is_ok(), "a live body missing from its BVH");
                 }
             }

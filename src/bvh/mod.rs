@@ -351,10 +351,6 @@ impl Bvh {
     /// the box, so no query or pair pass may run (the pair passes check it in debug builds).
     /// A caller that refits before its next pass (a full pass) pays no walk up at all, and one
     /// that does not enlarges each grown leaf's ancestors once, however many of its boxes moved.
-    #[allow(
-        dead_code,
-        reason = "for the broadphase's update path that defers its work to the step; tested here"
-    )]
     #[inline]
     pub(crate) fn update_box_deferred(&mut self, key: ProxyKey, b: &SimdBox) -> Result<(), Error> {
         let id = *self.ids.get(key).ok_or(Error::UnknownProxy)? as usize;

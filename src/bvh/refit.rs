@@ -83,10 +83,6 @@ impl Bvh {
     /// [`Bvh::update`]). Each walk up stops at the first ancestor that already contains its
     /// leaf's box, as [`Bvh::enlarge_ancestors`] does, so a leaf noted twice costs one test
     /// the second time. No allocation.
-    #[allow(
-        dead_code,
-        reason = "for the broadphase's update path that defers its work to the step; tested here"
-    )]
     pub(crate) fn enlarge_deferred(&mut self) {
         let mut deferred = core::mem::take(&mut self.deferred);
         for &leaf in &deferred {
