@@ -283,6 +283,14 @@ pub(crate) fn ordered_bits(f: f32) -> u32 {
     bits ^ (((bits as i32 >> 31) as u32) | 0x8000_0000)
 }
 
+/// The float [`ordered_bits`] maps to `k`: the sign bit set marks a positive float, whose bits
+/// are `k` without it; else every bit was inverted.
+#[must_use]
+#[inline]
+pub(crate) fn from_ordered_bits(k: u32) -> f32 {
+    f32::from_bits(if k >> 31 == 1 { k & !(1 << 31) } else { !k })
+}
+
 /// The smallest `t ∈ [0, max_t]` with `|origin + t·dir − center| ≤ radius`, or `None`.
 /// `dir` need not be unit length (`t` is in units of `dir`); a zero `dir` hits only when the
 /// origin is inside. An origin inside the sphere gives `t = 0`.
@@ -642,6 +650,7 @@ mod tests {
         let xs = [
             f32::NEG_INFINITY,
             -f32::MAX,
+            -3.5e30,
             -2.5,
             -1.0,
             -f32::MIN_POSITIVE,
@@ -650,12 +659,15 @@ mod tests {
             0.0,
             1e-45,
             f32::MIN_POSITIVE,
+            0.25,
             1.0,
             2.5,
+            7.0e20,
             f32::MAX,
             f32::INFINITY,
         ];
         for x in xs {
+            assert_eq!(from_ordered_bits(ordered_bits(x)).to_bits(), x.to_bits());
             for y in xs {
                 assert_eq!(
                     ordered_bits(x).cmp(&ordered_bits(y)),

@@ -49,7 +49,7 @@
 
 use super::placement::{Lattice, depth_for};
 use super::{MAX_DEPTH, NONE, Obj, Placement};
-use crate::geom::{self, Aabb};
+use crate::geom::{self, Aabb, from_ordered_bits, ordered_bits};
 use glam::Vec3;
 
 /// Cells of the level the median sphere lives at span this many of its diameters. Below 2, so
@@ -310,22 +310,14 @@ pub(super) fn worth_it(current: &Lattice, fresh: &Proposal) -> bool {
     finer || (current.placement == Placement::Strict && coarser)
 }
 
-/// `x` as an integer that sorts as `f32::total_cmp` does (the sign bit flipped for positive
-/// values, every bit for negative ones): the lent `u64` buffers then select floats.
+/// `x` as a key of the lent `u64` buffers that sorts as `f32::total_cmp` does.
 fn ordered(x: f32) -> u64 {
-    let b = x.to_bits();
-    u64::from(if b >> 31 == 1 { !b } else { b | 1 << 31 })
-}
-
-/// The float [`ordered`] maps to `k`.
-fn from_ordered(k: u64) -> f32 {
-    let b = k as u32;
-    f32::from_bits(if b >> 31 == 1 { b & !(1 << 31) } else { !b })
+    u64::from(ordered_bits(x))
 }
 
 /// The `k`-th smallest of the values in `s` (as [`ordered`] keys), by `f32::total_cmp`.
 fn select(s: &mut [u64], k: usize) -> f32 {
-    from_ordered(*s.select_nth_unstable(k).1)
+    from_ordered_bits(*s.select_nth_unstable(k).1 as u32)
 }
 
 /// The median of `values` (the upper one of an even count), 0 for none; `s` is scratch.
@@ -367,31 +359,10 @@ fn quantile_box(s: &mut Vec<u64>, objs: &[Obj], q: usize) -> Aabb {
 mod tests {
     use super::*;
 
-    /// The lent buffers select floats as `f32::total_cmp` orders them: `ordered` keeps that
-    /// order (signed zeros, subnormals and infinities included) and `from_ordered` undoes it.
+    /// The median selects by `f32::total_cmp` through the lent `u64` buffers (the key mapping
+    /// itself is `geom::ordered_bits`, tested there).
     #[test]
-    fn ordered_keys_sort_as_total_cmp() {
-        let xs = [
-            f32::NEG_INFINITY,
-            -3.5e30,
-            -1.0,
-            -f32::MIN_POSITIVE,
-            -1e-45,
-            -0.0,
-            0.0,
-            1e-45,
-            f32::MIN_POSITIVE,
-            0.25,
-            1.0,
-            7.0e20,
-            f32::INFINITY,
-        ];
-        for &a in &xs {
-            assert_eq!(from_ordered(ordered(a)).to_bits(), a.to_bits());
-            for &b in &xs {
-                assert_eq!(ordered(a).cmp(&ordered(b)), a.total_cmp(&b), "{a} vs {b}");
-            }
-        }
+    fn median_of_ordered_keys() {
         let mut s = Vec::new();
         assert_eq!(median(&mut s, [3.0, -1.0, 2.0, 8.0, 0.5].into_iter()), 2.0);
         assert_eq!(median(&mut s, core::iter::empty()), 0.0);
