@@ -1,11 +1,21 @@
 //! What the structures' and the broadphase's searches share: how a sphere cast opens, the
 //! running first hit of a cast, the slab test of one segment against many boxes, where a
-//! k-nearest search starts and its expanding-radius loop.
+//! k-nearest search starts and its expanding-radius loop, and the visitor of the plain queries.
 //! Depends on `geom` and `pair` only.
 
 use crate::geom::{self, Aabb, SimdBox};
 use crate::pair::ProxyKey;
+use core::ops::ControlFlow;
 use glam::{Vec3, Vec3A, Vec4};
+
+/// The visitor of the plain queries (the octree's, the BVHs' and the broadphase's): every
+/// match, never a stop.
+pub(crate) fn every(mut f: impl FnMut(ProxyKey)) -> impl FnMut(ProxyKey) -> ControlFlow<()> {
+    move |key| {
+        f(key);
+        ControlFlow::Continue(())
+    }
+}
 
 /// A nearest search's first radius beyond the searched objects' bounds, as a fraction of the
 /// spacing `k` objects spread evenly over those bounds would have: below 1, a first round

@@ -13,7 +13,7 @@
 
 use super::{BroadPhase, CollisionGroups, Shape};
 use crate::geom::{self, SimdBox, check_aabb};
-use crate::search::{FirstHit, nearest_expanding, nearest_start};
+use crate::search::{FirstHit, every, nearest_expanding, nearest_start};
 use crate::{Aabb, ProxyKey, Vec3};
 use core::ops::ControlFlow;
 
@@ -97,14 +97,6 @@ impl core::fmt::Debug for QueryFilter<'_> {
                 &self.predicate.map(|_| "Fn(ProxyKey, &Shape) -> bool"),
             )
             .finish()
-    }
-}
-
-/// The visitor of the plain queries: every match, never a stop.
-fn every(mut f: impl FnMut(ProxyKey)) -> impl FnMut(ProxyKey) -> ControlFlow<()> {
-    move |key| {
-        f(key);
-        ControlFlow::Continue(())
     }
 }
 

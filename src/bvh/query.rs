@@ -11,7 +11,7 @@ use crate::geom::{
     self, Aabb, SimdBox, check_aabb, check_sphere, inverse_dir, point_aabb_distance, ray_is_valid,
 };
 use crate::pair::ProxyKey;
-use crate::search::{FirstHit, Slab, nearest_expanding, nearest_start};
+use crate::search::{FirstHit, Slab, every, nearest_expanding, nearest_start};
 use core::ops::ControlFlow;
 use glam::{Vec3, Vec3A, Vec4};
 use slotmap::Key;
@@ -62,11 +62,8 @@ impl Bvh {
     /// Calls `f` with the key of every live box that overlaps `aabb` (closed: touching
     /// counts), each once, in no particular order. A non-finite or inverted query box matches
     /// nothing, as in `Octree::query_aabb` and `BroadPhase::query_aabb`.
-    pub fn query_aabb(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
-        let _ = self.try_query_aabb(aabb, |key| {
-            f(key);
-            ControlFlow::Continue(())
-        });
+    pub fn query_aabb(&self, aabb: &Aabb, f: impl FnMut(ProxyKey)) {
+        let _ = self.try_query_aabb(aabb, every(f));
     }
 
     /// [`Bvh::query_aabb`] with a visitor that can stop: the first [`ControlFlow::Break`]
@@ -85,11 +82,8 @@ impl Bvh {
     /// [`Bvh::query_aabb`] without the input check, for boxes the crate made itself: a sphere
     /// or body near `f32::MAX` has a box that overflows to ±∞ from finite input, and it must
     /// still find what it overlaps.
-    pub(crate) fn query_aabb_unchecked(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
-        let _ = self.try_query_aabb_unchecked(aabb, |key| {
-            f(key);
-            ControlFlow::Continue(())
-        });
+    pub(crate) fn query_aabb_unchecked(&self, aabb: &Aabb, f: impl FnMut(ProxyKey)) {
+        let _ = self.try_query_aabb_unchecked(aabb, every(f));
     }
 
     /// [`Bvh::try_query_aabb`] without the input check.
@@ -347,11 +341,8 @@ impl Bvh {
     /// ([`geom::point_aabb_distance`] `<= radius`: the box overlaps the closed ball, touching
     /// counts), each once, in no particular order. Nothing for a non-finite `center` or
     /// `radius`, or a negative `radius`.
-    pub fn query_sphere(&self, center: Vec3, radius: f32, mut f: impl FnMut(ProxyKey)) {
-        let _ = self.try_query_sphere(center, radius, |key| {
-            f(key);
-            ControlFlow::Continue(())
-        });
+    pub fn query_sphere(&self, center: Vec3, radius: f32, f: impl FnMut(ProxyKey)) {
+        let _ = self.try_query_sphere(center, radius, every(f));
     }
 
     /// [`Bvh::query_sphere`] with a visitor that can stop: the first [`ControlFlow::Break`]

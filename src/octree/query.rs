@@ -9,7 +9,7 @@ use super::cell::{Cell, morton, node_index};
 use super::{NONE, Octree, Placement};
 use crate::geom::{self, Aabb, SimdBox};
 use crate::pair::ProxyKey;
-use crate::search::{FirstHit, Slab, nearest_expanding, nearest_start_in_cells};
+use crate::search::{FirstHit, Slab, every, nearest_expanding, nearest_start_in_cells};
 use core::ops::ControlFlow;
 use glam::Vec3;
 
@@ -147,11 +147,8 @@ impl Octree {
 
     /// Calls `f` with the key of every sphere whose AABB overlaps `aabb` (closed), once each,
     /// in no particular order. A non-finite or inverted `aabb` finds nothing.
-    pub fn query_aabb(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
-        let _ = self.try_query_aabb(aabb, |key| {
-            f(key);
-            ControlFlow::Continue(())
-        });
+    pub fn query_aabb(&self, aabb: &Aabb, f: impl FnMut(ProxyKey)) {
+        let _ = self.try_query_aabb(aabb, every(f));
     }
 
     /// [`Octree::query_aabb`] with a visitor that can stop: the first
@@ -171,11 +168,8 @@ impl Octree {
     /// [`Octree::query_aabb`] without the input check, for boxes the crate made itself: a
     /// sphere or body near `f32::MAX` has a box that overflows to ±∞ from finite input, and it
     /// must still find what it overlaps.
-    pub(crate) fn query_aabb_unchecked(&self, aabb: &Aabb, mut f: impl FnMut(ProxyKey)) {
-        let _ = self.try_query_aabb_unchecked(aabb, |key| {
-            f(key);
-            ControlFlow::Continue(())
-        });
+    pub(crate) fn query_aabb_unchecked(&self, aabb: &Aabb, f: impl FnMut(ProxyKey)) {
+        let _ = self.try_query_aabb_unchecked(aabb, every(f));
     }
 
     /// [`Octree::try_query_aabb`] without the input check.
@@ -196,11 +190,8 @@ impl Octree {
     /// Calls `f` with the key of every sphere that overlaps the query sphere (centre distance
     /// `<= r1 + r2`, so touching spheres count), once each, in no particular order. A
     /// non-finite centre or radius, or a negative radius, finds nothing.
-    pub fn query_sphere(&self, center: Vec3, radius: f32, mut f: impl FnMut(ProxyKey)) {
-        let _ = self.try_query_sphere(center, radius, |key| {
-            f(key);
-            ControlFlow::Continue(())
-        });
+    pub fn query_sphere(&self, center: Vec3, radius: f32, f: impl FnMut(ProxyKey)) {
+        let _ = self.try_query_sphere(center, radius, every(f));
     }
 
     /// [`Octree::query_sphere`] with a visitor that can stop: the first
