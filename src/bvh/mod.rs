@@ -336,13 +336,23 @@ impl Bvh {
     /// passes it as is (making an `Aabb` of it and back goes through memory and stalls).
     #[inline]
     pub(crate) fn update_box(&mut self, key: ProxyKey, b: &SimdBox) -> Result<(), Error> {
+        if let Some(leaf) = self.write_box(key, b)? {
+            self.enlarge_ancestors(leaf, b);
+        }
+        Ok(())
+    }
+
+    /// Writes `key`'s box (and its lane); the leaf that holds it, if it is in the tree yet.
+    #[inline]
+    fn write_box(&mut self, key: ProxyKey, b: &SimdBox) -> Result<Option<u32>, Error> {
         let id = *self.ids.get(key).ok_or(Error::UnknownProxy)? as usize;
         self.boxes[id] = *b;
         if id < self.tree_len {
             self.lanes.set(id, b);
-            self.enlarge_ancestors(self.leaf_of[id], b);
+            Ok(Some(self.leaf_of[id]))
+        } else {
+            Ok(None)
         }
-        Ok(())
     }
 
     /// [`Bvh::update_box`] that leaves the ancestors alone: the box is written and its leaf's
@@ -353,11 +363,7 @@ impl Bvh {
     /// that does not enlarges each grown leaf's ancestors once, however many of its boxes moved.
     #[inline]
     pub(crate) fn update_box_deferred(&mut self, key: ProxyKey, b: &SimdBox) -> Result<(), Error> {
-        let id = *self.ids.get(key).ok_or(Error::UnknownProxy)? as usize;
-        self.boxes[id] = *b;
-        if id < self.tree_len {
-            self.lanes.set(id, b);
-            let leaf_index = self.leaf_of[id];
+        if let Some(leaf_index) = self.write_box(key, b)? {
             let leaf = &mut self.nodes[leaf_index as usize];
             let old = leaf.bounds();
             if !old.contains(b) {

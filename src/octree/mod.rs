@@ -332,13 +332,7 @@ impl Octree {
         }
         let limit = region::overflow_limit(self.live).max(2 * self.overflow_after as usize);
         if self.overflow as usize > limit || self.live > 2 * self.regrow.rooted {
-            match self.regrow.propose(
-                &self.objs,
-                self.live,
-                self.hint,
-                self.lattice.placement,
-                self.passes.walk.lend(),
-            ) {
+            match self.propose() {
                 Some(p) => self.reroot(&p),
                 None => {
                     // No finite region covers the world: keep this one, and wait for twice
@@ -350,17 +344,23 @@ impl Octree {
             return;
         }
         if self.regrow.tick() {
-            match self.regrow.propose(
-                &self.objs,
-                self.live,
-                self.hint,
-                self.lattice.placement,
-                self.passes.walk.lend(),
-            ) {
+            match self.propose() {
                 Some(p) if region::worth_it(&self.lattice, &p) => self.reroot(&p),
                 _ => self.regrow.back_off(),
             }
         }
+    }
+
+    /// The region and depth the spheres call for now (`Regrow::propose` over this tree's
+    /// spheres, hint and placement, with the walk order's buffers lent as scratch).
+    fn propose(&mut self) -> Option<region::Proposal> {
+        self.regrow.propose(
+            &self.objs,
+            self.live,
+            self.hint,
+            self.lattice.placement,
+            self.passes.walk.lend(),
+        )
     }
 
     /// Places every sphere again in a tree over the proposal's region and depth.
