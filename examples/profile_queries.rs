@@ -9,7 +9,7 @@
 //! scene's cube) and prints their hit count and the time per query.
 
 use broadleaf::fixtures::cli::{self, Flags, Stop};
-use broadleaf::fixtures::scene::{Bodies, Feed, Frame, Gas, Object, Rng, Scene};
+use broadleaf::fixtures::scene::{Bodies, Feed, Frame, Gas, Rng, Scene};
 use broadleaf::{Aabb, BroadPhase, Config, Vec3};
 use std::hint::black_box;
 use std::time::Instant;
@@ -101,12 +101,7 @@ fn world(args: &Args) -> (BroadPhase, Aabb) {
         scene.advance(&mut Frame::default());
         scene.spawns(&mut spawns);
         for s in &mut spawns {
-            let b = s.object.aabb();
-            s.object = Object::Cuboid {
-                center: b.center(),
-                half_extents: 0.5 * b.extent(),
-                rotation: glam::Quat::IDENTITY,
-            };
+            s.object = s.object.boxed();
         }
         feed.spawn(&mut bp, &spawns)
             .expect("scene objects are finite");

@@ -897,12 +897,7 @@ fn bodies_world(args: &Args) -> QueryWorld {
     let mut spawns = Vec::new();
     scene.spawns(&mut spawns);
     for s in &mut spawns {
-        let b = s.object.aabb();
-        s.object = Object::Cuboid {
-            center: b.center(),
-            half_extents: 0.5 * b.extent(),
-            rotation: glam::Quat::IDENTITY,
-        };
+        s.object = s.object.boxed();
     }
     let mut ours = Ours::new(args);
     let mut theirs = SceneWorld::new().groups(args.groups);
