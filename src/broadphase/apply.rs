@@ -28,7 +28,7 @@
 //! the last step left them.
 
 use super::store::flag;
-use super::{BroadPhase, Shape, fat};
+use super::{BroadPhase, Shape, fat, slack};
 use crate::radix::sort_bits_by;
 
 /// The stale slots are applied by walking every slot's flags once at least one slot in this
@@ -64,6 +64,9 @@ impl BroadPhase {
         if self.stale >= slots / DENSE_FRACTION {
             // Most slots are stale: one streaming walk over the flags is cheaper than sorting
             // the mover list (whose order then stays the caller's).
+            if self.cached && self.apply_spheres_fat() == 0 {
+                return;
+            }
             for s in 0..slots {
                 let f = &mut self.store.flags[s];
                 if *f & flag::STALE != 0 {
@@ -100,7 +103,6 @@ impl BroadPhase {
     #[inline(always)]
     fn apply(&mut self, slot: u32) {
         let s = slot as usize;
-        let key = self.store.key(slot);
         match self.store.shape[s] {
             Shape::Sphere { center, radius } => {
                 let grown = fat::grown_sphere(center, radius, self.config.margin);
@@ -109,6 +111,7 @@ impl BroadPhase {
                 if self.cached {
                     self.refresh_fat(slot, &grown.aabb);
                 } else {
+                    let key = self.store.key(slot);
                     self.octree.update_live(key, center, grown.radius);
                 }
             }
@@ -119,11 +122,56 @@ impl BroadPhase {
                 if self.cached {
                     self.refresh_fat(slot, &exact);
                 } else {
+                    let key = self.store.key(slot);
                     let placed = self.tree_mut(kind).update_box_deferred(key, &exact);
                     debug_assert!(placed.is_ok(), "a live body missing from its BVH");
                 }
             }
         }
+    }
+
+    /// The dense walk over the stale spheres in the incremental regime, in one streaming pass
+    /// over the per-slot arrays: each gets its exact box and motion, and either still lies in
+    /// its fat box, where it is classified quiet or loud at once (see [`super::slack`]), or
+    /// escaped, and is listed to get its new fat box after the walk, in slot order. Returns
+    /// how many stale slots it left for [`BroadPhase::apply`]: the bodies, and the spheres
+    /// already listed as escaped (inserted or regrouped since the last step).
+    fn apply_spheres_fat(&mut self) -> usize {
+        let (margin, now) = (self.config.margin, self.now);
+        let first_escape = self.escaped.len();
+        let (st, loud, escaped) = (&mut self.store, &mut self.loud, &mut self.escaped);
+        let n = st.slots();
+        let (mut fast, mut rest) = (0usize, 0usize);
+        for s in 0..n {
+            if st.flags[s] & flag::STALE == 0 {
+                continue;
+            }
+            let Shape::Sphere { center, radius } = st.shape[s] else {
+                rest += 1;
+                continue;
+            };
+            if st.flags[s] & flag::ESCAPED != 0 {
+                // Inserted or regrouped since the last step: already listed as escaped.
+                rest += 1;
+                continue;
+            }
+            st.flags[s] &= !flag::STALE;
+            let exact = fat::grown_sphere(center, radius, margin).aabb;
+            let (speed, f) = fat::motion(&st.exact[s], &exact, st.stamp[s], now);
+            fast += usize::from(f);
+            (st.exact[s], st.speed[s], st.stamp[s]) = (exact, speed, now);
+            if st.held[s].contains(&exact) {
+                slack::settle(st, loud, s as u32);
+            } else {
+                st.flags[s] |= flag::ESCAPED;
+                escaped.push(s as u32);
+            }
+        }
+        self.fast_movers += fast;
+        for i in first_escape..self.escaped.len() {
+            self.hold(self.escaped[i], true);
+        }
+        rest
     }
 
     /// The dense walk with its spheres' share split over rayon's current pool, outside the

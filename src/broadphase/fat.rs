@@ -71,12 +71,14 @@ impl BroadPhase {
         self.store.stamp[s] = self.now;
     }
 
-    /// In the incremental regime: keeps the fat box if it still holds `exact`, else gives the
-    /// slot a new one, which its structure holds from now on.
+    /// In the incremental regime: keeps the fat box if it still holds `exact` (and classifies
+    /// the slot quiet or loud, see [`super::slack::settle`]), else gives the slot a new one,
+    /// which its structure holds from now on.
     #[inline]
     pub(super) fn refresh_fat(&mut self, slot: u32, exact: &SimdBox) {
         if self.store.held[slot as usize].contains(exact) {
             self.mark(slot, flag::MOVED);
+            super::slack::settle(&mut self.store, &mut self.loud, slot);
         } else {
             self.hold(slot, true);
             self.mark(slot, flag::MOVED | flag::ESCAPED);

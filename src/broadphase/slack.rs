@@ -32,13 +32,17 @@ use super::BroadPhase;
 use super::step::{HIT, unpack};
 use super::store::{Store, flag};
 use crate::geom::SimdBox;
-use crate::radix::{PairBits, sort_u64};
+use crate::radix::{PairBits, sort_bits_by, sort_u64};
 use glam::Vec3A;
 
 /// Finding one proxy's candidates through the sorted list and the reverse index (a few
 /// binary searches, each a chain of cache misses) costs about as much as scanning this many
 /// candidates for a loud or removed side: past that many proxies to visit, the step scans.
 const CANDIDATES_PER_LOOKUP: usize = 100;
+
+/// The candidates to visit are sorted by a radix sort from this many on, by the standard
+/// library's sort below it (whose cost per item is higher, but which has no fixed cost).
+const RADIX_FROM: usize = 2048;
 
 /// `1 + 2⁻²²`: a product with it rounds a positive normal `f32` up by at least one ulp.
 const ROUND_UP: f32 = 1.0 + 1.0 / (1u32 << 22) as f32;
@@ -88,6 +92,9 @@ fn quiet(d: f32, m: f32) -> bool {
 pub(super) struct Patch {
     /// Indices of the candidates to visit, ascending.
     touched: Vec<u32>,
+    /// The radix sort's second buffer for `touched`, and its counters.
+    touched_tmp: Vec<u32>,
+    counts: Vec<u32>,
     /// Indices of the candidates dropped, ascending.
     cand_gone: Vec<u32>,
     /// The new candidates, each with the index of the old list it goes before.
@@ -109,10 +116,11 @@ pub(super) struct Patch {
 
 impl Patch {
     /// Every list: the index lists and the key lists.
-    fn lists(&mut self) -> ([&mut Vec<u32>; 7], [&mut Vec<u64>; 3]) {
+    fn lists(&mut self) -> ([&mut Vec<u32>; 8], [&mut Vec<u64>; 3]) {
         (
             [
                 &mut self.touched,
+                &mut self.touched_tmp,
                 &mut self.cand_gone,
                 &mut self.cand_at,
                 &mut self.rev_gone,
@@ -148,6 +156,8 @@ impl Patch {
     /// Heap bytes held (capacities).
     pub(super) fn heap_bytes(&self) -> usize {
         (self.touched.capacity()
+            + self.touched_tmp.capacity()
+            + self.counts.capacity()
             + self.cand_gone.capacity()
             + self.cand_at.capacity()
             + self.rev_gone.capacity()
@@ -167,9 +177,10 @@ fn reverse(a: usize, b: usize) -> u64 {
 }
 
 impl BroadPhase {
-    /// Makes loud every proxy that must re-test its candidates this step: the pending ones,
-    /// the escaped (and inserted) ones, and the movers that drifted half their slack. A loud
-    /// proxy is re-anchored at its exact box; a quiet mover records its drift.
+    /// Makes loud every proxy that must re-test its candidates this step: the pending ones and
+    /// the escaped (and inserted) ones; the movers that drifted half their slack were made loud
+    /// as their updates were applied ([`settle`]). A loud proxy is re-anchored at its exact
+    /// box.
     pub(super) fn classify(&mut self) {
         let (st, loud) = (&mut self.store, &mut self.loud);
         for &p in &self.pending {
@@ -180,17 +191,11 @@ impl BroadPhase {
             }
         }
         self.pending.clear();
-        for &m in &self.movers {
-            let s = m as usize;
-            let f = st.flags[s];
-            if f & (flag::GONE | flag::LOUD) != 0 {
-                continue;
-            }
-            let d = drift(&st.exact[s], &st.anchor[s]);
-            if f & flag::ESCAPED == 0 && quiet(d, st.slack[s]) {
-                st.drift[s] = d;
-            } else {
-                make_loud(st, loud, m);
+        // The movers that stayed in their fat boxes were classified as their updates were
+        // applied ([`settle`]); every other mover escaped (or was inserted, or changed groups).
+        for &e in &self.escaped {
+            if st.flags[e as usize] & (flag::GONE | flag::LOUD) == 0 {
+                make_loud(st, loud, e);
             }
         }
     }
@@ -260,7 +265,23 @@ impl BroadPhase {
                     r += 1;
                 }
             }
+            // A pair of two loud sides is listed twice.
+            if p.touched.len() < RADIX_FROM {
+                p.touched.sort_unstable();
+            } else {
+                let bits = u32::BITS - (cand.len() as u32).leading_zeros();
+                sort_bits_by(
+                    &mut p.touched,
+                    &mut p.touched_tmp,
+                    &mut p.counts,
+                    |&i| u64::from(i),
+                    0,
+                    bits,
+                );
+            }
+            p.touched.dedup();
         } else {
+            // In the candidates' order, each once.
             let flags = &self.store.flags;
             for (i, &c) in cand.iter().enumerate() {
                 let (a, b) = unpack(c);
@@ -269,8 +290,6 @@ impl BroadPhase {
                 }
             }
         }
-        p.touched.sort_unstable();
-        p.touched.dedup();
 
         let st = &mut self.store;
         let (flags, exact, anchor) = (&mut st.flags, &st.exact, &st.anchor);
@@ -394,6 +413,22 @@ impl BroadPhase {
             &self.added,
             &mut p.runs,
         );
+    }
+}
+
+/// Classifies the mover `slot`, whose new exact box still lies in its fat box: quiet (its
+/// drift recorded) while it drifted less than half its slack, else loud.
+#[inline]
+pub(super) fn settle(st: &mut Store, loud: &mut Vec<u32>, slot: u32) {
+    let s = slot as usize;
+    if st.flags[s] & flag::LOUD != 0 {
+        return;
+    }
+    let d = drift(&st.exact[s], &st.anchor[s]);
+    if quiet(d, st.slack[s]) {
+        st.drift[s] = d;
+    } else {
+        make_loud(st, loud, slot);
     }
 }
 
