@@ -64,7 +64,7 @@ impl BroadPhase {
         if self.stale >= slots / DENSE_FRACTION {
             // Most slots are stale: one streaming walk over the flags is cheaper than sorting
             // the mover list (whose order then stays the caller's).
-            if self.cached && self.apply_spheres_fat() == 0 {
+            if self.cached && self.apply_spheres_fat(true) == 0 {
                 return;
             }
             for s in 0..slots {
@@ -85,6 +85,9 @@ impl BroadPhase {
                     0,
                     bits,
                 );
+            }
+            if self.cached && self.apply_spheres_fat(false) == 0 {
+                return;
             }
             for i in 0..self.movers.len() {
                 let slot = self.movers[i];
@@ -130,43 +133,23 @@ impl BroadPhase {
         }
     }
 
-    /// The dense walk over the stale spheres in the incremental regime, in one streaming pass
-    /// over the per-slot arrays: each gets its exact box and motion, and either still lies in
-    /// its fat box, where it is classified quiet or loud at once (see [`super::slack`]), or
-    /// escaped, and is listed to get its new fat box after the walk, in slot order. Returns
-    /// how many stale slots it left for [`BroadPhase::apply`]: the bodies, and the spheres
-    /// already listed as escaped (inserted or regrouped since the last step).
-    fn apply_spheres_fat(&mut self) -> usize {
+    /// The walk over the stale spheres in the incremental regime (every slot with `dense`, else
+    /// the sorted movers), in one pass over the per-slot arrays: each gets its exact box and
+    /// motion, and either still lies in its fat box, where it is classified quiet or loud at
+    /// once (see [`super::slack`]), or escaped, and is listed to get its new fat box after the
+    /// walk, in slot order. Returns how many stale slots it left for [`BroadPhase::apply`]: the
+    /// bodies, and the spheres already listed as escaped (inserted or regrouped since the last
+    /// step).
+    fn apply_spheres_fat(&mut self, dense: bool) -> usize {
         let (margin, now) = (self.config.margin, self.now);
         let first_escape = self.escaped.len();
         let (st, loud, escaped) = (&mut self.store, &mut self.loud, &mut self.escaped);
-        let n = st.slots();
-        let (mut fast, mut rest) = (0usize, 0usize);
-        for s in 0..n {
-            if st.flags[s] & flag::STALE == 0 {
-                continue;
-            }
-            let Shape::Sphere { center, radius } = st.shape[s] else {
-                rest += 1;
-                continue;
-            };
-            if st.flags[s] & flag::ESCAPED != 0 {
-                // Inserted or regrouped since the last step: already listed as escaped.
-                rest += 1;
-                continue;
-            }
-            st.flags[s] &= !flag::STALE;
-            let exact = fat::grown_sphere(center, radius, margin).aabb;
-            let (speed, f) = fat::motion(&st.exact[s], &exact, st.stamp[s], now);
-            fast += usize::from(f);
-            (st.exact[s], st.speed[s], st.stamp[s]) = (exact, speed, now);
-            if st.held[s].contains(&exact) {
-                slack::settle(st, loud, s as u32);
-            } else {
-                st.flags[s] |= flag::ESCAPED;
-                escaped.push(s as u32);
-            }
-        }
+        let (fast, rest) = if dense {
+            fat_walk(0..st.slots(), st, loud, escaped, margin, now)
+        } else {
+            let movers = self.movers.iter().map(|&m| m as usize);
+            fat_walk(movers, st, loud, escaped, margin, now)
+        };
         self.fast_movers += fast;
         for i in first_escape..self.escaped.len() {
             self.hold(self.escaped[i], true);
@@ -275,4 +258,59 @@ impl BroadPhase {
         }
         core::ops::ControlFlow::Continue(())
     }
+}
+
+/// [`BroadPhase::apply_spheres_fat`]'s walk over `slots`: returns (moved fast, left for
+/// [`BroadPhase::apply`]). Inlined into each caller, so that the dense walk over `0..slots`
+/// needs no bounds checks on the cut slices.
+#[inline(always)]
+fn fat_walk(
+    slots: impl Iterator<Item = usize>,
+    st: &mut super::store::Store,
+    loud: &mut Vec<u32>,
+    escaped: &mut Vec<u32>,
+    margin: f32,
+    now: u32,
+) -> (usize, usize) {
+    let n = st.slots();
+    let (flags, shape) = (&mut st.flags[..n], &st.shape[..n]);
+    let (exact, speed, stamp) = (&mut st.exact[..n], &mut st.speed[..n], &mut st.stamp[..n]);
+    let (held, anchor) = (&st.held[..n], &mut st.anchor[..n]);
+    let (slk, drift) = (&mut st.slack[..n], &mut st.drift[..n]);
+    let (mut fast, mut rest) = (0usize, 0usize);
+    for s in slots {
+        let f = flags[s];
+        if f & flag::STALE == 0 {
+            continue;
+        }
+        let Shape::Sphere { center, radius } = shape[s] else {
+            rest += 1;
+            continue;
+        };
+        if f & flag::ESCAPED != 0 {
+            // Inserted or regrouped since the last step: already listed as escaped.
+            rest += 1;
+            continue;
+        }
+        let new = fat::grown_sphere(center, radius, margin).aabb;
+        let (v, moved_fast) = fat::motion(&exact[s], &new, stamp[s], now);
+        fast += usize::from(moved_fast);
+        (exact[s], speed[s], stamp[s]) = (new, v, now);
+        if !held[s].contains(&new) {
+            flags[s] = f & !flag::STALE | flag::ESCAPED;
+            escaped.push(s as u32);
+            continue;
+        }
+        // Still in its fat box: quiet or loud (see `slack::settle`; nothing is loud yet).
+        let d = slack::drift(&new, &anchor[s]);
+        if slack::quiet(d, slk[s]) {
+            flags[s] = f & !flag::STALE;
+            drift[s] = d;
+        } else {
+            flags[s] = f & !flag::STALE | flag::LOUD;
+            loud.push(s as u32);
+            (anchor[s], slk[s], drift[s]) = (new, f32::MAX, 0.0);
+        }
+    }
+    (fast, rest)
 }

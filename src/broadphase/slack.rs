@@ -24,9 +24,11 @@
 //! re-tested whenever either side moves.
 //!
 //! The same pass keeps the lists exact in place: the candidates (minus those of escaped or
-//! removed proxies, plus the escaped proxies' new ones) and their reverse index, the sorted
-//! pair list and the key pair list are patched by position ([`patch`]) with the few pairs that
-//! started or stopped overlapping, which are the step's `added` and `removed`.
+//! removed proxies, plus the escaped proxies' new ones), their reverse index and the key pair
+//! list are patched by position ([`patch`]) with the few pairs that started or stopped
+//! overlapping, which are the step's `added` and `removed`. The packed pair list, which the
+//! candidates marked overlapping and the key pairs both hold, is not kept in this regime: a
+//! full pass rebuilds it from the key pairs when it needs the previous step's.
 
 use super::BroadPhase;
 use super::step::{HIT, unpack};
@@ -82,7 +84,7 @@ pub(super) fn slack(a: &SimdBox, b: &SimdBox) -> f32 {
 /// True if a proxy that drifted `d` from its anchor, with least candidate slack `m`, keeps
 /// every candidate's status: it has not moved, or it moved less than half of `m`.
 #[inline]
-fn quiet(d: f32, m: f32) -> bool {
+pub(super) fn quiet(d: f32, m: f32) -> bool {
     d == 0.0 || d + d < m
 }
 
@@ -391,15 +393,13 @@ impl BroadPhase {
         patch(rev, &p.rev_gone, &p.rev_at, &p.rev_new, &mut p.runs);
         patch(cand, &p.cand_gone, &p.cand_at, &p.cand_new, &mut p.runs);
 
-        // The pair list and the key pairs: the changed pairs' places in the old list.
-        let packed = &mut self.packed;
-        for &k in removed.iter() {
-            p.pairs_gone.push(packed.partition_point(|&q| q < k) as u32);
-        }
-        for &k in added.iter() {
-            p.pairs_at.push(packed.partition_point(|&q| q < k) as u32);
-        }
-        patch(packed, &p.pairs_gone, &p.pairs_at, added, &mut p.runs);
+        // The key pairs: the changed pairs' places in the old list, which is in the packed
+        // pairs' order. The packed pair list is not kept in this regime (see
+        // [`BroadPhase::packed_from_pairs`]).
+        let pairs = &self.pairs;
+        let at = |k: u64| pairs.partition_point(|q| super::step::pack_pair(q) < k) as u32;
+        p.pairs_gone.extend(removed.iter().map(|&k| at(k)));
+        p.pairs_at.extend(added.iter().map(|&k| at(k)));
         let store = &self.store;
         let to_pair = |&q: &u64| super::step::key_pair(store, q);
         self.added.clear();

@@ -246,9 +246,9 @@ impl Snapshot {
             free: free.to_vec(),
             quarantine: quarantine.to_vec(),
             pairs: bp
-                .packed
+                .pairs
                 .iter()
-                .map(|&p| ((p >> 32) as u32, p as u32))
+                .map(|p| (crate::pair::slot(p.a), crate::pair::slot(p.b)))
                 .collect(),
         }
     }

@@ -145,6 +145,13 @@ pub(super) fn pack(a: u32, b: u32) -> u64 {
     (u64::from(lo) << 32) | u64::from(hi)
 }
 
+/// The packed pair of a key pair (both keys live, or quarantined since their removal): the
+/// key pairs are sorted as their packed pairs are.
+#[inline]
+pub(super) fn pack_pair(p: &Pair) -> u64 {
+    pack(crate::pair::slot(p.a), crate::pair::slot(p.b))
+}
+
 #[inline]
 pub(super) fn unpack(p: u64) -> (usize, usize) {
     (((p >> 32) as u32 & !(1 << 31)) as usize, p as u32 as usize)
@@ -204,7 +211,7 @@ impl BroadPhase {
             Passes::Adaptive => {}
         }
         let n = self.store.len() as f64;
-        let full = n * cost::FULL + self.packed.len() as f64 * cost::FULL_PAIR;
+        let full = n * cost::FULL + self.pairs.len() as f64 * cost::FULL_PAIR;
         if self.cached {
             // Leaving drops the candidates, which a later return rebuilds with a full pass of
             // its own: a single step over the full pass's cost (a burst of escapes) does not
@@ -304,7 +311,8 @@ impl BroadPhase {
         }
         // A full pass finds every pair (or candidate) into `fresh`, sorts it, and rotates it
         // with `packed` and `prev_packed`; the incremental steps fill `fresh` only with the
-        // escaped proxies' new candidates and patch `packed` in place. All four stay ready
+        // escaped proxies' new candidates and patch the key pairs in place (`packed` is
+        // rebuilt from them when a full pass follows). All four stay ready
         // for the largest list a full pass can make, grown as `ahead` grows a list: to half
         // again that length once within a quarter of it.
         let most = self.cand.len().max(self.packed.len());
@@ -343,6 +351,9 @@ impl BroadPhase {
     /// [`BroadPhase::full`] with its split phases in `tasks` tasks each (1: serial).
     #[inline(always)]
     fn full_in(&mut self, fat: bool, tasks: usize) {
+        if self.cached {
+            self.packed_from_pairs();
+        }
         core::mem::swap(&mut self.prev_packed, &mut self.packed);
         if self.cached || fat {
             for s in 0..self.store.slots() as u32 {
@@ -394,6 +405,13 @@ impl BroadPhase {
             }
             _ => self.emit(),
         }
+    }
+
+    /// The packed pair list of the key pairs: the incremental regime patches only the key
+    /// pairs, and a full pass that follows it diffs against the packed ones.
+    pub(super) fn packed_from_pairs(&mut self) {
+        self.packed.clear();
+        self.packed.extend(self.pairs.iter().map(pack_pair));
     }
 
     /// How many tasks each split phase of a full pass hands to rayon's current pool: 1 (the
