@@ -234,8 +234,8 @@ pub struct BroadPhase {
     sort_buf: Vec<u64>,
     added_packed: Vec<u64>,
     removed_packed: Vec<u64>,
-    /// The lists handed out by `step`.
-    pairs: Vec<Pair>,
+    /// The lists handed out by `step` (the pair list behind a gap, see [`slack::Gapped`]).
+    pairs: slack::Gapped<Pair>,
     added: Vec<Pair>,
     removed: Vec<Pair>,
     /// Steps taken: the clock of the per-proxy speed estimates.
@@ -321,7 +321,7 @@ impl BroadPhase {
             sort_buf: Vec::new(),
             added_packed: Vec::new(),
             removed_packed: Vec::new(),
-            pairs: Vec::new(),
+            pairs: slack::Gapped::default(),
             added: Vec::new(),
             removed: Vec::new(),
             now: 0,

@@ -128,6 +128,14 @@ impl Parallel {
     }
 }
 
+/// What fills the pair list's gap (see [`super::slack::Gapped`]): never read.
+pub(super) fn null_pair() -> Pair {
+    Pair {
+        a: ProxyKey::default(),
+        b: ProxyKey::default(),
+    }
+}
+
 /// The key pair of a packed slot pair (slots live, or quarantined since their removal).
 #[inline]
 pub(super) fn key_pair(store: &Store, p: u64) -> Pair {
@@ -302,7 +310,7 @@ impl BroadPhase {
         ahead(&mut self.fresh);
         ahead(&mut self.packed);
         ahead(&mut self.prev_packed);
-        ahead(&mut self.pairs);
+        self.pairs.ahead();
         let n = self.store.len();
         if self.cached {
             ahead(&mut self.loud);
@@ -612,8 +620,10 @@ impl BroadPhase {
         }
         let store = &self.store;
         let to_pair = |&p: &u64| key_pair(store, p);
-        self.pairs.clear();
-        self.pairs.par_extend(self.packed.par_iter().map(to_pair));
+        let packed = &self.packed;
+        self.pairs.refill(packed.len(), null_pair(), |pairs| {
+            pairs.par_extend(packed.par_iter().map(to_pair));
+        });
         self.added.clear();
         self.added
             .par_extend(self.added_packed.par_iter().map(to_pair));
@@ -632,8 +642,10 @@ impl BroadPhase {
         );
         let store = &self.store;
         let to_pair = |&p: &u64| key_pair(store, p);
-        self.pairs.clear();
-        self.pairs.extend(self.packed.iter().map(to_pair));
+        let packed = &self.packed;
+        self.pairs.refill(packed.len(), null_pair(), |pairs| {
+            pairs.extend(packed.iter().map(to_pair));
+        });
         self.added.clear();
         self.added.extend(self.added_packed.iter().map(to_pair));
         self.removed.clear();

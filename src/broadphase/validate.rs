@@ -110,7 +110,7 @@ impl BroadPhase {
                 b: st.key(p as u32),
             })
             .collect();
-        assert_eq!(keys, self.pairs, "pair list and packed pairs differ");
+        assert_eq!(keys, *self.pairs, "pair list and packed pairs differ");
     }
 
     /// With no change pending: the candidates are exactly the allowed pairs of overlapping
