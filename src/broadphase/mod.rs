@@ -220,10 +220,10 @@ pub struct BroadPhase {
     fast_movers: usize,
     /// Candidate pairs (packed slot pairs, `HIT` set if their exact boxes overlapped at the
     /// last step), sorted.
-    cand: Vec<u64>,
+    cand: slack::Gapped<u64>,
     /// The candidates' reverse index: `(higher slot, lower slot)` of each, sorted, so that a
     /// proxy's lower partners are found without a scan.
-    rev: Vec<u64>,
+    rev: slack::Gapped<u64>,
     /// The incremental pass's list patches.
     patch: slack::Patch,
     /// This step's pairs and the previous step's, packed, sorted.
@@ -312,8 +312,8 @@ impl BroadPhase {
             pending: Vec::new(),
             removals: 0,
             fast_movers: 0,
-            cand: Vec::new(),
-            rev: Vec::new(),
+            cand: slack::Gapped::default(),
+            rev: slack::Gapped::default(),
             patch: slack::Patch::default(),
             packed: Vec::new(),
             prev_packed: Vec::new(),

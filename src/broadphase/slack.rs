@@ -42,8 +42,9 @@ use glam::Vec3A;
 /// candidates for a loud or removed side: past that many proxies to visit, the step scans.
 const CANDIDATES_PER_LOOKUP: usize = 100;
 
-/// The candidates to visit are sorted by a radix sort from this many on, by the standard
-/// library's sort below it (whose cost per item is higher, but which has no fixed cost).
+/// The candidates to visit and the reverse entries that change are sorted by a radix sort
+/// from this many on, by the standard library's sort below it (whose cost per item is
+/// higher, but which has no fixed cost).
 const RADIX_FROM: usize = 2048;
 
 /// `1 + 2⁻²²`: a product with it rounds a positive normal `f32` up by at least one ulp.
@@ -108,6 +109,8 @@ pub(super) struct Patch {
     /// The reverse entries of the new candidates, with where they go.
     rev_at: Vec<u32>,
     rev_new: Vec<u64>,
+    /// The radix sort's second buffer for `rev_keys` and `rev_new`.
+    keys_tmp: Vec<u64>,
     /// Indices of the pairs that stopped overlapping, in the old pair list, ascending.
     pairs_gone: Vec<u32>,
     /// Where each pair that started overlapping goes in the old pair list.
@@ -118,7 +121,7 @@ pub(super) struct Patch {
 
 impl Patch {
     /// Every list: the index lists and the key lists.
-    fn lists(&mut self) -> ([&mut Vec<u32>; 8], [&mut Vec<u64>; 3]) {
+    fn lists(&mut self) -> ([&mut Vec<u32>; 8], [&mut Vec<u64>; 4]) {
         (
             [
                 &mut self.touched,
@@ -130,7 +133,12 @@ impl Patch {
                 &mut self.pairs_gone,
                 &mut self.pairs_at,
             ],
-            [&mut self.cand_new, &mut self.rev_keys, &mut self.rev_new],
+            [
+                &mut self.cand_new,
+                &mut self.rev_keys,
+                &mut self.rev_new,
+                &mut self.keys_tmp,
+            ],
         )
     }
 
@@ -169,7 +177,11 @@ impl Patch {
             + self.pairs_gone.capacity()
             + self.pairs_at.capacity())
             * 4
-            + (self.cand_new.capacity() + self.rev_keys.capacity() + self.rev_new.capacity()) * 8
+            + (self.cand_new.capacity()
+                + self.rev_keys.capacity()
+                + self.rev_new.capacity()
+                + self.keys_tmp.capacity())
+                * 8
             + self.scratch.runs.capacity() * core::mem::size_of::<Run>()
             + self.scratch.per_shift.capacity() * 4
     }
@@ -215,19 +227,19 @@ impl BroadPhase {
             st.slack[s] = f32::MAX;
             st.drift[s] = 0.0;
         }
-        self.rev.clear();
-        for &c in &self.cand {
+        // The reverse entries are sorted in `fresh` (the pass is done with it), then copied.
+        let rev = &mut self.fresh;
+        rev.clear();
+        for &c in self.cand.iter() {
             let (a, b) = unpack(c & !HIT);
             let s = slack(&st.exact[a], &st.exact[b]);
             st.slack[a] = st.slack[a].min(s);
             st.slack[b] = st.slack[b].min(s);
-            self.rev.push(reverse(a, b));
+            rev.push(reverse(a, b));
         }
-        sort_u64(
-            &mut self.rev,
-            &mut self.sort_buf,
-            PairBits::for_slots(st.slots()),
-        );
+        sort_u64(rev, &mut self.sort_buf, PairBits::for_slots(st.slots()));
+        self.rev
+            .refill(rev.len(), 0, |list| list.extend_from_slice(rev));
         self.clear_pending();
     }
 
@@ -249,7 +261,7 @@ impl BroadPhase {
     pub(super) fn update_candidates(&mut self) {
         let p = &mut self.patch;
         p.clear();
-        let (cand, rev) = (&self.cand, &self.rev);
+        let (cand, rev) = (&self.cand[..], &self.rev[..]);
         let visits = self.loud.len() + self.store.freed().len();
         if visits * CANDIDATES_PER_LOOKUP < cand.len() {
             let key_at = |i: usize| cand[i] & !HIT;
@@ -319,7 +331,7 @@ impl BroadPhase {
             exact[a].overlaps(&exact[b])
         };
         let fresh = &self.fresh;
-        let cand = &mut self.cand;
+        let cand: &mut [u64] = &mut self.cand;
         let mut j = 0;
         // A new candidate: tested, and inserted where it sorts.
         fn insert(
@@ -381,7 +393,8 @@ impl BroadPhase {
 
         // The reverse index: a dropped candidate's entry goes, a new one's comes.
         let rev = &mut self.rev;
-        p.rev_keys.sort_unstable();
+        let layout = PairBits::for_slots(self.store.slots());
+        sort_keys(&mut p.rev_keys, &mut p.keys_tmp, layout);
         for &e in &p.rev_keys {
             p.rev_gone.push(rev.partition_point(|&r| r < e) as u32);
         }
@@ -389,12 +402,13 @@ impl BroadPhase {
             let (a, b) = unpack(c & !HIT);
             p.rev_new.push(reverse(a, b));
         }
-        p.rev_new.sort_unstable();
+        sort_keys(&mut p.rev_new, &mut p.keys_tmp, layout);
         for &e in &p.rev_new {
             p.rev_at.push(rev.partition_point(|&r| r < e) as u32);
         }
-        patch(rev, &p.rev_gone, &p.rev_at, &p.rev_new, &mut p.scratch);
-        patch(cand, &p.cand_gone, &p.cand_at, &p.cand_new, &mut p.scratch);
+        rev.patch(&p.rev_gone, &p.rev_at, &p.rev_new, &mut p.scratch);
+        self.cand
+            .patch(&p.cand_gone, &p.cand_at, &p.cand_new, &mut p.scratch);
 
         // The key pairs: the changed pairs' places in the old list, which is in the packed
         // pairs' order. The packed pair list is not kept in this regime (see
@@ -427,6 +441,16 @@ pub(super) fn settle(st: &mut Store, loud: &mut Vec<u32>, slot: u32) {
         st.drift[s] = d;
     } else {
         make_loud(st, loud, slot);
+    }
+}
+
+/// Sorts packed pairs: by the standard library's sort below [`RADIX_FROM`], by the radix
+/// sort from there (`tmp` its second buffer, which may trade places with `keys`).
+fn sort_keys(keys: &mut Vec<u64>, tmp: &mut Vec<u64>, layout: PairBits) {
+    if keys.len() < RADIX_FROM {
+        keys.sort_unstable();
+    } else {
+        sort_u64(keys, tmp, layout);
     }
 }
 
@@ -579,6 +603,13 @@ impl<T> Default for Gapped<T> {
     }
 }
 
+impl<T> core::ops::DerefMut for Gapped<T> {
+    #[inline]
+    fn deref_mut(&mut self) -> &mut [T] {
+        &mut self.buf[self.start..]
+    }
+}
+
 impl<T> core::ops::Deref for Gapped<T> {
     type Target = [T];
     #[inline]
@@ -622,6 +653,12 @@ impl<T: Copy> Gapped<T> {
             new,
             scratch,
         );
+    }
+
+    /// Empties the list (and its gap).
+    pub(super) fn clear(&mut self) {
+        self.buf.clear();
+        self.start = 0;
     }
 
     /// Grows the buffer ahead of its peaks (see `radix::ahead`).

@@ -306,7 +306,7 @@ impl BroadPhase {
     /// Grows the lists whose length swings from step to step ahead of their peaks, so that a
     /// world in steady state stops allocating after its first few swings.
     fn keep_headroom(&mut self) {
-        ahead(&mut self.cand);
+        self.cand.ahead();
         ahead(&mut self.fresh);
         ahead(&mut self.packed);
         ahead(&mut self.prev_packed);
@@ -383,16 +383,17 @@ impl BroadPhase {
         }
         self.packed.clear();
         if fat {
-            self.cand.clear();
-            let exact = &self.store.exact;
-            for &c in &self.fresh {
-                let (a, b) = unpack(c);
-                let hit = exact[a].overlaps(&exact[b]);
-                self.cand.push(c | if hit { HIT } else { 0 });
-                if hit {
-                    self.packed.push(c);
+            let (exact, fresh, packed) = (&self.store.exact, &self.fresh, &mut self.packed);
+            self.cand.refill(fresh.len(), 0, |cand| {
+                for &c in fresh {
+                    let (a, b) = unpack(c);
+                    let hit = exact[a].overlaps(&exact[b]);
+                    cand.push(c | if hit { HIT } else { 0 });
+                    if hit {
+                        packed.push(c);
+                    }
                 }
-            }
+            });
             self.stats.candidates_tested = self.fresh.len();
             let n = self.store.len().max(1) as f64;
             self.costs.cand_per_proxy = self.cand.len() as f64 / n;

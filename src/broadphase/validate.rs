@@ -137,7 +137,7 @@ impl BroadPhase {
         assert_eq!(have, want, "candidates are not the overlapping fat pairs");
         let mut rev: Vec<u64> = have.iter().map(|&c| c.rotate_right(32)).collect();
         rev.sort_unstable();
-        assert_eq!(rev, self.rev, "the reverse index is not the candidates'");
+        assert_eq!(rev, *self.rev, "the reverse index is not the candidates'");
         let hits: Vec<u64> = self
             .cand
             .iter()
@@ -178,7 +178,7 @@ impl BroadPhase {
                 "slot {s}: pending flag and list"
             );
         }
-        for &c in &self.cand {
+        for &c in self.cand.iter() {
             let (a, b) = super::step::unpack(c & !HIT);
             let s = slack(&st.anchor[a], &st.anchor[b]);
             assert!(
