@@ -25,7 +25,7 @@
 //!
 //! The same pass keeps the lists exact in place: the candidates (minus those of escaped or
 //! removed proxies, plus the escaped proxies' new ones), their reverse index and the key pair
-//! list are patched by position ([`patch`]) with the few pairs that started or stopped
+//! list are patched by position ([`Gapped::patch`]) with the few pairs that started or stopped
 //! overlapping, which are the step's `added` and `removed`. The packed pair list, which the
 //! candidates marked overlapping and the key pairs both hold, is not kept in this regime: a
 //! full pass rebuilds it from the key pairs when it needs the previous step's.
@@ -115,7 +115,7 @@ pub(super) struct Patch {
     pairs_gone: Vec<u32>,
     /// Where each pair that started overlapping goes in the old pair list.
     pairs_at: Vec<u32>,
-    /// [`patch`]'s scratch.
+    /// [`patch_in`]'s scratch.
     scratch: Scratch,
 }
 
@@ -473,21 +473,17 @@ struct Run {
     shift: i32,
 }
 
-/// Removes `v[i]` for every `i` of `gone` (ascending, distinct) and inserts `new[k]` before
-/// the old entry `at[k]` (`at` ascending, repeats allowed, `v.len()` appends), in place,
-/// moving only the entries whose index changes (see [`patch_in`]).
-fn patch<T: Copy>(v: &mut Vec<T>, gone: &[u32], at: &[u32], new: &[T], scratch: &mut Scratch) {
-    patch_in(v, 0, 0, gone, at, new, scratch);
-}
-
-/// [`patch`]'s scratch: the runs and the length of old entries per shift.
+/// [`patch_in`]'s scratch: the runs and the length of old entries per shift.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Scratch {
     runs: Vec<Run>,
     per_shift: Vec<u32>,
 }
 
-/// [`patch`] of the list `buf[start..]`, which may move to start anywhere in `0..=max_start`.
+/// Removes `buf[start + i]` for every `i` of `gone` (ascending, distinct) and inserts `new[k]`
+/// before the old entry `at[k]` (`at` ascending, repeats allowed, the list's length appends),
+/// in place, moving only the entries whose index changes; the list `buf[start..]` may move to
+/// start anywhere in `0..=max_start`.
 /// Between two changes the old entries all move by the same shift, and their order is kept.
 /// The list's new start is chosen so that the longest total stretch of old entries stays
 /// where it is (with `max_start` 0, the start stays 0 and the entries before the first change
@@ -640,7 +636,7 @@ impl<T: Copy> Gapped<T> {
         fill(&mut self.buf);
     }
 
-    /// [`patch`] of the list, moving its start within the gap.
+    /// [`patch_in`] of the list, moving its start within the gap.
     fn patch(&mut self, gone: &[u32], at: &[u32], new: &[T], scratch: &mut Scratch) {
         let len = self.buf.len() - self.start;
         let max_start = 2 * gap_for(len);
@@ -716,7 +712,7 @@ mod tests {
         assert!(!quiet(drift(&far, &back), f32::MAX));
     }
 
-    /// `patch` and `patch_in` (from every start, with room to move) against the obvious
+    /// `patch_in` (from start 0 without room to move, and from other starts with room) against the obvious
     /// rebuild, on random removals and insertions.
     #[test]
     fn patch_equals_rebuild() {
@@ -755,7 +751,7 @@ mod tests {
             }
             if round % 2 == 0 {
                 let mut v = old.clone();
-                patch(&mut v, &gone, &at, &new, &mut scratch);
+                patch_in(&mut v, 0, 0, &gone, &at, &new, &mut scratch);
                 assert_eq!(v, want, "round {round}: gone {gone:?} at {at:?}");
             } else {
                 let start = next(8) as usize;
@@ -774,7 +770,7 @@ mod tests {
                 };
                 let at_zero = {
                     let mut v = old.clone();
-                    patch(&mut v, &gone, &at, &new, &mut scratch);
+                    patch_in(&mut v, 0, 0, &gone, &at, &new, &mut scratch);
                     stay(&v, 0)
                 };
                 let new_start =
