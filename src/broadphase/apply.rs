@@ -144,13 +144,13 @@ impl BroadPhase {
         let (margin, now) = (self.config.margin, self.now);
         let first_escape = self.escaped.len();
         let (st, loud, escaped) = (&mut self.store, &mut self.loud, &mut self.escaped);
-        let (fast, rest) = if dense {
+        // The fast movers are not counted: only the estimate outside the regime reads them.
+        let rest = if dense {
             fat_walk(0..st.slots(), st, loud, escaped, margin, now)
         } else {
             let movers = self.movers.iter().map(|&m| m as usize);
             fat_walk(movers, st, loud, escaped, margin, now)
         };
-        self.fast_movers += fast;
         for i in first_escape..self.escaped.len() {
             self.hold(self.escaped[i], true);
         }
@@ -260,8 +260,8 @@ impl BroadPhase {
     }
 }
 
-/// [`BroadPhase::apply_spheres_fat`]'s walk over `slots`: returns (moved fast, left for
-/// [`BroadPhase::apply`]). Inlined into each caller, so that the dense walk over `0..slots`
+/// [`BroadPhase::apply_spheres_fat`]'s walk over `slots`: returns how many it left for
+/// [`BroadPhase::apply`]. Inlined into each caller, so that the dense walk over `0..slots`
 /// needs no bounds checks on the cut slices.
 #[inline(always)]
 fn fat_walk(
@@ -271,13 +271,13 @@ fn fat_walk(
     escaped: &mut Vec<u32>,
     margin: f32,
     now: u32,
-) -> (usize, usize) {
+) -> usize {
     let n = st.slots();
     let (flags, shape) = (&mut st.flags[..n], &st.shape[..n]);
     let (exact, speed, stamp) = (&mut st.exact[..n], &mut st.speed[..n], &mut st.stamp[..n]);
     let (held, anchor) = (&st.held[..n], &mut st.anchor[..n]);
     let (slk, drift) = (&mut st.slack[..n], &mut st.drift[..n]);
-    let (mut fast, mut rest) = (0usize, 0usize);
+    let mut rest = 0;
     for s in slots {
         let f = flags[s];
         if f & flag::STALE == 0 {
@@ -293,8 +293,7 @@ fn fat_walk(
             continue;
         }
         let new = fat::grown_sphere(center, radius, margin).aabb;
-        let (v, moved_fast) = fat::motion(&exact[s], &new, stamp[s], now);
-        fast += usize::from(moved_fast);
+        let v = fat::speed(&exact[s], &new, stamp[s], now);
         (exact[s], speed[s], stamp[s]) = (new, v, now);
         if !held[s].contains(&new) {
             flags[s] = f & !flag::STALE | flag::ESCAPED;
@@ -312,5 +311,5 @@ fn fat_walk(
             (anchor[s], slk[s], drift[s]) = (new, f32::MAX, 0.0);
         }
     }
-    (fast, rest)
+    rest
 }

@@ -41,16 +41,22 @@ fn jitter(slot: u32, now: u32) -> f32 {
 /// ([`outgrows_min_margin`]).
 #[inline(always)]
 pub(super) fn motion(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> (f32, bool) {
+    let speed = speed(old, new, stamp, now);
+    (
+        speed,
+        outgrows_min_margin(speed, new.extent().max_element()),
+    )
+}
+
+/// The speed of [`motion`] alone.
+#[inline(always)]
+pub(super) fn speed(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> f32 {
     let moved = ((new.min + new.max) - (old.min + old.max))
         .abs()
         .max_element()
         * 0.5;
     let steps = now.wrapping_sub(stamp).max(1);
-    let speed = moved / steps as f32;
-    (
-        speed,
-        outgrows_min_margin(speed, new.extent().max_element()),
-    )
+    moved / steps as f32
 }
 
 /// True if a box of largest extent `size` moving `speed` per step gets a margin above the
