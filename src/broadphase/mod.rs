@@ -204,9 +204,6 @@ pub struct BroadPhase {
     /// The radix sort's scratch for `movers` (see [`apply`]).
     movers_tmp: Vec<u32>,
     movers_counts: Vec<u32>,
-    /// The parallel apply's sphere placements, by slot (see [`apply`]).
-    #[cfg(feature = "parallel")]
-    placed: Vec<crate::octree::Placed>,
     /// Slots given a new fat box since the last step, each once (`flag::ESCAPED`).
     escaped: Vec<u32>,
     /// Slots re-anchored this step, each once (`flag::LOUD`).
@@ -305,8 +302,6 @@ impl BroadPhase {
             stale: 0,
             movers_tmp: Vec::new(),
             movers_counts: Vec::new(),
-            #[cfg(feature = "parallel")]
-            placed: Vec::new(),
             escaped: Vec::new(),
             loud: Vec::new(),
             pending: Vec::new(),
@@ -404,7 +399,6 @@ impl BroadPhase {
     #[cfg(feature = "parallel")]
     fn par_heap_bytes(&self) -> usize {
         self.par.heap_bytes()
-            + self.placed.capacity() * core::mem::size_of::<crate::octree::Placed>()
     }
 
     #[cfg(not(feature = "parallel"))]
@@ -678,6 +672,21 @@ impl BroadPhase {
     /// them may look proxies up ([`BroadPhase::shape`], [`BroadPhase::groups`]). Steady state
     /// allocates nothing: every list is kept and reused.
     pub fn step(&mut self) {
+        // A step that will split its work over rayon's pool runs on the pool as one job: a
+        // caller outside the pool then hands it over once (each hand-over wakes a worker and,
+        // at its end, the caller), and the split phases inside it (the apply's, the pass's)
+        // start on a worker that is already awake.
+        #[cfg(feature = "parallel")]
+        if self.tasks() >= 2 && !self.cached {
+            rayon::scope(|_| self.step_in());
+            return;
+        }
+        self.step_in();
+    }
+
+    /// [`BroadPhase::step`] on the thread it is called on.
+    #[inline(always)]
+    fn step_in(&mut self) {
         // The updates since the last step reach the structures first, in slot order.
         self.apply_updates();
         // The octree's region follows the spheres: re-rooted here, before any pass or query.

@@ -106,7 +106,7 @@ pub enum Placement {
 /// the node lists ([`Link`]). 40 bytes.
 #[derive(Clone, Copy, Debug)]
 #[repr(C)]
-struct Obj {
+pub(crate) struct Obj {
     /// The sphere exactly as given. 16 bytes.
     center: Vec3,
     radius: f32,
@@ -743,41 +743,62 @@ impl Octree {
     }
 }
 
-/// A sphere's placement computed without changing the tree ([`Octree::placement_of`]): what
-/// [`Octree::update`] does first, kept for the second half ([`Octree::update_placed`]), so that
-/// a caller moving many spheres can compute their placements on several threads and store
-/// them on one.
+/// The batched update split over tasks.
+impl Octree {
+    /// The tree's placement (read-only) beside its spheres' records by id (a slot's id is its
+    /// key's slot; the records end at the highest id ever held), for a batched update split
+    /// over tasks by id range: each task places its spheres with [`Placer::placement_of`] and
+    /// stores the moves that keep a sphere in its node with [`Record::store_in_place`]; the
+    /// others (a relink, a sphere entering or leaving the region) go through
+    /// [`Octree::update_live`] afterwards, on one thread.
+    pub(crate) fn split_for_update(&mut self) -> (Placer<'_>, &mut [Record]) {
+        (Placer(&self.lattice), &mut self.objs)
+    }
+}
+
+/// Places spheres in a tree whose records are lent out ([`Octree::split_for_update`]).
+#[derive(Clone, Copy)]
+pub(crate) struct Placer<'a>(&'a Lattice);
+
+impl Placer<'_> {
+    /// Where a sphere at `center`, `radius` goes in the tree as it is now.
+    #[inline(always)]
+    pub(crate) fn placement_of(&self, center: Vec3, radius: f32) -> Placed {
+        Placed(self.0.locate(center, radius))
+    }
+}
+
+/// A sphere's placement from [`Placer::placement_of`], for [`Record::store_in_place`].
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Placed(placement::Located);
 
-impl Placed {
-    /// A placement no sphere has: a filler for buffers.
-    pub(crate) const NONE: Placed = Placed(placement::Located {
-        qmin: [0; 3],
-        qmax: [0; 3],
-        node: NONE,
-        outside: false,
-    });
-}
+/// A sphere's record in the tree (opaque outside it), lent out by
+/// [`Octree::split_for_update`].
+pub(crate) type Record = Obj;
 
-/// The batched update (read-only placement, then store and relink).
-impl Octree {
-    /// Where a sphere at `center`, `radius` goes in the tree as it is now; reads only. Valid
-    /// for [`Octree::update_placed`] until the region changes ([`Octree::maintain`]).
+impl Obj {
+    /// Stores `center`, `radius` placed at `at` (from `placer`, this record's tree) if the
+    /// sphere stays in its node and the update leaves the count of spheres outside the region
+    /// as it was: the record is all such a move changes. False, with nothing stored, if the
+    /// move needs [`Octree::update_live`].
     #[inline(always)]
-    pub(crate) fn placement_of(&self, center: Vec3, radius: f32) -> Placed {
-        Placed(self.lattice.locate(center, radius))
-    }
-
-    /// [`Octree::update_live`] with the placement [`Octree::placement_of`] computed for the
-    /// same `center` and `radius`: stores the sphere, relinking it if its node changed.
-    #[inline(always)]
-    pub(crate) fn update_placed(&mut self, key: ProxyKey, center: Vec3, radius: f32, at: &Placed) {
-        debug_assert!(
-            self.id_of(key).is_some(),
-            "update_placed of a key not live here"
-        );
-        self.store_located(crate::pair::slot(key), center, radius, &at.0);
+    pub(crate) fn store_in_place(
+        &mut self,
+        placer: Placer<'_>,
+        center: Vec3,
+        radius: f32,
+        at: &Placed,
+    ) -> bool {
+        let at = &at.0;
+        // Only a sphere in the root (node 0) can be outside the region.
+        let counted = self.node == 0
+            && (at.outside || placer.0.is_outside(&self.aabb(), self.center, self.radius));
+        if self.node != at.node || self.node == NONE || counted {
+            return false;
+        }
+        (self.center, self.radius) = (center, radius);
+        (self.qmin, self.qmax) = (at.qmin, at.qmax);
+        true
     }
 }
 
