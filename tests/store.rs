@@ -481,5 +481,9 @@ fn parallel_apply_moves_root_and_outside_spheres_exactly() {
             saw_outside,
             "the region took the outliers in: nothing tested outside"
         );
+        assert!(
+            saw_root_inside,
+            "no sphere was ever in the root inside the region"
+        );
     });
 }
