@@ -117,8 +117,8 @@ impl Nodes {
     /// Stops at the first ancestor that was already non-empty (its own ancestors are marked).
     pub(super) fn mark_occupied(&mut self, node: u32) {
         for (parent, octant) in ancestors(node) {
-            let was_empty = self.is_empty(parent);
             let s = self.slot_mut(parent);
+            let was_empty = self.head[s] == NONE && self.mask[s] == 0;
             self.mask[s] |= 1 << octant;
             if !was_empty {
                 return;
@@ -131,7 +131,7 @@ impl Nodes {
         for (parent, octant) in ancestors(node) {
             let s = self.slot_mut(parent);
             self.mask[s] &= !(1 << octant);
-            if !self.is_empty(parent) {
+            if self.head[s] != NONE || self.mask[s] != 0 {
                 return;
             }
         }
