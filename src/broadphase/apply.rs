@@ -162,7 +162,7 @@ impl BroadPhase {
             .zip(records.par_chunks_mut(chunk))
             .enumerate()
             .map(|(c, ((((exact, speed), stamp), flags), records))| {
-                let mut fast = 0;
+                let (mut fast, mut placer) = (0, placer);
                 // The records end at the highest sphere id: a chunk's later slots (and the
                 // chunks after the records) hold no sphere.
                 for i in 0..records.len() {
@@ -178,7 +178,7 @@ impl BroadPhase {
                     (exact[i], speed[i], stamp[i]) = (grown.aabb, v, now);
                     fast += usize::from(f);
                     let at = placer.placement_of(center, grown.radius);
-                    if records[i].store_in_place(placer, center, grown.radius, &at) {
+                    if records[i].store_in_place(&placer, center, grown.radius, &at) {
                         flags[i] &= !flag::STALE;
                     }
                 }

@@ -210,6 +210,8 @@ impl PassScratch {
 pub struct Octree {
     /// Bounds, depth, placement and the integer lattice.
     lattice: Lattice,
+    /// The last sphere radius placed on `lattice` and its level ([`Lattice::locate_memo`]).
+    memo: placement::LevelMemo,
     /// Hot data by id (see [`Obj`]).
     objs: Vec<Obj>,
     /// List links by id.
@@ -289,6 +291,7 @@ impl Octree {
         let depth = lattice.depth;
         Octree {
             lattice,
+            memo: placement::LevelMemo::EMPTY,
             objs: Vec::new(),
             links: Vec::new(),
             keys: Vec::new(),
@@ -367,6 +370,7 @@ impl Octree {
     #[inline(never)]
     fn reroot(&mut self, p: &region::Proposal) {
         self.lattice = Lattice::new(p.bounds, p.depth, self.lattice.placement);
+        self.memo = placement::LevelMemo::EMPTY;
         self.nodes.reset(cell::node_count(p.depth));
         self.per_level = [0; MAX_DEPTH as usize + 1];
         self.overflow = 0;
@@ -481,7 +485,7 @@ impl Octree {
 
     #[inline(always)]
     fn update_id(&mut self, id: u32, center: Vec3, radius: f32) {
-        let at = self.lattice.locate(center, radius);
+        let at = self.lattice.locate_memo(center, radius, &mut self.memo);
         self.store_located(id, center, radius, &at);
     }
 
@@ -752,19 +756,27 @@ impl Octree {
     /// others (a relink, a sphere entering or leaving the region) go through
     /// [`Octree::update_live`] afterwards, on one thread.
     pub(crate) fn split_for_update(&mut self) -> (Placer<'_>, &mut [Record]) {
-        (Placer(&self.lattice), &mut self.objs)
+        let placer = Placer {
+            lattice: &self.lattice,
+            memo: placement::LevelMemo::EMPTY,
+        };
+        (placer, &mut self.objs)
     }
 }
 
-/// Places spheres in a tree whose records are lent out ([`Octree::split_for_update`]).
+/// Places spheres in a tree whose records are lent out ([`Octree::split_for_update`]); each
+/// task places with its own copy (which notes the last radius's level).
 #[derive(Clone, Copy)]
-pub(crate) struct Placer<'a>(&'a Lattice);
+pub(crate) struct Placer<'a> {
+    lattice: &'a Lattice,
+    memo: placement::LevelMemo,
+}
 
 impl Placer<'_> {
     /// Where a sphere at `center`, `radius` goes in the tree as it is now.
     #[inline(always)]
-    pub(crate) fn placement_of(&self, center: Vec3, radius: f32) -> Placed {
-        Placed(self.0.locate(center, radius))
+    pub(crate) fn placement_of(&mut self, center: Vec3, radius: f32) -> Placed {
+        Placed(self.lattice.locate_memo(center, radius, &mut self.memo))
     }
 }
 
@@ -784,7 +796,7 @@ impl Obj {
     #[inline(always)]
     pub(crate) fn store_in_place(
         &mut self,
-        placer: Placer<'_>,
+        placer: &Placer<'_>,
         center: Vec3,
         radius: f32,
         at: &Placed,
@@ -792,7 +804,10 @@ impl Obj {
         let at = &at.0;
         // Only a sphere in the root (node 0) can be outside the region.
         let counted = self.node == 0
-            && (at.outside || placer.0.is_outside(&self.aabb(), self.center, self.radius));
+            && (at.outside
+                || placer
+                    .lattice
+                    .is_outside(&self.aabb(), self.center, self.radius));
         if self.node != at.node || self.node == NONE || counted {
             return false;
         }

@@ -172,6 +172,23 @@ pub(super) struct Located {
     pub(super) outside: bool,
 }
 
+/// The last radius placed through [`Lattice::locate_memo`] and its loose level by radius
+/// ([`Lattice::loose_level`]), valid for the lattice it was noted on.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct LevelMemo {
+    /// The radius's bits; a NaN's (no radius placed) when empty.
+    radius_bits: u32,
+    level: Option<u32>,
+}
+
+impl LevelMemo {
+    /// Holds no radius: a NaN is never placed.
+    pub(crate) const EMPTY: LevelMemo = LevelMemo {
+        radius_bits: f32::NAN.to_bits(),
+        level: None,
+    };
+}
+
 /// A tree's bounds, depth, placement and the integer lattice boxes are mapped to.
 #[derive(Clone, Debug)]
 pub(super) struct Lattice {
@@ -215,12 +232,29 @@ impl Lattice {
     /// the root for not fitting.
     #[inline(always)]
     pub(super) fn locate(&self, center: Vec3, radius: f32) -> Located {
+        let mut memo = LevelMemo::EMPTY;
+        self.locate_memo(center, radius, &mut memo)
+    }
+
+    /// [`Lattice::locate`] reading a loose sphere's level by radius from `memo` when it holds
+    /// `radius` (and noting it there when not): a world of one sphere size places each sphere
+    /// without working its level out again. `memo` belongs to this lattice.
+    #[inline(always)]
+    pub(super) fn locate_memo(&self, center: Vec3, radius: f32, memo: &mut LevelMemo) -> Located {
         let aabb = Aabb::from_center_radius(center, radius);
         let qmin = self.quantize(aabb.min);
         let qmax = self.quantize(aabb.max);
         let (node, outside) = match self.placement {
             Placement::Strict => self.strict_node(&aabb, qmin, qmax),
-            Placement::Loose => self.loose_node(center, radius, qmin, qmax),
+            Placement::Loose => {
+                if memo.radius_bits != radius.to_bits() {
+                    *memo = LevelMemo {
+                        radius_bits: radius.to_bits(),
+                        level: self.loose_level(radius),
+                    };
+                }
+                self.loose_node(memo.level, center, qmin, qmax)
+            }
         };
         Located {
             qmin,
@@ -283,8 +317,14 @@ impl Lattice {
     /// Centres outside the bounds and spheres too big for the root's loose bounds go to the
     /// root as overflow.
     #[inline]
-    fn loose_node(&self, center: Vec3, radius: f32, qmin: [u16; 3], qmax: [u16; 3]) -> (u32, bool) {
-        let Some(by_radius) = self.loose_level(radius) else {
+    fn loose_node(
+        &self,
+        by_radius: Option<u32>,
+        center: Vec3,
+        qmin: [u16; 3],
+        qmax: [u16; 3],
+    ) -> (u32, bool) {
+        let Some(by_radius) = by_radius else {
             return (0, true);
         };
         if !self.bounds.contains_point(center) {
