@@ -5,7 +5,7 @@
 //! stop as soon as their visitor returns [`ControlFlow::Break`], and say whether it did.
 
 use super::Bvh;
-use super::lanes::{GROUP, Group};
+use super::lanes::{GROUP, Group, Splat, bits};
 use super::node::{INLINE_STACK, Node, SmallStack};
 use crate::geom::{
     self, Aabb, SimdBox, check_aabb, check_sphere, inverse_dir, point_aabb_distance, ray_is_valid,
@@ -124,26 +124,29 @@ impl Bvh {
         aabb: &SimdBox,
         mut f: impl FnMut(usize) -> ControlFlow<()>,
     ) -> ControlFlow<()> {
+        let q = Splat::of(aabb);
         self.walk(
             |node| node.bounds().overlaps(aabb),
-            |i| {
-                if self.boxes[i].overlaps(aabb) {
-                    f(i)
-                } else {
-                    ControlFlow::Continue(())
+            |range| match self.lanes.leaf(range.start, range.len()) {
+                // Four boxes per test, the matches read from the set bits.
+                Some(leaf) => {
+                    let base = range.start - leaf.off;
+                    bits(leaf.mask(&q)).try_for_each(|k| f(base + k))
                 }
+                None => range
+                    .filter(|&i| self.boxes[i].overlaps(aabb))
+                    .try_for_each(&mut f),
             },
         )
     }
 
     /// Depth-first over the tree with the inline stack: enters every node that passes
-    /// `enter` (children only through their parent) and calls `visit` with each primitive
-    /// index of the leaves entered. The first `Break` of `visit` ends the walk and is
-    /// returned.
+    /// `enter` (children only through their parent) and calls `visit` with the primitive
+    /// range of each leaf entered. The first `Break` of `visit` ends the walk and is returned.
     fn walk(
         &self,
         mut enter: impl FnMut(&Node) -> bool,
-        mut visit: impl FnMut(usize) -> ControlFlow<()>,
+        mut visit: impl FnMut(core::ops::Range<usize>) -> ControlFlow<()>,
     ) -> ControlFlow<()> {
         if self.nodes.is_empty() {
             return ControlFlow::Continue(());
@@ -156,9 +159,7 @@ impl Bvh {
                 continue;
             }
             if node.is_leaf() {
-                for i in node.range() {
-                    visit(i)?;
-                }
+                visit(node.range())?;
             } else {
                 let (a, b) = node.children(n);
                 stack.push(b);
@@ -208,12 +209,14 @@ impl Bvh {
         }
         let _ = self.walk(
             |node| node.aabb().ray_entry(origin, inv, max_t).is_some(),
-            |i| {
-                let key = self.keys[i];
-                if !key.is_null()
-                    && let Some(t) = self.boxes[i].aabb().ray_entry(origin, inv, max_t)
-                {
-                    f(key, t);
+            |range| {
+                for i in range {
+                    let key = self.keys[i];
+                    if !key.is_null()
+                        && let Some(t) = self.boxes[i].aabb().ray_entry(origin, inv, max_t)
+                    {
+                        f(key, t);
+                    }
                 }
                 ControlFlow::Continue(())
             },
@@ -284,7 +287,7 @@ impl Bvh {
         }
         self.walk(
             |node| may_be_near(&node.bounds()),
-            |i| consider(self.keys[i], &self.boxes[i]),
+            |mut range| range.try_for_each(|i| consider(self.keys[i], &self.boxes[i])),
         )
     }
 
