@@ -148,22 +148,28 @@ impl Bvh {
         mut enter: impl FnMut(&Node) -> bool,
         mut visit: impl FnMut(core::ops::Range<usize>) -> ControlFlow<()>,
     ) -> ControlFlow<()> {
-        if self.nodes.is_empty() {
+        let Some(root) = self.nodes.first() else {
+            return ControlFlow::Continue(());
+        };
+        if !enter(root) {
             return ControlFlow::Continue(());
         }
+        // Only entered nodes are pushed: children are tested before the push, not after the
+        // pop, which saves the stack round trip of those that are not entered.
         let mut stack = SmallStack::<u32, INLINE_STACK>::new(0);
         stack.push(0);
         while let Some(n) = stack.pop() {
             let node = &self.nodes[n as usize];
-            if !enter(node) {
-                continue;
-            }
             if node.is_leaf() {
                 visit(node.range())?;
             } else {
                 let (a, b) = node.children(n);
-                stack.push(b);
-                stack.push(a);
+                if enter(&self.nodes[b as usize]) {
+                    stack.push(b);
+                }
+                if enter(&self.nodes[a as usize]) {
+                    stack.push(a);
+                }
             }
         }
         ControlFlow::Continue(())
