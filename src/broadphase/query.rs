@@ -260,10 +260,13 @@ impl BroadPhase {
         // (rounded to `f32`) could be refused, and a smaller key lost. The walks still prune
         // by the best `t`.
         let max_t = hit.limit();
-        self.octree
-            .ray_candidates(origin, dir, max_t, inflate, |k, _| {
-                hit.offer(k, t_of(k, max_t))
-            });
+        // A world of bodies alone skips the octree's setup.
+        if !self.octree.is_empty() {
+            self.octree
+                .ray_candidates(origin, dir, max_t, inflate, |k, _| {
+                    hit.offer(k, t_of(k, max_t))
+                });
+        }
         let limit = hit.limit();
         Bvh::ray_candidates_both(
             &self.dynamic,
