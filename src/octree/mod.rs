@@ -214,8 +214,10 @@ pub struct Octree {
     objs: Vec<Obj>,
     /// List links by id.
     links: Vec<Link>,
-    /// Id → key, the null key for a hole: a key is live iff `keys[its slot index]` is it.
-    keys: Vec<ProxyKey>,
+    /// Id → the version of its key (the key is `version << 32 | id` as slotmap's FFI form,
+    /// see [`key_at`]), 0 for a hole: a key is live iff its version is `versions[its slot
+    /// index]`.
+    versions: Vec<u32>,
     /// Live spheres.
     live: usize,
     /// Mints keys for [`Octree::insert`].
@@ -291,7 +293,7 @@ impl Octree {
             lattice,
             objs: Vec::new(),
             links: Vec::new(),
-            keys: Vec::new(),
+            versions: Vec::new(),
             live: 0,
             minted: SlotMap::with_key(),
             nodes: Nodes::new(cell::node_count(depth)),
@@ -431,7 +433,7 @@ impl Octree {
     pub(crate) fn reserve_ids(&mut self, ids: usize) {
         crate::radix::try_grow_to(&mut self.objs, ids);
         crate::radix::try_grow_to(&mut self.links, ids);
-        crate::radix::try_grow_to(&mut self.keys, ids);
+        crate::radix::try_grow_to(&mut self.versions, ids);
     }
 
     /// Heap bytes held (capacities, not lengths), pair-pass scratch included.
@@ -439,7 +441,7 @@ impl Octree {
     pub fn heap_bytes(&self) -> usize {
         self.objs.capacity() * core::mem::size_of::<Obj>()
             + self.links.capacity() * 8
-            + self.keys.capacity() * 8
+            + self.versions.capacity() * 4
             + self.nodes.heap_bytes()
             + self.passes.heap_bytes()
     }
@@ -523,12 +525,12 @@ impl Octree {
         self.overflow -= u32::from(self.is_outside(id));
         self.minted.remove(key);
         self.objs[i] = Obj::HOLE;
-        self.keys[i] = ProxyKey::default();
+        self.versions[i] = 0;
         self.live -= 1;
         while self.objs.last().is_some_and(|o| o.node == NONE) {
             self.objs.pop();
             self.links.pop();
-            self.keys.pop();
+            self.versions.pop();
         }
         Ok(())
     }
@@ -641,9 +643,9 @@ impl Octree {
 
     /// Calls `f` with every sphere's key and box (`center ± radius`), in key slot order.
     pub fn for_each(&self, mut f: impl FnMut(ProxyKey, Aabb)) {
-        for (key, obj) in self.keys.iter().zip(&self.objs) {
+        for (id, obj) in self.objs.iter().enumerate() {
             if obj.node != NONE {
-                f(*key, obj.aabb());
+                f(self.key_of(id as u32), obj.aabb());
             }
         }
     }
@@ -663,8 +665,16 @@ impl Octree {
     /// The id of the live sphere `key` names, if any.
     #[inline]
     fn id_of(&self, key: ProxyKey) -> Option<u32> {
-        let id = crate::pair::slot(key);
-        (self.keys.get(id as usize) == Some(&key) && !key.is_null()).then_some(id)
+        let ffi = key.data().as_ffi();
+        let (id, version) = (ffi as u32, (ffi >> 32) as u32);
+        (version != 0 && self.versions.get(id as usize) == Some(&version) && !key.is_null())
+            .then_some(id)
+    }
+
+    /// The key of the live sphere `id`.
+    #[inline]
+    fn key_of(&self, id: u32) -> ProxyKey {
+        key_at(&self.versions, id)
     }
 
     /// Adds a sphere that passed the checks under `key` (not live here) at its id.
@@ -675,10 +685,10 @@ impl Octree {
         if self.objs.len() <= i {
             crate::radix::grow_slots(&mut self.objs, i + 1);
             crate::radix::grow_slots(&mut self.links, i + 1);
-            crate::radix::grow_slots(&mut self.keys, i + 1);
+            crate::radix::grow_slots(&mut self.versions, i + 1);
             self.objs.resize(i + 1, Obj::HOLE);
             self.links.resize(i + 1, Link::NONE);
-            self.keys.resize(i + 1, ProxyKey::default());
+            self.versions.resize(i + 1, 0);
         }
         self.objs[i] = Obj {
             qmin: at.qmin,
@@ -687,7 +697,7 @@ impl Octree {
             radius,
             ..Obj::HOLE
         };
-        self.keys[i] = key;
+        self.versions[i] = (key.data().as_ffi() >> 32) as u32;
         self.live += 1;
         self.per_level[level_of(at.node) as usize] += 1;
         self.overflow += u32::from(at.outside);
@@ -741,6 +751,14 @@ impl Octree {
             self.nodes.mark_empty(node);
         }
     }
+}
+
+/// The key of id `id` whose version is `versions[id]`: slotmap's FFI form, `version << 32 |
+/// index`, which both the broadphase's keys and the ones [`Octree::insert`] mints take.
+#[inline]
+fn key_at(versions: &[u32], id: u32) -> ProxyKey {
+    let ffi = (u64::from(versions[id as usize]) << 32) | u64::from(id);
+    ProxyKey::from(slotmap::KeyData::from_ffi(ffi))
 }
 
 /// A sphere's placement computed without changing the tree ([`Octree::placement_of`]): what
