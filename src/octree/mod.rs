@@ -103,7 +103,7 @@ pub enum Placement {
 /// updates its spheres in key order streams through it, and a removal leaves a hole (`node ==
 /// NONE`) instead of moving another sphere. The pair pass reads the sphere (its box is
 /// [`Obj::aabb`], recomputed rather than stored), `qmin`/`qmax` and `walk_key`; queries follow
-/// the node lists ([`Link`]). 40 bytes.
+/// the node lists ([`Link`]). 36 bytes.
 #[derive(Clone, Copy, Debug)]
 #[repr(C)]
 struct Obj {
@@ -116,10 +116,12 @@ struct Obj {
     qmax: [u16; 3],
     /// The node the sphere is linked in. 4 bytes.
     node: u32,
-    /// The node's walk key (`Lattice::walk_key`), set on every link. 8 bytes.
-    walk_key: u64,
+    /// The node's walk key (`Lattice::walk_key`), set on every link, in 32 bits: the whole key
+    /// while it fits (`walk_key_bits(depth) <= 32`, every depth below [`MAX_DEPTH`]); a
+    /// deeper tree's pass sorts by `Lattice::walk_key` of `node` instead. 4 bytes.
+    walk_key: u32,
 }
-const _: () = assert!(core::mem::size_of::<Obj>() == 40);
+const _: () = assert!(core::mem::size_of::<Obj>() == 36);
 
 impl Obj {
     /// An id no sphere holds.
@@ -716,7 +718,8 @@ impl Octree {
 
     /// Pushes object `id` at the front of `node`'s list.
     fn link(&mut self, id: u32, node: u32) {
-        let walk_key = self.lattice.walk_key(node);
+        // Truncated past 32 bits, where it is not read (see `Obj::walk_key`).
+        let walk_key = self.lattice.walk_key(node) as u32;
         let became_occupied = self.nodes.is_empty(node);
         let head = self.nodes.head(node);
         let o = &mut self.objs[id as usize];

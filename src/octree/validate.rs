@@ -54,7 +54,7 @@ impl Octree {
             );
             assert_eq!(
                 o.walk_key,
-                self.lattice.walk_key(at.node),
+                self.lattice.walk_key(at.node) as u32,
                 "stale walk key at id {id}"
             );
             per_level[level_of(at.node) as usize] += 1;

@@ -330,7 +330,7 @@ impl Octree {
                     .iter()
                     .enumerate()
                     .filter(|(_, o)| o.node != NONE)
-                    .map(|(id, o)| (o.walk_key << 32) | id as u64),
+                    .map(|(id, o)| (u64::from(o.walk_key) << 32) | id as u64),
             );
             sort_bits(items, node_key, counts, 32, key_bits);
             self.scatter(
@@ -347,7 +347,7 @@ impl Octree {
                     .iter()
                     .enumerate()
                     .filter(|(_, o)| o.node != NONE)
-                    .map(|(id, o)| (o.walk_key, id as u32)),
+                    .map(|(id, o)| (self.lattice.walk_key(o.node), id as u32)),
             );
             // Ids are unique and listed in increasing order, so the stable sort by walk key
             // alone gives the `(walk key, id)` order.
@@ -429,7 +429,7 @@ impl Octree {
             objs.iter()
                 .step_by(stride)
                 .filter(|o| o.node != NONE)
-                .map(|o| o.walk_key),
+                .map(|o| u64::from(o.walk_key)),
         );
         if par.sample.is_empty() {
             self.sort_into_walk_order(s);
@@ -464,9 +464,10 @@ impl Octree {
                         // Counted without a branch: there are at most `MAX_PARTS − 1`.
                         let p: usize = splitters
                             .iter()
-                            .map(|&x| usize::from(x <= o.walk_key))
+                            .map(|&x| usize::from(x <= u64::from(o.walk_key)))
                             .sum();
-                        buckets[p].push((o.walk_key << 32) | (c * range + i) as u64);
+                        let key = u64::from(o.walk_key);
+                        buckets[p].push((key << 32) | (c * range + i) as u64);
                     }
                 }
                 buckets.iter_mut().for_each(ahead);
