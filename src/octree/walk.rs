@@ -83,8 +83,6 @@ pub(super) struct Scratch {
     wide: Vec<(u64, u32)>,
     wide_tmp: Vec<(u64, u32)>,
     counts: Vec<u32>,
-    /// By sphere id: its position in walk order.
-    rank: Vec<u32>,
     /// Walk-ordered copies: hot data and walk key of each sphere.
     pub(super) hot: Vec<Hot>,
     pub(super) node_key: Vec<u64>,
@@ -149,14 +147,13 @@ impl Scratch {
             counts: &mut self.counts,
         }
     }
-
     /// Heap bytes held (capacities).
     pub(super) fn heap_bytes(&self) -> usize {
         use core::mem::size_of_val;
         let v = |n: usize, one: usize| n * one;
         v(self.items.capacity(), 8)
             + v(self.wide.capacity() + self.wide_tmp.capacity(), 16)
-            + v(self.counts.capacity() + self.rank.capacity(), 4)
+            + v(self.counts.capacity(), 4)
             + v(self.hot.capacity(), size_of_val(&Hot::EMPTY))
             + v(self.node_key.capacity(), 8)
             + v(self.sweeps.a.capacity() + self.sweeps.b.capacity(), 8)
@@ -313,15 +310,14 @@ impl Octree {
             counts,
             hot,
             node_key,
-            rank,
             ..
         } = s;
         let key_bits = walk_key_bits(self.lattice.depth);
         // Every buffer sized by the sphere count grows by `room_for`, not by doubling.
         let n = self.live;
-        room_for(node_key, n);
+        // `node_key` first maps ids to walk positions (see `scatter`).
+        room_for(node_key, self.objs.len());
         room_for(hot, n);
-        room_for(rank, self.objs.len());
         if key_bits <= 32 {
             room_for(items, n);
             items.clear();
@@ -333,12 +329,7 @@ impl Octree {
                     .map(|(id, o)| (u64::from(o.walk_key) << 32) | id as u64),
             );
             sort_bits(items, node_key, counts, 32, key_bits);
-            self.scatter(
-                items.iter().map(|&x| (x >> 32, x as u32)),
-                rank,
-                hot,
-                node_key,
-            );
+            self.scatter(items.iter().map(|&x| (x >> 32, x as u32)), hot, node_key);
         } else {
             room_for(wide, n);
             wide.clear();
@@ -352,27 +343,26 @@ impl Octree {
             // Ids are unique and listed in increasing order, so the stable sort by walk key
             // alone gives the `(walk key, id)` order.
             sort_bits_by(wide, wide_tmp, counts, |&(key, _)| key, 0, key_bits);
-            self.scatter(wide.iter().copied(), rank, hot, node_key);
+            self.scatter(wide.iter().copied(), hot, node_key);
         }
     }
 
     /// Fills the walk-ordered copies from the sorted `(walk key, id)` sequence. Each sphere's
-    /// walk position is noted by id first; then one pass reads the spheres in id order, as
-    /// they lie in memory, and stores each at its position: stores to scattered places do not
-    /// stall the loop the way loads from them would.
+    /// walk position is noted by id first (in `node_key`, free until its keys are written
+    /// last); then one pass reads the spheres in id order, as they lie in memory, and stores
+    /// each at its position: stores to scattered places do not stall the loop the way loads
+    /// from them would.
     fn scatter(
         &self,
         order: impl Iterator<Item = (u64, u32)> + Clone,
-        rank: &mut Vec<u32>,
         hot: &mut Vec<Hot>,
         node_key: &mut Vec<u64>,
     ) {
         let n = self.live;
-        node_key.clear();
-        node_key.extend(order.clone().map(|(key, _)| key));
+        let rank = node_key;
         rank.resize(self.objs.len(), 0);
-        for (pos, (_, id)) in order.enumerate() {
-            rank[id as usize] = pos as u32;
+        for (pos, (_, id)) in order.clone().enumerate() {
+            rank[id as usize] = pos as u64;
         }
         // `rank` maps the live ids onto `0..n`: every entry below is overwritten, so the
         // buffers only change length when the sphere count does.
@@ -388,6 +378,9 @@ impl Octree {
                 id: id as u32,
             };
         }
+        let node_key = rank;
+        node_key.clear();
+        node_key.extend(order.map(|(key, _)| key));
     }
 }
 
