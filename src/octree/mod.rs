@@ -37,10 +37,11 @@
 //!
 //! Memory: the tree is "preallocated" in the sense of implicit indexing (level `L` starts at
 //! node `(8^L − 1)/7`, a node's index within its level is its Morton code), but the per-node
-//! arrays are paged: a page of 4096 nodes is allocated the first time a sphere is linked into
-//! one of its nodes or below it. A depth-10 tree (1.2 G implicit nodes) therefore costs a
-//! 1.2 MB page table plus the pages its spheres touch, and a scene of 100k spheres at depth 5
-//! costs ten pages.
+//! arrays are paged: a page of 4096 list heads is allocated the first time a sphere is linked
+//! into one of its nodes, a page of 4096 child masks the first time a sphere is linked below
+//! one of them. A depth-10 tree (1.2 G implicit nodes) therefore costs a 2.4 MB page table
+//! plus the pages its spheres touch; the levels between the root and the spheres' own keep
+//! masks only, and the deepest level heads only.
 //!
 //! # Conventions
 //! The same for [`Octree`] and [`Bvh`](crate::Bvh):
