@@ -382,9 +382,9 @@ impl Octree {
             }
             let at = self.lattice.locate(o.center, o.radius);
             (o.qmin, o.qmax) = (at.qmin, at.qmax);
-            self.per_level[level_of(at.node) as usize] += 1;
-            self.overflow += u32::from(at.outside);
-            self.link(id, at.node);
+            self.per_level[level_of(at.node()) as usize] += 1;
+            self.overflow += u32::from(at.outside());
+            self.link(id, at.node());
         }
         self.regrow.rooted(self.live, Some(p.span_center));
         self.overflow_after = self.overflow;
@@ -496,16 +496,16 @@ impl Octree {
     fn store_located(&mut self, id: u32, center: Vec3, radius: f32, at: &placement::Located) {
         let i = id as usize;
         let old_node = self.objs[i].node;
-        if old_node == 0 || at.outside {
+        if old_node == 0 || at.outside() {
             let was_outside = self.is_outside(id);
-            self.overflow = self.overflow - u32::from(was_outside) + u32::from(at.outside);
+            self.overflow = self.overflow - u32::from(was_outside) + u32::from(at.outside());
         }
         let o = &mut self.objs[i];
         (o.center, o.radius) = (center, radius);
         o.qmin = at.qmin;
         o.qmax = at.qmax;
-        if old_node != at.node {
-            self.relink(id, old_node, at.node);
+        if old_node != at.node() {
+            self.relink(id, old_node, at.node());
         }
     }
 
@@ -702,9 +702,9 @@ impl Octree {
         };
         self.versions[i] = (key.data().as_ffi() >> 32) as u32;
         self.live += 1;
-        self.per_level[level_of(at.node) as usize] += 1;
-        self.overflow += u32::from(at.outside);
-        self.link(id, at.node);
+        self.per_level[level_of(at.node()) as usize] += 1;
+        self.overflow += u32::from(at.outside());
+        self.link(id, at.node());
     }
 
     /// True if the sphere with id `id` is counted in `overflow` (only root spheres can
@@ -774,12 +774,7 @@ pub(crate) struct Placed(placement::Located);
 
 impl Placed {
     /// A placement no sphere has: a filler for buffers.
-    pub(crate) const NONE: Placed = Placed(placement::Located {
-        qmin: [0; 3],
-        qmax: [0; 3],
-        node: NONE,
-        outside: false,
-    });
+    pub(crate) const NONE: Placed = Placed(placement::Located::new([0; 3], [0; 3], NONE, false));
 }
 
 /// The batched update (read-only placement, then store and relink).

@@ -49,16 +49,17 @@ impl Octree {
             );
             self.lattice.check_rule(id, c, r, &at, o.node);
             assert_eq!(
-                o.node, at.node,
+                o.node,
+                at.node(),
                 "id {id} is not in the node placement gives"
             );
             assert_eq!(
                 o.walk_key,
-                self.lattice.walk_key(at.node) as u32,
+                self.lattice.walk_key(at.node()) as u32,
                 "stale walk key at id {id}"
             );
-            per_level[level_of(at.node) as usize] += 1;
-            overflow += u32::from(at.outside);
+            per_level[level_of(at.node()) as usize] += 1;
+            overflow += u32::from(at.outside());
         }
         assert_eq!(per_level, self.per_level, "per-level counts disagree");
         assert_eq!(overflow, self.overflow, "overflow count disagrees");
