@@ -693,7 +693,22 @@ impl BroadPhase {
         self.octree.maintain();
         let plan = self.plan();
         self.run(plan);
+        self.trim_events();
         self.now = self.now.wrapping_add(1);
+    }
+
+    /// Gives back the room of the event lists that a burst left far above their use (the
+    /// first step adds every pair at once): each is cut to half again what this step used,
+    /// or the room the step keeps ahead for them, once it holds more than twice that. A
+    /// list in steady state never comes near that bound, so steps keep allocating nothing.
+    fn trim_events(&mut self) {
+        let floor = self.store.len() / 8;
+        trim(&mut self.added, floor);
+        trim(&mut self.removed, floor);
+        trim(&mut self.added_packed, floor);
+        trim(&mut self.removed_packed, floor);
+        #[cfg(feature = "parallel")]
+        self.par.trim(trim);
     }
 
     /// Every pair whose (margin-grown) boxes overlapped at the last [`BroadPhase::step`],
@@ -720,6 +735,19 @@ impl BroadPhase {
         &self.removed
     }
 }
+
+/// Cuts `v`'s room to half again its length (at least `floor`) once it holds more than twice
+/// that ([`BroadPhase::trim_events`]).
+fn trim<T>(v: &mut Vec<T>, floor: usize) {
+    let keep = (v.len() + v.len() / 2).max(floor).max(TRIM_FLOOR);
+    if v.capacity() > 2 * keep {
+        v.shrink_to(keep);
+    }
+}
+
+/// The least room [`trim`] leaves a list, in entries: below it a list whose length swings
+/// between a few and a few hundred would be cut and grown again.
+const TRIM_FLOOR: usize = 256;
 
 /// The most live proxies: the structures index their entries with `u32`.
 const MAX_PROXIES: usize = (u32::MAX - 2) as usize;

@@ -129,6 +129,20 @@ impl Parallel {
     }
 }
 
+#[cfg(feature = "parallel")]
+impl Parallel {
+    /// Applies `trim` (the broadphase's event-list policy) to the lists a burst of pairs
+    /// leaves oversized: the producers' parts and the diff's parts.
+    pub(super) fn trim(&mut self, trim: fn(&mut Vec<u64>, usize)) {
+        for list in self.found.iter_mut().flatten() {
+            trim(list, 0);
+        }
+        for list in self.diff.iter_mut().flatten() {
+            trim(list, 0);
+        }
+    }
+}
+
 /// The key pair of a packed slot pair (slots live, or quarantined since their removal).
 #[inline]
 pub(super) fn key_pair(store: &Store, p: u64) -> Pair {

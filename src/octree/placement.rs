@@ -160,16 +160,44 @@ impl LooseKey {
     }
 }
 
-/// Where a sphere goes, from [`Lattice::locate`].
+/// Where a sphere goes, from [`Lattice::locate`]. 16 bytes: the parallel apply keeps one per
+/// slot.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Located {
     /// The box's corners as lattice coordinates, clamped to the lattice.
     pub(super) qmin: [u16; 3],
     pub(super) qmax: [u16; 3],
+    /// The node the sphere lives in ([`Located::node`]), with [`Located::OUTSIDE`] set if it is
+    /// kept in the root for not fitting the tree (counted in `OctreeStats::overflow`): node
+    /// indices stay below it (`cell::node_count(MAX_DEPTH) < 2^31`).
+    node_outside: u32,
+}
+const _: () = assert!(core::mem::size_of::<Located>() == 16);
+
+impl Located {
+    /// The bit of `node_outside` that says the sphere is outside.
+    const OUTSIDE: u32 = 1 << 31;
+
+    pub(super) const fn new(qmin: [u16; 3], qmax: [u16; 3], node: u32, outside: bool) -> Self {
+        let flag = if outside { Self::OUTSIDE } else { 0 };
+        Located {
+            qmin,
+            qmax,
+            node_outside: (node & !Self::OUTSIDE) | flag,
+        }
+    }
+
     /// The node the sphere lives in.
-    pub(super) node: u32,
-    /// Kept in the root for not fitting the tree (counted in `OctreeStats::overflow`).
-    pub(super) outside: bool,
+    #[inline]
+    pub(super) fn node(&self) -> u32 {
+        self.node_outside & !Self::OUTSIDE
+    }
+
+    /// True if the sphere is kept in the root for not fitting the tree.
+    #[inline]
+    pub(super) fn outside(&self) -> bool {
+        self.node_outside & Self::OUTSIDE != 0
+    }
 }
 
 /// The last radius placed through [`Lattice::locate_memo`] and its loose level by radius
@@ -256,12 +284,7 @@ impl Lattice {
                 self.loose_node(memo.level, center, qmin, qmax)
             }
         };
-        Located {
-            qmin,
-            qmax,
-            node,
-            outside,
-        }
+        Located::new(qmin, qmax, node, outside)
     }
 
     /// True if a sphere placed in the root is there for not fitting the tree
@@ -270,7 +293,7 @@ impl Lattice {
     pub(super) fn is_outside(&self, aabb: &Aabb, center: Vec3, radius: f32) -> bool {
         match self.placement {
             Placement::Strict => !self.bounds.contains(aabb),
-            Placement::Loose => self.locate(center, radius).outside,
+            Placement::Loose => self.locate(center, radius).outside(),
         }
     }
 
@@ -525,7 +548,7 @@ impl Lattice {
         cell: [u32; 3],
     ) {
         let wrong = "is not in the node placement gives";
-        if at.outside {
+        if at.outside() {
             let left = !self.bounds.contains(aabb);
             assert!(node == 0 && left, "id {id} {wrong}: it overflows the root");
             return;
@@ -567,7 +590,7 @@ impl Lattice {
             .max()
             .unwrap_or(0);
         let reach_fits = |l: u32| reach <= 1 << (self.depth - l);
-        if at.outside {
+        if at.outside() {
             assert_eq!(node, 0, "overflow sphere {id} is not in the root");
             assert!(
                 !fits(0) || !self.bounds.contains_point(c) || !reach_fits(0),
