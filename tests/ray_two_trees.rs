@@ -167,3 +167,51 @@ fn bvh_sphere_casts_keep_ties_to_the_smaller_key() {
         );
     }
 }
+
+/// `Octree::cast_sphere` over spheres many of which have a twin (the same
+/// sphere under another key, so the same `t`) or a near twin (moved by a few ulps along a
+/// random axis, whose exact time may round to the same `f32`): the smaller key at the same `t`
+/// as brute force over the test's own list of spheres.
+#[test]
+fn octree_casts_keep_ties_to_the_smaller_key() {
+    use broadleaf::Placement;
+    use broadleaf::octree::Octree;
+    let half = 12.0;
+    for placement in [Placement::Loose, Placement::Strict] {
+        let mut rng = Rng::new(13);
+        let mut tree = Octree::growing(placement);
+        let mut spheres: Vec<(ProxyKey, Vec3, f32)> = Vec::new();
+        for _ in 0..400 {
+            let c = rng.offset(half);
+            let r = rng.range(0.05, 1.5);
+            spheres.push((tree.insert(c, r).unwrap(), c, r));
+            if rng.chance(0.3) {
+                let nudge = match rng.below(3) {
+                    0 => Vec3::ZERO,
+                    1 => Vec3::X * (c.x.abs().max(1.0) * f32::EPSILON),
+                    _ => Vec3::splat(c.abs().max_element().max(1.0) * 2.0 * f32::EPSILON),
+                };
+                let c2 = c + nudge;
+                spheres.push((tree.insert(c2, r).unwrap(), c2, r));
+            }
+        }
+        tree.maintain();
+        for q in 0..2000 {
+            let o = random_origin(&mut rng, half);
+            let d = random_dir(&mut rng);
+            let max_t = [0.0, 3.0, 40.0, f32::MAX][q % 4];
+            let r = [0.0, 0.25, 1.0][q % 3];
+            let want = first_of(
+                spheres
+                    .iter()
+                    .map(|&(k, c, sr)| (k, geom::sphere_cast_sphere(o, r, d, max_t, c, sr))),
+            );
+            assert_eq!(
+                tree.cast_sphere(o, r, d, max_t),
+                want,
+                "{placement:?} query {q}: cast {o} {r} {d} {max_t}"
+            );
+        }
+        tree.validate();
+    }
+}
