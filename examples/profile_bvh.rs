@@ -9,8 +9,9 @@
 //! `Bvh::from_aabbs` itself (a new tree: `n` inserts, then the first build from the boxes'
 //! random order) `steps` times. `--what step` runs the `bodies` scene through a
 //! `BroadPhase` (spawn, then per step `Feed::apply` + `BroadPhase::step`) and prints the
-//! median ns/object/step, the pair count and the dynamic tree's shape. `--warmup W` steps are
-//! run (and not timed) first.
+//! median ns/object/step, the pair count and the dynamic tree's shape (`--moving P`: only P % of
+//! the dynamic boxes move, as `vs_rapier --moving`). `--warmup W` steps are run (and not timed)
+//! first.
 
 use broadleaf::bvh::{Bvh, BvhConfig};
 use broadleaf::fixtures::cli::{self, Flags, Stop};
@@ -20,14 +21,15 @@ use std::time::Instant;
 
 const USAGE: &str = "\
 usage: profile_bvh [--what build|first|step|pairs] [--n N] [--steps S] [--warmup W]
-                   [--trav C] [--leaf L] [--shuffle true|false]
+                   [--trav C] [--leaf L] [--shuffle true|false] [--moving P]
   --what W       what to time (default step; see the file's docs)
   --n N          boxes (default 10000)
   --steps S      timed repetitions (default 30)
   --warmup W     untimed steps first, for step and pairs (default 5)
   --trav C       BvhConfig::traversal_cost of the trees built
   --leaf L       BvhConfig::max_leaf_size of the trees built
-  --shuffle B    build: hand the keys a random permutation before each rebuild (default false)";
+  --shuffle B    build: hand the keys a random permutation before each rebuild (default false)
+  --moving P     step: the percentage of dynamic boxes that move (default 100)";
 
 struct Args {
     n: usize,
@@ -35,6 +37,7 @@ struct Args {
     warmup: usize,
     what: &'static str,
     shuffle: bool,
+    moving: f64,
     config: BvhConfig,
 }
 
@@ -45,6 +48,7 @@ fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
         warmup: 5,
         what: "step",
         shuffle: false,
+        moving: 100.0,
         config: BvhConfig::default(),
     };
     let mut flags = Flags::new(argv);
@@ -60,6 +64,7 @@ fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
             "--trav" => args.config.traversal_cost = flags.parse(&flag)?,
             "--leaf" => args.config.max_leaf_size = flags.parse(&flag)?,
             "--shuffle" => args.shuffle = flags.parse(&flag)?,
+            "--moving" => args.moving = flags.parse(&flag)?,
             _ => return Err(Stop::unknown(&flag)),
         }
     }
@@ -146,7 +151,7 @@ fn first(args: &Args) {
 }
 
 fn step(args: &Args) {
-    let mut scene = Bodies::new(args.n, 2);
+    let mut scene = Bodies::with_moving(args.n, 2, args.moving);
     let mut bp = BroadPhase::new(Config {
         ..Config::default()
     });

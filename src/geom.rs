@@ -320,8 +320,20 @@ pub fn inverse_dir(dir: Vec3) -> Vec3 {
     Vec3::ONE / dir
 }
 
-/// Checks a sphere given by the user: finite centre, finite non-negative radius.
+/// Checks a sphere given by the user: finite centre, finite non-negative radius. The common
+/// case, all good, is one vector test; a bad sphere is then named field by field.
+#[inline]
 pub(crate) fn check_sphere(center: Vec3, radius: f32) -> Result<(), Error> {
+    let v = glam::Vec4::from((center, radius));
+    if v.is_finite_mask().all() && radius >= 0.0 {
+        return Ok(());
+    }
+    name_sphere_error(center, radius)
+}
+
+/// The error [`check_sphere`] gives a sphere that fails it.
+#[cold]
+fn name_sphere_error(center: Vec3, radius: f32) -> Result<(), Error> {
     if !center.is_finite() {
         return Err(Error::NonFinite {
             what: "center",

@@ -114,16 +114,20 @@
 //! - `profiler`: `rapier` with rapier's timing counters, for the comparisons that time it.
 //! - `fixtures`: benchmark and test support (`broadleaf::fixtures`: scenes, a small physics
 //!   loop, rapier worlds); not part of the broadphase.
-//! - `parallel`: [`BroadPhase::step`]'s full pass runs on rayon's current thread pool (the one
-//!   a caller's `ThreadPool::install` runs in, else the global pool), with the same `pairs`,
-//!   `added`, `removed` and keys at any thread count, bit for bit. It splits only with more
-//!   than one thread and at least 10 000 spheres (the octree's pass is what splits; the BVH
-//!   passes run as one task beside it; the incremental pass stays serial). The step's first
-//!   act, applying the updates, splits its spheres' boxes and octree placements over the pool
-//!   under the same conditions when at least one proxy in eight was updated, outside the
-//!   incremental regime; the octree's relinks stay serial. On one thread it
-//!   allocates nothing per step in steady state; with more, rarely (per-task lists growing to
-//!   a new peak, and, for a caller outside the pool, rayon's job queue about once in 63 steps).
+//! - `parallel`: [`BroadPhase::step`] runs on rayon's current thread pool (the one a caller's
+//!   `ThreadPool::install` runs in, else the global pool), with the same `pairs`, `added`,
+//!   `removed` and keys at any thread count, bit for bit. It splits only with more than one
+//!   thread and at least 10 000 spheres or 16 384 dynamic bodies; outside the incremental
+//!   regime the whole step is then one job on the pool (a caller outside the pool hands it
+//!   over once, and each split phase starts on a worker already awake). The octree's pass
+//!   splits in chunks, the BVH passes hand their subtree pairs to tasks, the pair sort and the
+//!   event diff split by key range; the incremental pass stays serial. The step's first act,
+//!   applying the updates, splits its spheres over the pool under the same conditions when at
+//!   least one proxy in eight was updated: each task computes its spheres' boxes and
+//!   placements and stores those that stay in their octree node; the relinks and the bodies'
+//!   leaves stay serial. On one thread it allocates nothing per step in steady state; with
+//!   more, rarely (per-task lists growing to a new peak, and, for a caller outside the pool,
+//!   rayon's job queue about once in 63 steps).
 //! - `serde`: [`BroadPhase`] implements serde's `Serialize` and `Deserialize`, for snapshots
 //!   in any serde format. A snapshot holds the [`Config`], the step clock, every slot's
 //!   version with each live proxy's shape and [`CollisionGroups`], the free and quarantined

@@ -7,14 +7,29 @@
 //!   `broadphase::step::pack`), the broadphase's pair lists. With `slots` slots each index fits
 //!   in `s = bits_of(slots - 1)` bits, so the sort reads a pair as the `2s`-bit number
 //!   `high half << s | low half` ([`PairBits`]): it orders pairs as the full keys do, and its
-//!   digits cover only bits that vary (10 000 slots: 28 bits, three passes instead of five
-//!   over the 64-bit key). All digit counts are taken in one read of the keys.
+//!   digits cover only bits that vary. All digit counts are taken in one read of the keys.
+//!   The digits are as wide as the number of keys pays for: each pass moves every key once,
+//!   and each counter costs a clear, a prefix sum and a look at whether its digit varies, so
+//!   a list with more keys than half the counters of fewer, wider passes takes those ([`plan`]:
+//!   10 000 slots and 20 000 pairs sort in two passes of 14 bits instead of three of 10).
 
-/// The widest digit: 2048 counters (8 KiB) stay in L1.
+/// The widest digit of the narrow plan: 2048 counters (8 KiB) stay in L1.
 const MAX_DIGIT_BITS: u32 = 11;
-const MAX_BUCKETS: usize = 1 << MAX_DIGIT_BITS;
-/// Passes enough for two 32-bit slot indices.
-const MAX_PASSES: usize = 64usize.div_ceil(MAX_DIGIT_BITS as usize);
+
+/// The plans a pair sort chooses from, as (counters per pass, passes): each covers keys of up
+/// to `passes × log2(counters)` bits, and keeps its counters on the stack.
+mod plan {
+    /// Two passes of up to 14 bits: up to 2¹⁴ slots (128 KiB of counters).
+    pub(super) const TWO: (usize, usize) = (1 << 14, 2);
+    /// Three passes of up to 12 bits: up to 2¹⁸ slots (48 KiB).
+    pub(super) const THREE: (usize, usize) = (1 << 12, 3);
+    /// Any key: passes of up to [`super::MAX_DIGIT_BITS`] bits, enough for two 32-bit slot
+    /// indices (48 KiB).
+    pub(super) const NARROW: (usize, usize) = (
+        1 << super::MAX_DIGIT_BITS,
+        64usize.div_ceil(super::MAX_DIGIT_BITS as usize),
+    );
+}
 
 /// How the sort reads the pairs of a store of a given number of slots: the slot bits and
 /// the digits that cover the `2 × slot_bits` bits of the compact key.
@@ -27,16 +42,29 @@ pub(crate) struct PairBits {
 
 impl PairBits {
     /// The layout for slot indices below `slots` (at most `2³¹`): `ceil(2s / 11)` passes of
-    /// equal digits.
+    /// equal digits, the narrow plan ([`sort_in`] takes fewer, wider ones for long lists).
     pub(crate) fn for_slots(slots: usize) -> PairBits {
         let slot_bits = bits_of(slots.saturating_sub(1) as u64).max(1);
-        let total = 2 * slot_bits;
-        let passes = total.div_ceil(MAX_DIGIT_BITS);
+        PairBits::with_passes(slot_bits, (2 * slot_bits).div_ceil(MAX_DIGIT_BITS))
+    }
+
+    /// `passes` passes of equal digits over the `2 × slot_bits` bits of the compact key.
+    fn with_passes(slot_bits: u32, passes: u32) -> PairBits {
         PairBits {
             slot_bits,
-            digit_bits: total.div_ceil(passes),
+            digit_bits: (2 * slot_bits).div_ceil(passes),
             passes,
         }
+    }
+
+    /// This layout in the passes of `plan` (counters per pass, passes), if that saves a pass,
+    /// its digits fit the counters, and `n` keys pay for them: at least half as many keys as
+    /// counters in use (a pass moves each key for about what two counters cost).
+    fn in_plan(self, (buckets, passes): (usize, usize), n: usize) -> Option<PairBits> {
+        let wide = PairBits::with_passes(self.slot_bits, passes as u32);
+        let used = (1usize << wide.digit_bits) * passes;
+        (wide.passes < self.passes && 1usize << wide.digit_bits <= buckets && 2 * n >= used)
+            .then_some(wide)
     }
 
     /// `high half << slot_bits | low half` of a packed pair both of whose slots are below
@@ -53,10 +81,11 @@ impl PairBits {
         ((c >> self.slot_bits) << 32) | (c & ((1 << self.slot_bits) - 1))
     }
 
-    /// The digit of compact key `c` at `shift`, below [`MAX_BUCKETS`] by construction.
+    /// The digit of compact key `c` at `shift`, below `B` (the plan's counters per pass, a
+    /// power of two of at least `1 << digit_bits`).
     #[inline]
-    fn digit(self, c: u64, shift: u32) -> usize {
-        ((c >> shift) as usize) & ((1 << self.digit_bits) - 1) & (MAX_BUCKETS - 1)
+    fn digit<const B: usize>(self, c: u64, shift: u32) -> usize {
+        ((c >> shift) as usize) & ((1 << self.digit_bits) - 1) & (B - 1)
     }
 }
 
@@ -72,19 +101,68 @@ pub(crate) fn sort_u64(keys: &mut Vec<u64>, scratch: &mut Vec<u64>, layout: Pair
         keys.sort_unstable();
         return;
     }
-    scratch.clear();
-    scratch.resize(n, 0);
-    if sort_in(keys, scratch, layout) {
+    // The second buffer's old contents are overwritten: it only grows (zeroing just what
+    // it gains), and ends as long as the longest list it has sorted.
+    if scratch.len() < n {
+        scratch.resize(n, 0);
+    }
+    if sort_in(keys, &mut scratch[..n], layout) {
         core::mem::swap(keys, scratch);
+        keys.truncate(n);
     }
 }
 
 /// The sort of [`sort_u64`] over `keys` with `tmp` (of the same length) as the second buffer;
-/// true if the sorted keys end in `tmp`. The counts pass also rewrites the keys in compact
-/// form, which the scatters then read with a shift and a mask, and the last scatter (or a
-/// final loop if it had nothing to move) writes them back in packed form.
+/// true if the sorted keys end in `tmp`. Takes the plan of fewest passes that the keys pay
+/// for (see [`PairBits::in_plan`]).
 fn sort_in(keys: &mut [u64], tmp: &mut [u64], layout: PairBits) -> bool {
-    let mut counts = [[0u32; MAX_BUCKETS]; MAX_PASSES];
+    let n = keys.len();
+    if let Some(two) = layout.in_plan(plan::TWO, n) {
+        sort_halves::<{ plan::TWO.0 }>(keys, tmp, two)
+    } else if let Some(three) = layout.in_plan(plan::THREE, n) {
+        sort_planned::<{ plan::THREE.0 }, { plan::THREE.1 }>(keys, tmp, three)
+    } else if layout.passes == 2 {
+        sort_halves::<{ plan::NARROW.0 }>(keys, tmp, layout)
+    } else {
+        sort_planned::<{ plan::NARROW.0 }, { plan::NARROW.1 }>(keys, tmp, layout)
+    }
+}
+
+/// [`sort_in`] in two passes whose digits are the packed key's halves (slots below `B` and
+/// `1 << layout.slot_bits`): the low half (the larger slot), then the high half. Two passes
+/// over `2s` bits have digits of `s` bits, the slots themselves, so the keys need no compact
+/// form. Not inlined: its counters take only its own stack frame.
+#[inline(never)]
+fn sort_halves<const B: usize>(keys: &mut [u64], tmp: &mut [u64], layout: PairBits) -> bool {
+    debug_assert!(layout.passes == 2 && layout.digit_bits == layout.slot_bits);
+    let mut counts = [[0u32; B]; 2];
+    let used = (1 << layout.slot_bits).min(B);
+    let [lo, hi] = &mut counts;
+    let low = |k: u64| k as usize & (B - 1);
+    let high = |k: u64| (k >> 32) as usize & (B - 1);
+    for &k in keys.iter() {
+        debug_assert!(k >> 32 < B as u64 && (k as u32 as usize) < B);
+        lo[low(k)] += 1;
+        hi[high(k)] += 1;
+    }
+    let same = |k| k;
+    let in_tmp = scatter(keys, tmp, lo, used, low, same);
+    let (src, dst): (&[u64], &mut [u64]) = if in_tmp { (tmp, keys) } else { (keys, tmp) };
+    in_tmp ^ scatter(src, dst, hi, used, high, same)
+}
+
+/// [`sort_in`] with `P` passes of at most `B` counters each. The counts pass also rewrites the
+/// keys in compact form, which the scatters then read with a shift and a mask, and the last
+/// scatter (or a final loop if it had nothing to move) writes them back in packed form. Not
+/// inlined: each plan's counters take only its own stack frame.
+#[inline(never)]
+fn sort_planned<const B: usize, const P: usize>(
+    keys: &mut [u64],
+    tmp: &mut [u64],
+    layout: PairBits,
+) -> bool {
+    debug_assert!(layout.passes as usize <= P && 1 << layout.digit_bits <= B);
+    let mut counts = [[0u32; B]; P];
     count_digits(keys, layout, &mut counts);
     let mut in_tmp = false;
     let mut expanded = false;
@@ -92,10 +170,12 @@ fn sort_in(keys: &mut [u64], tmp: &mut [u64], layout: PairBits) -> bool {
         let last = pass + 1 == layout.passes;
         let shift = pass * layout.digit_bits;
         let (src, dst): (&[u64], &mut [u64]) = if in_tmp { (tmp, keys) } else { (keys, tmp) };
+        let used = 1 << layout.digit_bits;
+        let digit = |c| layout.digit::<B>(c, shift);
         let moved = if last {
-            scatter::<true>(src, dst, layout, shift, c)
+            scatter(src, dst, c, used, digit, |c| layout.expand(c))
         } else {
-            scatter::<false>(src, dst, layout, shift, c)
+            scatter(src, dst, c, used, digit, |c| c)
         };
         in_tmp ^= moved;
         expanded = last && moved;
@@ -213,53 +293,56 @@ fn sort_slice(keys: &mut [u64], tmp: &mut [u64], layout: PairBits) {
 /// The counts of every digit of every pass, in one read of the keys, which it leaves in
 /// compact form.
 #[inline]
-fn count_digits(keys: &mut [u64], layout: PairBits, counts: &mut [[u32; MAX_BUCKETS]; MAX_PASSES]) {
+fn count_digits<const B: usize, const P: usize>(
+    keys: &mut [u64],
+    layout: PairBits,
+    counts: &mut [[u32; B]; P],
+) {
     let b = layout.digit_bits;
-    match layout.passes {
-        // The common layouts, unrolled: up to 2¹¹ slots in two passes, up to 2¹⁶ in three.
-        2 => {
-            let [c0, c1, ..] = counts;
+    match (layout.passes, &mut counts[..]) {
+        // Two and three passes, unrolled: every plan up to 2¹⁸ slots.
+        (2, [c0, c1, ..]) => {
             for k in keys {
                 let c = layout.compact(*k);
                 *k = c;
-                c0[layout.digit(c, 0)] += 1;
-                c1[layout.digit(c, b)] += 1;
+                c0[layout.digit::<B>(c, 0)] += 1;
+                c1[layout.digit::<B>(c, b)] += 1;
             }
         }
-        3 => {
-            let [c0, c1, c2, ..] = counts;
+        (3, [c0, c1, c2, ..]) => {
             for k in keys {
                 let c = layout.compact(*k);
                 *k = c;
-                c0[layout.digit(c, 0)] += 1;
-                c1[layout.digit(c, b)] += 1;
-                c2[layout.digit(c, 2 * b)] += 1;
+                c0[layout.digit::<B>(c, 0)] += 1;
+                c1[layout.digit::<B>(c, b)] += 1;
+                c2[layout.digit::<B>(c, 2 * b)] += 1;
             }
         }
-        passes => {
+        (passes, counts) => {
             for k in keys {
                 let c = layout.compact(*k);
                 *k = c;
                 for (p, counts) in counts[..passes as usize].iter_mut().enumerate() {
-                    counts[layout.digit(c, p as u32 * b)] += 1;
+                    counts[layout.digit::<B>(c, p as u32 * b)] += 1;
                 }
             }
         }
     }
 }
 
-/// One scatter of compact keys on the digit at `shift`, whose counts are `counts`: `dst` gets
-/// `src` stably sorted by it, in packed form with `EXPAND`. Returns false, leaving `dst` as it
-/// was, if every key has the same digit there: the pass would move nothing.
-#[inline]
-fn scatter<const EXPAND: bool>(
+/// One scatter of `src` into `dst`, stably sorted by `digit` (below `used`, at most `B`), each
+/// key written as `out` of it; `counts` holds the digits' counts. Returns false, leaving
+/// `dst` as it was, if every key has the same digit: the pass would move nothing.
+#[inline(always)]
+fn scatter<const B: usize>(
     src: &[u64],
     dst: &mut [u64],
-    layout: PairBits,
-    shift: u32,
-    counts: &mut [u32; MAX_BUCKETS],
+    counts: &mut [u32; B],
+    used: usize,
+    digit: impl Fn(u64) -> usize,
+    out: impl Fn(u64) -> u64,
 ) -> bool {
-    let used = &mut counts[..1 << layout.digit_bits];
+    let used = &mut counts[..used];
     if used.iter().any(|&c| c as usize == src.len()) {
         return false;
     }
@@ -270,8 +353,9 @@ fn scatter<const EXPAND: bool>(
         sum += here;
     }
     for &c in src {
-        let d = layout.digit(c, shift);
-        dst[counts[d] as usize] = if EXPAND { layout.expand(c) } else { c };
+        // Masked to the array's length: no bounds check on the counters.
+        let d = digit(c) & (B - 1);
+        dst[counts[d] as usize] = out(c);
         counts[d] += 1;
     }
     true
@@ -447,7 +531,7 @@ mod tests {
     #[test]
     fn sorts_like_sort_unstable() {
         let mut next = xorshift(0x9E37_79B9_7F4A_7C15);
-        for n in [0, 1, 5, 63, 64, 65, 1000, 5000] {
+        for n in [0, 1, 5, 63, 64, 65, 1000, 5000, 20_000] {
             for slots in [2, 3, 100, 2048, 2049, 10_000, 70_000, 1 << 22, 1 << 31] {
                 let mut keys: Vec<u64> = (0..n).map(|_| random_pair(&mut next, slots)).collect();
                 // Repeats too: the sort is stable and keeps them.
@@ -464,6 +548,30 @@ mod tests {
                 assert_eq!(keys, want, "n {n} slots {slots}");
             }
         }
+    }
+
+    /// Long lists take fewer, wider passes, short ones keep the narrow plan; every plan's
+    /// digits cover the compact key and fit its counters (the sorts of those plans are
+    /// checked by `sorts_like_sort_unstable`, whose 20 000 keys take them).
+    #[test]
+    fn plans_save_passes_on_long_lists() {
+        let passes = |slots: usize, n: usize| {
+            let layout = PairBits::for_slots(slots);
+            let chosen = [plan::TWO, plan::THREE]
+                .into_iter()
+                .find_map(|p| layout.in_plan(p, n).map(|l| (l, p.0)))
+                .unwrap_or((layout, plan::NARROW.0));
+            let (l, buckets) = chosen;
+            assert!(l.digit_bits * l.passes >= 2 * l.slot_bits);
+            assert!(1 << l.digit_bits <= buckets);
+            l.passes
+        };
+        assert_eq!(passes(10_000, 20_000), 2);
+        assert_eq!(passes(10_000, 5_000), 3);
+        assert_eq!(passes(110_000, 240_000), 3);
+        assert_eq!(passes(110_000, 1_000), 4);
+        assert_eq!(passes(2048, 100_000), 2);
+        assert_eq!(passes(1 << 31, 1 << 24), 6);
     }
 
     /// `sort_bits_in` sorts a slice stably by the key bits, its answer in whichever buffer
@@ -504,7 +612,7 @@ mod tests {
                 .collect();
             keys.sort_unstable();
             keys.dedup();
-            assert!(layout.passes as usize <= MAX_PASSES);
+            assert!(layout.passes as usize <= plan::NARROW.1);
             assert!(layout.digit_bits * layout.passes >= 2 * layout.slot_bits);
             assert!(
                 keys.windows(2)

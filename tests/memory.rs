@@ -58,3 +58,34 @@ fn spheres_pay_nothing_in_the_bvhs() {
     // The broadphase counts its octree's bytes in its own, beside its slots and pair lists.
     assert!(bp.heap_bytes() > bp.octree().heap_bytes());
 }
+
+/// The first step adds every pair at once; once the world settles, the event lists give that
+/// room back instead of keeping the first step's peak.
+#[test]
+fn event_lists_give_back_the_first_steps_peak() {
+    let mut bp = BroadPhase::new(Config::default());
+    let keys: Vec<_> = (0..3000)
+        .map(|i| bp.insert_sphere(grid(i, 15, 1.5), 0.8).unwrap())
+        .collect();
+    bp.step();
+    let first = bp.added().len();
+    assert_eq!(first, bp.pairs().len());
+    let peak = bp.heap_bytes();
+    for step in 1..4 {
+        for (i, &k) in keys.iter().enumerate() {
+            let c = grid(i, 15, 1.5) + Vec3::splat(0.001 * step as f32);
+            bp.update_sphere(k, c, 0.8).unwrap();
+        }
+        bp.step();
+        assert!(bp.added().is_empty() && bp.removed().is_empty());
+    }
+    // `added` (16 bytes a pair) alone held the first step's pairs; it keeps at most an
+    // eighth of the proxies' worth of room.
+    let kept = 3000 / 8;
+    assert!(first > 4 * kept, "the world has too few pairs to tell");
+    assert!(
+        bp.heap_bytes() + (first - kept) * 16 <= peak,
+        "{} bytes after settling, {peak} at the first step's peak of {first} pairs",
+        bp.heap_bytes()
+    );
+}

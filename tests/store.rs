@@ -404,3 +404,86 @@ fn parallel_apply_equals_brute_force_at_one_and_two_threads() {
         });
     }
 }
+
+/// Feature `parallel`: spheres held in the octree's root move while the apply runs split
+/// over two threads. The region follows the bulk of the spheres and leaves a few far outliers
+/// out (kept in the root, counted as outside); some of those move a little and stay outside,
+/// others cycle through small in the bulk, too big for any child of the root (in the root,
+/// inside the region), the same teleported far (in the root, outside), small and far, big in
+/// the bulk again, and back. Every
+/// step's lists equal the model's brute force, and `validate()` (which recounts the spheres
+/// outside the region from the shapes) holds; the tree keeps outliers out throughout.
+#[cfg(feature = "parallel")]
+#[test]
+fn parallel_apply_moves_root_and_outside_spheres_exactly() {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .expect("a pool");
+    pool.install(|| {
+        let mut rng = Rng::new(12);
+        let mut bp = BroadPhase::new(Config {
+            passes: Passes::Full,
+            ..Config::default()
+        });
+        let mut model = Model::new(0.0);
+        model.quadratic = false;
+        for _ in 0..12_000 {
+            let s = ModelShape::Sphere {
+                center: rng.offset(60.0),
+                radius: rng.range(0.1, 0.6),
+            };
+            model.insert(&mut bp, s);
+        }
+        let far = Vec3::new(2.0e4, -1.5e4, 3.0e4);
+        let sphere = |center, radius| ModelShape::Sphere { center, radius };
+        let outliers: Vec<ProxyKey> = (0..4)
+            .map(|_| model.insert(&mut bp, sphere(far + rng.offset(3.0), 0.5)))
+            .collect();
+        let cyclers: Vec<(ProxyKey, usize)> = (0..3)
+            .map(|i| (model.insert(&mut bp, sphere(rng.offset(60.0), 0.5)), i))
+            .collect();
+        model.check_step(&mut bp, "first");
+        // Too big for the root's children, small enough for the root: a root cell's loose
+        // bounds reach half its side beyond it.
+        let region = bp.octree().bounds();
+        let (mid, big) = (region.center(), 0.35 * (region.max.x - region.min.x));
+        let (mut saw_outside, mut saw_root_inside) = (false, false);
+        for step in 0..8 {
+            // Most of the bulk moves, so the apply is the dense one split over the pool.
+            for key in model.keys() {
+                let mine = outliers.contains(&key) || cyclers.iter().any(|c| c.0 == key);
+                if !mine && rng.below(4) != 0 {
+                    let s = model.shapes[&key].moved(rng.offset(0.05));
+                    model.update(&mut bp, key, s);
+                }
+            }
+            for &key in &outliers {
+                let s = model.shapes[&key].moved(rng.offset(0.5));
+                model.update(&mut bp, key, s);
+            }
+            // Each cycler moves to its next state every step.
+            for &(key, phase) in &cyclers {
+                let s = match (phase + step) % 5 {
+                    0 => sphere(rng.offset(60.0), 0.5),
+                    1 | 4 => sphere(mid + rng.offset(5.0), big),
+                    2 => sphere(far + rng.offset(3.0), big),
+                    _ => sphere(far + rng.offset(3.0), 0.5),
+                };
+                model.update(&mut bp, key, s);
+            }
+            model.check_step(&mut bp, &format!("step {step}"));
+            let stats = bp.octree().stats();
+            saw_outside |= stats.overflow > 0;
+            saw_root_inside |= stats.per_level[0] > stats.overflow;
+        }
+        assert!(
+            saw_outside,
+            "the region took the outliers in: nothing tested outside"
+        );
+        assert!(
+            saw_root_inside,
+            "no sphere was ever in the root inside the region"
+        );
+    });
+}

@@ -160,15 +160,15 @@ impl BroadPhase {
     /// The dense walk with its spheres' share split over rayon's current pool, outside the
     /// incremental regime, with more than one thread and at least `PARALLEL_MIN_SPHERES`
     /// spheres, at least one slot in [`DENSE_FRACTION`] stale; false (nothing done) otherwise.
-    /// Each task takes a range of slots and computes, for its stale spheres, the exact box, the
-    /// motion and the octree placement (reading the tree only); then one walk in slot order
-    /// stores the placements in the octree (relinking the spheres whose node changed) and
-    /// applies the bodies. Every slot's outcome depends only on its own shape, so the result is
-    /// the serial walk's at any thread count.
+    /// Each task takes a range of slots and, for its stale spheres, computes the exact box, the
+    /// motion and the octree placement, and stores the sphere in its octree record when it
+    /// stays in its node (a move touches nothing else of the tree then); one walk in slot order
+    /// then applies what is left: the spheres that change node or enter or leave the region
+    /// (relinked), and the bodies. Every slot's outcome depends only on its own shape, so the
+    /// result is the serial walk's at any thread count.
     #[cfg(feature = "parallel")]
     fn apply_par(&mut self) -> bool {
         use super::store::Kind;
-        use crate::octree::Placed;
         use rayon::prelude::*;
         let slots = self.store.slots();
         let threads = rayon::current_num_threads();
@@ -180,41 +180,45 @@ impl BroadPhase {
             return false;
         }
         let chunk = slots.div_ceil(threads * TASKS_PER_THREAD).max(1);
-        if self.placed.len() < slots {
-            // Exactly the slots: the per-slot arrays grow by an eighth, not by doubling.
-            crate::radix::grow_to(&mut self.placed, self.store.capacity_slots());
-            self.placed.resize(slots, Placed::NONE);
-        }
-        let (margin, now, octree) = (self.config.margin, self.now, &self.octree);
+        let (margin, now) = (self.config.margin, self.now);
+        let (placer, records) = self.octree.split_for_update();
         let st = &mut self.store;
-        let (shape, flags) = (&st.shape, &st.flags);
+        let shape = &st.shape;
         let fast: usize = st
             .exact
             .par_chunks_mut(chunk)
             .zip(st.speed.par_chunks_mut(chunk))
             .zip(st.stamp.par_chunks_mut(chunk))
-            .zip(self.placed.par_chunks_mut(chunk))
+            .zip(st.flags.par_chunks_mut(chunk))
+            .zip(records.par_chunks_mut(chunk))
             .enumerate()
-            .map(|(c, (((exact, speed), stamp), placed))| {
-                let mut fast = 0;
-                for i in 0..exact.len() {
+            .map(|(c, ((((exact, speed), stamp), flags), records))| {
+                let (mut fast, mut placer) = (0, placer);
+                // The records end at the highest sphere id: a chunk's later slots (and the
+                // chunks after the records) hold no sphere.
+                for i in 0..records.len() {
                     let s = c * chunk + i;
                     let Shape::Sphere { center, radius } = shape[s] else {
                         continue;
                     };
-                    if flags[s] & flag::STALE == 0 {
+                    if flags[i] & flag::STALE == 0 {
                         continue;
                     }
                     let grown = fat::grown_sphere(center, radius, margin);
                     let (v, f) = fat::motion(&exact[i], &grown.aabb, stamp[i], now);
                     (exact[i], speed[i], stamp[i]) = (grown.aabb, v, now);
                     fast += usize::from(f);
-                    placed[i] = octree.placement_of(center, grown.radius);
+                    let at = placer.placement_of(center, grown.radius);
+                    if records[i].store_in_place(&placer, center, grown.radius, &at) {
+                        flags[i] &= !flag::STALE;
+                    }
                 }
                 fast
             })
             .sum();
         self.fast_movers += fast;
+        // What is left: the bodies, and the spheres that change node or enter or leave the
+        // region, placed again (the region is the one the tasks placed them in).
         for s in 0..slots {
             let f = &mut self.store.flags[s];
             if *f & flag::STALE == 0 {
@@ -228,7 +232,7 @@ impl BroadPhase {
             if let Shape::Sphere { center, radius } = self.store.shape[s] {
                 let key = self.store.key(s as u32);
                 let r = fat::grown_sphere(center, radius, margin).radius;
-                self.octree.update_placed(key, center, r, &self.placed[s]);
+                self.octree.update_live(key, center, r);
             }
         }
         true

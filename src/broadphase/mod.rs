@@ -204,9 +204,6 @@ pub struct BroadPhase {
     /// The radix sort's scratch for `movers` (see [`apply`]).
     movers_tmp: Vec<u32>,
     movers_counts: Vec<u32>,
-    /// The parallel apply's sphere placements, by slot (see [`apply`]).
-    #[cfg(feature = "parallel")]
-    placed: Vec<crate::octree::Placed>,
     /// Slots given a new fat box since the last step, each once (`flag::ESCAPED`).
     escaped: Vec<u32>,
     /// Slots re-anchored this step, each once (`flag::LOUD`).
@@ -305,8 +302,6 @@ impl BroadPhase {
             stale: 0,
             movers_tmp: Vec::new(),
             movers_counts: Vec::new(),
-            #[cfg(feature = "parallel")]
-            placed: Vec::new(),
             escaped: Vec::new(),
             loud: Vec::new(),
             pending: Vec::new(),
@@ -404,7 +399,6 @@ impl BroadPhase {
     #[cfg(feature = "parallel")]
     fn par_heap_bytes(&self) -> usize {
         self.par.heap_bytes()
-            + self.placed.capacity() * core::mem::size_of::<crate::octree::Placed>()
     }
 
     #[cfg(not(feature = "parallel"))]
@@ -678,13 +672,43 @@ impl BroadPhase {
     /// them may look proxies up ([`BroadPhase::shape`], [`BroadPhase::groups`]). Steady state
     /// allocates nothing: every list is kept and reused.
     pub fn step(&mut self) {
+        // A step that will split its work over rayon's pool runs on the pool as one job: a
+        // caller outside the pool then hands it over once (each hand-over wakes a worker and,
+        // at its end, the caller), and the split phases inside it (the apply's, the pass's)
+        // start on a worker that is already awake.
+        #[cfg(feature = "parallel")]
+        if self.tasks() >= 2 && !self.cached {
+            rayon::scope(|_| self.step_in());
+            return;
+        }
+        self.step_in();
+    }
+
+    /// [`BroadPhase::step`] on the thread it is called on.
+    #[inline(always)]
+    fn step_in(&mut self) {
         // The updates since the last step reach the structures first, in slot order.
         self.apply_updates();
         // The octree's region follows the spheres: re-rooted here, before any pass or query.
         self.octree.maintain();
         let plan = self.plan();
         self.run(plan);
+        self.trim_events();
         self.now = self.now.wrapping_add(1);
+    }
+
+    /// Gives back the room of the event lists that a burst left far above their use (the
+    /// first step adds every pair at once): each is cut to half again what this step used,
+    /// or the room the step keeps ahead for them, once it holds more than twice that. A
+    /// list in steady state never comes near that bound, so steps keep allocating nothing.
+    fn trim_events(&mut self) {
+        let floor = self.store.len() / 8;
+        trim(&mut self.added, floor);
+        trim(&mut self.removed, floor);
+        trim(&mut self.added_packed, floor);
+        trim(&mut self.removed_packed, floor);
+        #[cfg(feature = "parallel")]
+        self.par.trim(trim);
     }
 
     /// Every pair whose (margin-grown) boxes overlapped at the last [`BroadPhase::step`],
@@ -711,6 +735,19 @@ impl BroadPhase {
         &self.removed
     }
 }
+
+/// Cuts `v`'s room to half again its length (at least `floor`) once it holds more than twice
+/// that ([`BroadPhase::trim_events`]).
+fn trim<T>(v: &mut Vec<T>, floor: usize) {
+    let keep = (v.len() + v.len() / 2).max(floor).max(TRIM_FLOOR);
+    if v.capacity() > 2 * keep {
+        v.shrink_to(keep);
+    }
+}
+
+/// The least room [`trim`] leaves a list, in entries: below it a list whose length swings
+/// between a few and a few hundred would be cut and grown again.
+const TRIM_FLOOR: usize = 256;
 
 /// The most live proxies: the structures index their entries with `u32`.
 const MAX_PROXIES: usize = (u32::MAX - 2) as usize;

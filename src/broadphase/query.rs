@@ -12,6 +12,7 @@
 //! `Break` ends the query at once.
 
 use super::{BroadPhase, CollisionGroups, Shape};
+use crate::bvh::Bvh;
 use crate::geom::{self, SimdBox, check_aabb};
 use crate::search::{FirstHit, every, nearest_expanding, nearest_start};
 use crate::{Aabb, ProxyKey, Vec3};
@@ -235,7 +236,8 @@ impl BroadPhase {
     /// The smallest `(t, key)` of `hit_of(shape, limit)` over the proxies `filter` passes whose
     /// held boxes, grown by `inflate`, the segment `origin + t·dir` meets before the best `t`
     /// so far: each structure is walked nearer subtrees first and prunes what lies behind
-    /// that `t`. A rejected proxy does not shorten the segment.
+    /// that `t`, the two BVHs in one walk ([`Bvh::ray_candidates_both`]), so that a hit in
+    /// either prunes the other. A rejected proxy does not shorten the segment.
     fn first_hit(
         &self,
         mut hit: FirstHit,
@@ -253,25 +255,32 @@ impl BroadPhase {
             let t = hit_of(&self.store.shape[s], limit)?;
             self.passes(filter, key, s).then_some(t)
         };
+        // Each candidate is tested up to `max_t`, not the best `t` so far: a sphere test
+        // compares its `f64` time with the limit before rounding it, so a tie at the best `t`
+        // (rounded to `f32`) could be refused, and a smaller key lost. The walks still prune
+        // by the best `t`.
+        let max_t = hit.limit();
+        // A world of bodies alone skips the octree's setup.
+        if !self.octree.is_empty() {
+            self.octree
+                .ray_candidates(origin, dir, max_t, inflate, |k, _| {
+                    hit.offer(k, t_of(k, max_t))
+                });
+        }
         let limit = hit.limit();
-        self.octree
-            .ray_candidates(origin, dir, limit, inflate, |k, _| {
-                hit.offer(k, t_of(k, hit.limit()))
-            });
-        let limit = hit.limit();
-        self.dynamic
-            .ray_candidates(origin, dir, limit, inflate, |k, _| {
-                hit.offer(k, t_of(k, hit.limit()))
-            });
-        let limit = hit.limit();
-        self.statics
-            .ray_candidates(origin, dir, limit, inflate, |k, _| {
-                hit.offer(k, t_of(k, hit.limit()))
-            });
+        Bvh::ray_candidates_both(
+            &self.dynamic,
+            &self.statics,
+            origin,
+            dir,
+            limit,
+            inflate,
+            |k, _| hit.offer(k, t_of(k, max_t)),
+        );
         // The stale slots the structures skipped, at their latest shapes.
         let _ = self.for_each_stale(|s| {
             let k = self.store.key(s as u32);
-            let t = hit_of(&self.store.shape[s], hit.limit());
+            let t = hit_of(&self.store.shape[s], max_t);
             hit.offer(k, t.filter(|_| self.passes(filter, k, s)));
             ControlFlow::Continue(())
         });

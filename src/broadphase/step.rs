@@ -22,8 +22,9 @@
 //! candidate, never sorted and never diffed.
 //!
 //! **Threads** (feature `parallel`). With more than one thread in rayon's current pool and at
-//! least [`PARALLEL_MIN_SPHERES`] spheres or [`PARALLEL_MIN_BODIES`] dynamic bodies, the full
-//! pass runs as one job on the pool, split in [`TASKS_PER_THREAD`] tasks per thread at each
+//! least [`PARALLEL_MIN_SPHERES`] spheres or [`PARALLEL_MIN_BODIES`] dynamic bodies, the step
+//! (outside the incremental regime; inside it, a full pass) runs as one job on the pool, the
+//! full pass split in [`TASKS_PER_THREAD`] tasks per thread at each
 //! phase: the octree sorts its walk order in key-range parts and passes its runs in chunks
 //! (each with its own pass state), the BVH passes hand their descents' items to as many tasks
 //! (each with its own stack), and one task runs the sphere × body queries; every producer cuts its pairs into
@@ -125,6 +126,20 @@ impl Parallel {
             + self.prev_at.capacity())
             * 8
             + self.split.heap_bytes()
+    }
+}
+
+#[cfg(feature = "parallel")]
+impl Parallel {
+    /// Applies `trim` (the broadphase's event-list policy) to the lists a burst of pairs
+    /// leaves oversized: the producers' parts and the diff's parts.
+    pub(super) fn trim(&mut self, trim: fn(&mut Vec<u64>, usize)) {
+        for list in self.found.iter_mut().flatten() {
+            trim(list, 0);
+        }
+        for list in self.diff.iter_mut().flatten() {
+            trim(list, 0);
+        }
     }
 }
 
@@ -426,7 +441,7 @@ impl BroadPhase {
     /// How many tasks each split phase of a full pass hands to rayon's current pool: 1 (the
     /// serial pass) without the feature `parallel`, on one thread, or with few spheres.
     #[cfg(feature = "parallel")]
-    fn tasks(&self) -> usize {
+    pub(super) fn tasks(&self) -> usize {
         let threads = rayon::current_num_threads();
         let small =
             self.octree.len() < PARALLEL_MIN_SPHERES && self.dynamic.len() < PARALLEL_MIN_BODIES;
@@ -439,7 +454,7 @@ impl BroadPhase {
 
     #[cfg(not(feature = "parallel"))]
     #[inline(always)]
-    fn tasks(&self) -> usize {
+    pub(super) fn tasks(&self) -> usize {
         1
     }
 

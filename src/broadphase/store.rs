@@ -99,12 +99,6 @@ impl Store {
         self.version.len()
     }
 
-    /// Slots the per-slot arrays have room for without growing.
-    #[cfg(feature = "parallel")]
-    pub(super) fn capacity_slots(&self) -> usize {
-        self.version.capacity()
-    }
-
     /// The slot `key` names, if it names a live proxy here.
     #[inline]
     pub(super) fn resolve(&self, key: ProxyKey) -> Option<u32> {

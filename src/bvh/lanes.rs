@@ -170,6 +170,18 @@ impl Lanes {
     }
 }
 
+/// The positions of the set bits of `m`, lowest first.
+#[inline]
+pub(super) fn bits(mut m: u64) -> impl Iterator<Item = usize> {
+    core::iter::from_fn(move || {
+        (m != 0).then(|| {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            k
+        })
+    })
+}
+
 /// The lowest `len` bits set (`len <= 64`).
 #[inline]
 pub(super) fn low_bits(len: usize) -> u64 {

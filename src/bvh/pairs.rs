@@ -2,7 +2,7 @@
 //! lists against both (tree queries and sort-and-sweep on x).
 
 use super::Bvh;
-use super::lanes::{GROUP, Group, Lanes, Splat, low_bits};
+use super::lanes::{GROUP, Group, Lanes, Splat, bits, low_bits};
 use super::node::Node;
 use crate::geom::SimdBox;
 use crate::pair::{Pair, ProxyKey};
@@ -676,18 +676,6 @@ impl Noted {
             }
         }
     }
-}
-
-/// The positions of the set bits of `m`, lowest first.
-#[inline]
-fn bits(mut m: u64) -> impl Iterator<Item = usize> {
-    core::iter::from_fn(move || {
-        (m != 0).then(|| {
-            let k = m.trailing_zeros() as usize;
-            m &= m - 1;
-            k
-        })
-    })
 }
 
 #[cfg(all(test, feature = "parallel"))]

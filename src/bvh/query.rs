@@ -5,7 +5,7 @@
 //! stop as soon as their visitor returns [`ControlFlow::Break`], and say whether it did.
 
 use super::Bvh;
-use super::lanes::{GROUP, Group};
+use super::lanes::{GROUP, Group, Splat, bits};
 use super::node::{INLINE_STACK, Node, SmallStack};
 use crate::geom::{
     self, Aabb, SimdBox, check_aabb, check_sphere, inverse_dir, point_aabb_distance, ray_is_valid,
@@ -21,15 +21,22 @@ impl Slab {
     /// segment with no zero direction component (`finite`): the same operations on the same
     /// floats, lane by lane (`t_near` is the largest of the axes' and 0, `t_far` the smallest
     /// of the axes' and `limit`).
+    /// `INFLATED` false skips the growth, for a slab of `inflate == 0` (a ray), whose boxes
+    /// grown by `±0` are the boxes themselves, bit for bit.
     #[inline(always)]
-    fn group_mask(&self, group: &Group, limit: f32) -> u32 {
-        debug_assert!(self.finite);
+    fn group_mask<const INFLATED: bool>(&self, group: &Group, limit: f32) -> u32 {
+        debug_assert!(self.finite && (INFLATED || self.inflate == 0.0));
         let (min, max) = group.faces();
         let mut near = Vec4::ZERO;
         let mut far = Vec4::splat(limit);
         for a in 0..3 {
-            let t1 = (min[a] - self.inflate4 - self.origin4[a]) * self.inv4[a];
-            let t2 = (max[a] + self.inflate4 - self.origin4[a]) * self.inv4[a];
+            let (lo, hi) = if INFLATED {
+                (min[a] - self.inflate4, max[a] + self.inflate4)
+            } else {
+                (min[a], max[a])
+            };
+            let t1 = (lo - self.origin4[a]) * self.inv4[a];
+            let t2 = (hi - self.origin4[a]) * self.inv4[a];
             near = near.max(t1.min(t2));
             far = far.min(t1.max(t2));
         }
@@ -117,45 +124,52 @@ impl Bvh {
         aabb: &SimdBox,
         mut f: impl FnMut(usize) -> ControlFlow<()>,
     ) -> ControlFlow<()> {
+        let q = Splat::of(aabb);
         self.walk(
             |node| node.bounds().overlaps(aabb),
-            |i| {
-                if self.boxes[i].overlaps(aabb) {
-                    f(i)
-                } else {
-                    ControlFlow::Continue(())
+            |range| match self.lanes.leaf(range.start, range.len()) {
+                // Four boxes per test, the matches read from the set bits.
+                Some(leaf) => {
+                    let base = range.start - leaf.off;
+                    bits(leaf.mask(&q)).try_for_each(|k| f(base + k))
                 }
+                None => range
+                    .filter(|&i| self.boxes[i].overlaps(aabb))
+                    .try_for_each(&mut f),
             },
         )
     }
 
     /// Depth-first over the tree with the inline stack: enters every node that passes
-    /// `enter` (children only through their parent) and calls `visit` with each primitive
-    /// index of the leaves entered. The first `Break` of `visit` ends the walk and is
-    /// returned.
+    /// `enter` (children only through their parent) and calls `visit` with the primitive
+    /// range of each leaf entered. The first `Break` of `visit` ends the walk and is returned.
     fn walk(
         &self,
         mut enter: impl FnMut(&Node) -> bool,
-        mut visit: impl FnMut(usize) -> ControlFlow<()>,
+        mut visit: impl FnMut(core::ops::Range<usize>) -> ControlFlow<()>,
     ) -> ControlFlow<()> {
-        if self.nodes.is_empty() {
+        let Some(root) = self.nodes.first() else {
+            return ControlFlow::Continue(());
+        };
+        if !enter(root) {
             return ControlFlow::Continue(());
         }
+        // Only entered nodes are pushed: children are tested before the push, not after the
+        // pop, which saves the stack round trip of those that are not entered.
         let mut stack = SmallStack::<u32, INLINE_STACK>::new(0);
         stack.push(0);
         while let Some(n) = stack.pop() {
             let node = &self.nodes[n as usize];
-            if !enter(node) {
-                continue;
-            }
             if node.is_leaf() {
-                for i in node.range() {
-                    visit(i)?;
-                }
+                visit(node.range())?;
             } else {
                 let (a, b) = node.children(n);
-                stack.push(b);
-                stack.push(a);
+                if enter(&self.nodes[b as usize]) {
+                    stack.push(b);
+                }
+                if enter(&self.nodes[a as usize]) {
+                    stack.push(a);
+                }
             }
         }
         ControlFlow::Continue(())
@@ -201,12 +215,14 @@ impl Bvh {
         }
         let _ = self.walk(
             |node| node.aabb().ray_entry(origin, inv, max_t).is_some(),
-            |i| {
-                let key = self.keys[i];
-                if !key.is_null()
-                    && let Some(t) = self.boxes[i].aabb().ray_entry(origin, inv, max_t)
-                {
-                    f(key, t);
+            |range| {
+                for i in range {
+                    let key = self.keys[i];
+                    if !key.is_null()
+                        && let Some(t) = self.boxes[i].aabb().ray_entry(origin, inv, max_t)
+                    {
+                        f(key, t);
+                    }
                 }
                 ControlFlow::Continue(())
             },
@@ -226,80 +242,24 @@ impl Bvh {
         dir: Vec3,
         max_t: f32,
         inflate: f32,
-        mut visit: impl FnMut(ProxyKey, &Aabb) -> f32,
+        visit: impl FnMut(ProxyKey, &Aabb) -> f32,
     ) {
-        if !ray_is_valid(origin, dir, max_t) || inflate.is_nan() || inflate < 0.0 {
-            return;
-        }
-        let slab = Slab::new(origin, dir, inflate);
-        let entry = |b: SimdBox, limit: f32| slab.entry(&b, limit);
-        // Nodes are read as one 16-byte load per corner (`Node::bounds`), whose fourth lane
-        // the slab test ignores.
-        let node_entry = |n: u32, limit: f32| entry(self.nodes[n as usize].bounds(), limit);
-        let mut best = max_t;
-        let mut consider = |key: ProxyKey, b: &SimdBox, best: &mut f32| {
-            if !key.is_null() && entry(*b, *best).is_some() {
-                *best = best.min(visit(key, &b.aabb()));
-            }
-        };
-        for (b, &key) in self.pending_boxes().iter().zip(self.pending_keys()) {
-            consider(key, b, &mut best);
-        }
-        let Some(root) = self.nodes.first() else {
-            return;
-        };
-        let Some(t_root) = entry(root.bounds(), best) else {
-            return;
-        };
-        let mut stack = SmallStack::<(u32, f32), INLINE_STACK>::new((0, 0.0));
-        stack.push((0, t_root));
-        while let Some((n, t_enter)) = stack.pop() {
-            if t_enter > best {
-                continue;
-            }
-            let node = &self.nodes[n as usize];
-            if node.is_leaf() {
-                let range = node.range();
-                match self.lanes.leaf(range.start, range.len()) {
-                    // Four boxes per test; each that passes is tested again (it may lie
-                    // behind a hit found since).
-                    Some(leaf) if slab.finite => {
-                        let mut m = 0u64;
-                        for (j, group) in leaf.blocks.iter().enumerate() {
-                            m |= u64::from(slab.group_mask(group, best)) << (GROUP * j);
-                        }
-                        m &= leaf.valid;
-                        let base = range.start - leaf.off;
-                        while m != 0 {
-                            let i = base + m.trailing_zeros() as usize;
-                            m &= m - 1;
-                            consider(self.keys[i], &self.boxes[i], &mut best);
-                        }
-                    }
-                    _ => {
-                        for i in range {
-                            consider(self.keys[i], &self.boxes[i], &mut best);
-                        }
-                    }
-                }
-                continue;
-            }
-            let (a, b) = node.children(n);
-            let (ta, tb) = (node_entry(a, best), node_entry(b, best));
-            match (ta, tb) {
-                (Some(ta), Some(tb)) if tb < ta => {
-                    stack.push((a, ta));
-                    stack.push((b, tb));
-                }
-                (Some(ta), Some(tb)) => {
-                    stack.push((b, tb));
-                    stack.push((a, ta));
-                }
-                (Some(ta), None) => stack.push((a, ta)),
-                (None, Some(tb)) => stack.push((b, tb)),
-                (None, None) => {}
-            }
-        }
+        ray_walk([self], origin, dir, max_t, inflate, visit);
+    }
+
+    /// [`Bvh::ray_candidates`] over the boxes of two trees in one walk: both trees' pending
+    /// boxes first, then their roots as the two children of a virtual root, nearer entry
+    /// first (`a` on a tie), on one stack.
+    pub(crate) fn ray_candidates_both(
+        a: &Bvh,
+        b: &Bvh,
+        origin: Vec3,
+        dir: Vec3,
+        max_t: f32,
+        inflate: f32,
+        visit: impl FnMut(ProxyKey, &Aabb) -> f32,
+    ) {
+        ray_walk([a, b], origin, dir, max_t, inflate, visit);
     }
 
     /// Calls `f(key, aabb)` for every live box `aabb` within `radius` of `p`
@@ -333,7 +293,7 @@ impl Bvh {
         }
         self.walk(
             |node| may_be_near(&node.bounds()),
-            |i| consider(self.keys[i], &self.boxes[i]),
+            |mut range| range.try_for_each(|i| consider(self.keys[i], &self.boxes[i])),
         )
     }
 
@@ -376,10 +336,13 @@ impl Bvh {
         max_t: f32,
     ) -> Option<(ProxyKey, f32)> {
         let (mut hit, inflate) = FirstHit::sphere_cast(center, radius, dir, max_t)?;
+        // Each candidate is tested up to `max_t`, not the best `t` so far: the exact test
+        // compares its `f64` time with the limit before rounding it, so a tie at the best `t`
+        // (rounded to `f32`) could be refused, and a smaller key lost.
         self.ray_candidates(center, dir, max_t, inflate, |key, aabb| {
             hit.offer(
                 key,
-                geom::sphere_cast_aabb(center, radius, dir, hit.limit(), aabb),
+                geom::sphere_cast_aabb(center, radius, dir, max_t, aabb),
             )
         });
         hit.best()
@@ -428,6 +391,138 @@ impl Bvh {
 
     pub(super) fn pending_keys(&self) -> &[ProxyKey] {
         &self.keys[self.tree_len..]
+    }
+}
+
+/// The top bit of a node index on the stack of [`ray_walk`] names the tree (of at most two)
+/// the node is in: a tree's node indices stay below `2³¹` (its 32-byte nodes would not fit
+/// memory otherwise).
+const TREE_BIT: u32 = 1 << 31;
+
+/// [`Bvh::ray_candidates`] over the boxes of `N` (one or two) trees in one walk: the trees'
+/// roots are the children of a virtual root, pushed on one stack of `(node, entry t)` farther
+/// first (the first tree popped first on a tie), each node tagged with its tree
+/// ([`TREE_BIT`]); each interior node's children are pushed farther first too, and a node
+/// popped with an entry behind `best` is skipped. Each box of each tree is visited at most once
+/// (a tree's boxes lie in its leaves' disjoint ranges), and one is skipped only if its
+/// entry, no smaller than its node's, lies behind `best`.
+#[inline(always)]
+fn ray_walk<const N: usize>(
+    trees: [&Bvh; N],
+    origin: Vec3,
+    dir: Vec3,
+    max_t: f32,
+    inflate: f32,
+    visit: impl FnMut(ProxyKey, &Aabb) -> f32,
+) {
+    const { assert!(N == 1 || N == 2) };
+    if !ray_is_valid(origin, dir, max_t) || inflate.is_nan() || inflate < 0.0 {
+        return;
+    }
+    // A ray's leaf test skips the growth by zero ([`Slab::group_mask`]).
+    if inflate == 0.0 {
+        ray_walk_in::<N, false>(trees, origin, dir, max_t, inflate, visit);
+    } else {
+        ray_walk_in::<N, true>(trees, origin, dir, max_t, inflate, visit);
+    }
+}
+
+/// [`ray_walk`] of a valid segment, with `INFLATED` false iff `inflate` is 0.
+#[inline(always)]
+fn ray_walk_in<const N: usize, const INFLATED: bool>(
+    trees: [&Bvh; N],
+    origin: Vec3,
+    dir: Vec3,
+    max_t: f32,
+    inflate: f32,
+    mut visit: impl FnMut(ProxyKey, &Aabb) -> f32,
+) {
+    let slab = Slab::new(origin, dir, inflate);
+    let entry = |b: SimdBox, limit: f32| slab.entry(&b, limit);
+    let mut best = max_t;
+    let mut consider = |key: ProxyKey, b: &SimdBox, best: &mut f32| {
+        if !key.is_null() && entry(*b, *best).is_some() {
+            *best = best.min(visit(key, &b.aabb()));
+        }
+    };
+    for tree in trees {
+        for (b, &key) in tree.pending_boxes().iter().zip(tree.pending_keys()) {
+            consider(key, b, &mut best);
+        }
+    }
+    let mut stack = SmallStack::<(u32, f32), INLINE_STACK>::new((0, 0.0));
+    // The virtual root's children: the roots the segment enters, the nearer pushed last.
+    let mut roots = [(0, f32::INFINITY); N];
+    let mut entered = 0;
+    for (k, tree) in trees.iter().enumerate() {
+        debug_assert!(tree.nodes.len() <= TREE_BIT as usize);
+        if let Some(t) = tree.nodes.first().and_then(|r| entry(r.bounds(), best)) {
+            roots[entered] = (k as u32 * TREE_BIT, t);
+            entered += 1;
+        }
+    }
+    let roots = &mut roots[..entered];
+    if let [first, second] = roots
+        && first.1 <= second.1
+    {
+        core::mem::swap(first, second);
+    }
+    for &root in roots.iter() {
+        stack.push(root);
+    }
+    while let Some((tagged, t_enter)) = stack.pop() {
+        if t_enter > best {
+            continue;
+        }
+        let (tag, n) = (tagged & TREE_BIT, tagged & !TREE_BIT);
+        // `% N`: an index into `trees` that needs no bounds check.
+        let tree = trees[(tag / TREE_BIT) as usize % N];
+        let node = &tree.nodes[n as usize];
+        if node.is_leaf() {
+            let range = node.range();
+            match tree.lanes.leaf(range.start, range.len()) {
+                // Four boxes per test; each that passes is tested again (it may lie
+                // behind a hit found since).
+                Some(leaf) if slab.finite => {
+                    let mut m = 0u64;
+                    for (j, group) in leaf.blocks.iter().enumerate() {
+                        m |= u64::from(slab.group_mask::<INFLATED>(group, best)) << (GROUP * j);
+                    }
+                    m &= leaf.valid;
+                    let base = range.start - leaf.off;
+                    while m != 0 {
+                        let i = base + m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        consider(tree.keys[i], &tree.boxes[i], &mut best);
+                    }
+                }
+                _ => {
+                    for i in range {
+                        consider(tree.keys[i], &tree.boxes[i], &mut best);
+                    }
+                }
+            }
+            continue;
+        }
+        // Nodes are read as one 16-byte load per corner (`Node::bounds`), whose fourth lane
+        // the slab test ignores.
+        let node_entry = |c: u32| entry(tree.nodes[c as usize].bounds(), best);
+        let (a, b) = node.children(n);
+        let (ta, tb) = (node_entry(a), node_entry(b));
+        let (a, b) = (a | tag, b | tag);
+        match (ta, tb) {
+            (Some(ta), Some(tb)) if tb < ta => {
+                stack.push((a, ta));
+                stack.push((b, tb));
+            }
+            (Some(ta), Some(tb)) => {
+                stack.push((b, tb));
+                stack.push((a, ta));
+            }
+            (Some(ta), None) => stack.push((a, ta)),
+            (None, Some(tb)) => stack.push((b, tb)),
+            (None, None) => {}
+        }
     }
 }
 

@@ -27,9 +27,11 @@ pub(super) fn node_index(level: u32, code: u32) -> u32 {
     LEVEL_START[level as usize] + code
 }
 
-/// The level of node `node`.
+/// The level of node `node`: level `L` holds the nodes with `8^L <= 7·node + 1 < 8^(L+1)`.
+/// (`MAX_DEPTH + 1` for nodes past the deepest level, `NONE` among them.)
+#[inline]
 pub(super) fn level_of(node: u32) -> u32 {
-    LEVEL_START[1..].iter().take_while(|&&s| s <= node).count() as u32
+    (u64::from(node) * 7 + 1).ilog2() / 3
 }
 
 /// The Morton code of `node` within its level `level`.
@@ -150,6 +152,19 @@ mod tests {
         assert_eq!(morton([0, 0, 1]), 4);
         assert_eq!(morton([2, 0, 0]), 8);
         assert_eq!(morton([1023, 1023, 1023]), (1 << 30) - 1);
+    }
+
+    #[test]
+    fn level_of_agrees_with_the_level_starts() {
+        let by_table = |node: u32| LEVEL_START[1..].iter().take_while(|&&s| s <= node).count();
+        for &start in &LEVEL_START {
+            for node in [start.saturating_sub(1), start, start.saturating_add(1)] {
+                assert_eq!(level_of(node) as usize, by_table(node), "node {node}");
+            }
+        }
+        for node in [u32::MAX - 1, u32::MAX, 1 << 31, 12_345_678] {
+            assert_eq!(level_of(node) as usize, by_table(node), "node {node}");
+        }
     }
 
     #[test]

@@ -208,7 +208,7 @@ impl Octree {
             return PassCost::default();
         }
         self.sort_into_walk_order_par(ws, k);
-        let (hot, keys) = (&ws.hot[..], &ws.keys[..]);
+        let hot = &ws.hot[..];
         let deeper = self.occupied_below();
         let d = self.lattice.depth as usize;
         let cross = (0..=d).any(|l| deeper[l] && self.per_level[l] > 0);
@@ -244,7 +244,7 @@ impl Octree {
                     run_start,
                     run_of,
                     t: Tester {
-                        keys,
+                        versions: &self.versions,
                         tests: 0,
                         emit: |a, b| emit(out, a, b),
                     },

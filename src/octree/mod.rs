@@ -37,10 +37,11 @@
 //!
 //! Memory: the tree is "preallocated" in the sense of implicit indexing (level `L` starts at
 //! node `(8^L − 1)/7`, a node's index within its level is its Morton code), but the per-node
-//! arrays are paged: a page of 4096 nodes is allocated the first time a sphere is linked into
-//! one of its nodes or below it. A depth-10 tree (1.2 G implicit nodes) therefore costs a
-//! 1.2 MB page table plus the pages its spheres touch, and a scene of 100k spheres at depth 5
-//! costs ten pages.
+//! arrays are paged: a page of 4096 list heads is allocated the first time a sphere is linked
+//! into one of its nodes, a page of 4096 child masks the first time a sphere is linked below
+//! one of them. A depth-10 tree (1.2 G implicit nodes) therefore costs a 2.4 MB page table
+//! plus the pages its spheres touch; the levels between the root and the spheres' own keep
+//! masks only, and the deepest level heads only.
 //!
 //! # Conventions
 //! The same for [`Octree`] and [`Bvh`](crate::Bvh):
@@ -103,10 +104,10 @@ pub enum Placement {
 /// updates its spheres in key order streams through it, and a removal leaves a hole (`node ==
 /// NONE`) instead of moving another sphere. The pair pass reads the sphere (its box is
 /// [`Obj::aabb`], recomputed rather than stored), `qmin`/`qmax` and `walk_key`; queries follow
-/// the node lists ([`Link`]). 40 bytes.
+/// the node lists ([`Link`]). 36 bytes.
 #[derive(Clone, Copy, Debug)]
 #[repr(C)]
-struct Obj {
+pub(crate) struct Obj {
     /// The sphere exactly as given. 16 bytes.
     center: Vec3,
     radius: f32,
@@ -116,10 +117,12 @@ struct Obj {
     qmax: [u16; 3],
     /// The node the sphere is linked in. 4 bytes.
     node: u32,
-    /// The node's walk key (`Lattice::walk_key`), set on every link. 8 bytes.
-    walk_key: u64,
+    /// The node's walk key (`Lattice::walk_key`), set on every link, in 32 bits: the whole key
+    /// while it fits (`walk_key_bits(depth) <= 32`, every depth below [`MAX_DEPTH`]); a
+    /// deeper tree's pass sorts by `Lattice::walk_key` of `node` instead. 4 bytes.
+    walk_key: u32,
 }
-const _: () = assert!(core::mem::size_of::<Obj>() == 40);
+const _: () = assert!(core::mem::size_of::<Obj>() == 36);
 
 impl Obj {
     /// An id no sphere holds.
@@ -210,12 +213,16 @@ impl PassScratch {
 pub struct Octree {
     /// Bounds, depth, placement and the integer lattice.
     lattice: Lattice,
+    /// The last sphere radius placed on `lattice` and its level ([`Lattice::locate_memo`]).
+    memo: placement::LevelMemo,
     /// Hot data by id (see [`Obj`]).
     objs: Vec<Obj>,
     /// List links by id.
     links: Vec<Link>,
-    /// Id → key, the null key for a hole: a key is live iff `keys[its slot index]` is it.
-    keys: Vec<ProxyKey>,
+    /// Id → the version of its key (the key is `version << 32 | id` as slotmap's FFI form,
+    /// see [`key_at`]), 0 for a hole: a key is live iff its version is `versions[its slot
+    /// index]`.
+    versions: Vec<u32>,
     /// Live spheres.
     live: usize,
     /// Mints keys for [`Octree::insert`].
@@ -289,9 +296,10 @@ impl Octree {
         let depth = lattice.depth;
         Octree {
             lattice,
+            memo: placement::LevelMemo::EMPTY,
             objs: Vec::new(),
             links: Vec::new(),
-            keys: Vec::new(),
+            versions: Vec::new(),
             live: 0,
             minted: SlotMap::with_key(),
             nodes: Nodes::new(cell::node_count(depth)),
@@ -367,6 +375,7 @@ impl Octree {
     #[inline(never)]
     fn reroot(&mut self, p: &region::Proposal) {
         self.lattice = Lattice::new(p.bounds, p.depth, self.lattice.placement);
+        self.memo = placement::LevelMemo::EMPTY;
         self.nodes.reset(cell::node_count(p.depth));
         self.per_level = [0; MAX_DEPTH as usize + 1];
         self.overflow = 0;
@@ -377,9 +386,9 @@ impl Octree {
             }
             let at = self.lattice.locate(o.center, o.radius);
             (o.qmin, o.qmax) = (at.qmin, at.qmax);
-            self.per_level[level_of(at.node) as usize] += 1;
-            self.overflow += u32::from(at.outside);
-            self.link(id, at.node);
+            self.per_level[level_of(at.node()) as usize] += 1;
+            self.overflow += u32::from(at.outside());
+            self.link(id, at.node());
         }
         self.regrow.rooted(self.live, Some(p.span_center));
         self.overflow_after = self.overflow;
@@ -431,7 +440,7 @@ impl Octree {
     pub(crate) fn reserve_ids(&mut self, ids: usize) {
         crate::radix::try_grow_to(&mut self.objs, ids);
         crate::radix::try_grow_to(&mut self.links, ids);
-        crate::radix::try_grow_to(&mut self.keys, ids);
+        crate::radix::try_grow_to(&mut self.versions, ids);
     }
 
     /// Heap bytes held (capacities, not lengths), pair-pass scratch included.
@@ -439,7 +448,7 @@ impl Octree {
     pub fn heap_bytes(&self) -> usize {
         self.objs.capacity() * core::mem::size_of::<Obj>()
             + self.links.capacity() * 8
-            + self.keys.capacity() * 8
+            + self.versions.capacity() * 4
             + self.nodes.heap_bytes()
             + self.passes.heap_bytes()
     }
@@ -481,7 +490,7 @@ impl Octree {
 
     #[inline(always)]
     fn update_id(&mut self, id: u32, center: Vec3, radius: f32) {
-        let at = self.lattice.locate(center, radius);
+        let at = self.lattice.locate_memo(center, radius, &mut self.memo);
         self.store_located(id, center, radius, &at);
     }
 
@@ -491,16 +500,16 @@ impl Octree {
     fn store_located(&mut self, id: u32, center: Vec3, radius: f32, at: &placement::Located) {
         let i = id as usize;
         let old_node = self.objs[i].node;
-        if old_node == 0 || at.outside {
+        if old_node == 0 || at.outside() {
             let was_outside = self.is_outside(id);
-            self.overflow = self.overflow - u32::from(was_outside) + u32::from(at.outside);
+            self.overflow = self.overflow - u32::from(was_outside) + u32::from(at.outside());
         }
         let o = &mut self.objs[i];
         (o.center, o.radius) = (center, radius);
         o.qmin = at.qmin;
         o.qmax = at.qmax;
-        if old_node != at.node {
-            self.relink(id, old_node, at.node);
+        if old_node != at.node() {
+            self.relink(id, old_node, at.node());
         }
     }
 
@@ -523,12 +532,12 @@ impl Octree {
         self.overflow -= u32::from(self.is_outside(id));
         self.minted.remove(key);
         self.objs[i] = Obj::HOLE;
-        self.keys[i] = ProxyKey::default();
+        self.versions[i] = 0;
         self.live -= 1;
         while self.objs.last().is_some_and(|o| o.node == NONE) {
             self.objs.pop();
             self.links.pop();
-            self.keys.pop();
+            self.versions.pop();
         }
         Ok(())
     }
@@ -641,9 +650,9 @@ impl Octree {
 
     /// Calls `f` with every sphere's key and box (`center ± radius`), in key slot order.
     pub fn for_each(&self, mut f: impl FnMut(ProxyKey, Aabb)) {
-        for (key, obj) in self.keys.iter().zip(&self.objs) {
+        for (id, obj) in self.objs.iter().enumerate() {
             if obj.node != NONE {
-                f(*key, obj.aabb());
+                f(self.key_of(id as u32), obj.aabb());
             }
         }
     }
@@ -663,8 +672,16 @@ impl Octree {
     /// The id of the live sphere `key` names, if any.
     #[inline]
     fn id_of(&self, key: ProxyKey) -> Option<u32> {
-        let id = crate::pair::slot(key);
-        (self.keys.get(id as usize) == Some(&key) && !key.is_null()).then_some(id)
+        let ffi = key.data().as_ffi();
+        let (id, version) = (ffi as u32, (ffi >> 32) as u32);
+        (version != 0 && self.versions.get(id as usize) == Some(&version) && !key.is_null())
+            .then_some(id)
+    }
+
+    /// The key of the live sphere `id`.
+    #[inline]
+    fn key_of(&self, id: u32) -> ProxyKey {
+        key_at(&self.versions, id)
     }
 
     /// Adds a sphere that passed the checks under `key` (not live here) at its id.
@@ -675,10 +692,10 @@ impl Octree {
         if self.objs.len() <= i {
             crate::radix::grow_slots(&mut self.objs, i + 1);
             crate::radix::grow_slots(&mut self.links, i + 1);
-            crate::radix::grow_slots(&mut self.keys, i + 1);
+            crate::radix::grow_slots(&mut self.versions, i + 1);
             self.objs.resize(i + 1, Obj::HOLE);
             self.links.resize(i + 1, Link::NONE);
-            self.keys.resize(i + 1, ProxyKey::default());
+            self.versions.resize(i + 1, 0);
         }
         self.objs[i] = Obj {
             qmin: at.qmin,
@@ -687,11 +704,11 @@ impl Octree {
             radius,
             ..Obj::HOLE
         };
-        self.keys[i] = key;
+        self.versions[i] = (key.data().as_ffi() >> 32) as u32;
         self.live += 1;
-        self.per_level[level_of(at.node) as usize] += 1;
-        self.overflow += u32::from(at.outside);
-        self.link(id, at.node);
+        self.per_level[level_of(at.node()) as usize] += 1;
+        self.overflow += u32::from(at.outside());
+        self.link(id, at.node());
     }
 
     /// True if the sphere with id `id` is counted in `overflow` (only root spheres can
@@ -706,7 +723,8 @@ impl Octree {
 
     /// Pushes object `id` at the front of `node`'s list.
     fn link(&mut self, id: u32, node: u32) {
-        let walk_key = self.lattice.walk_key(node);
+        // Truncated past 32 bits, where it is not read (see `Obj::walk_key`).
+        let walk_key = self.lattice.walk_key(node) as u32;
         let became_occupied = self.nodes.is_empty(node);
         let head = self.nodes.head(node);
         let o = &mut self.objs[id as usize];
@@ -743,41 +761,81 @@ impl Octree {
     }
 }
 
-/// A sphere's placement computed without changing the tree ([`Octree::placement_of`]): what
-/// [`Octree::update`] does first, kept for the second half ([`Octree::update_placed`]), so that
-/// a caller moving many spheres can compute their placements on several threads and store
-/// them on one.
+/// The key of id `id` whose version is `versions[id]`: slotmap's FFI form, `version << 32 |
+/// index`, which both the broadphase's keys and the ones [`Octree::insert`] mints take.
+#[inline]
+fn key_at(versions: &[u32], id: u32) -> ProxyKey {
+    let ffi = (u64::from(versions[id as usize]) << 32) | u64::from(id);
+    ProxyKey::from(slotmap::KeyData::from_ffi(ffi))
+}
+
+/// The batched update split over tasks.
+impl Octree {
+    /// The tree's placement (read-only) beside its spheres' records by id (a slot's id is its
+    /// key's slot; the records end at the highest id ever held), for a batched update split
+    /// over tasks by id range: each task places its spheres with [`Placer::placement_of`] and
+    /// stores the moves that keep a sphere in its node with [`Record::store_in_place`]; the
+    /// others (a relink, a sphere entering or leaving the region) go through
+    /// [`Octree::update_live`] afterwards, on one thread.
+    pub(crate) fn split_for_update(&mut self) -> (Placer<'_>, &mut [Record]) {
+        let placer = Placer {
+            lattice: &self.lattice,
+            memo: placement::LevelMemo::EMPTY,
+        };
+        (placer, &mut self.objs)
+    }
+}
+
+/// Places spheres in a tree whose records are lent out ([`Octree::split_for_update`]); each
+/// task places with its own copy (which notes the last radius's level).
+#[derive(Clone, Copy)]
+pub(crate) struct Placer<'a> {
+    lattice: &'a Lattice,
+    memo: placement::LevelMemo,
+}
+
+impl Placer<'_> {
+    /// Where a sphere at `center`, `radius` goes in the tree as it is now.
+    #[inline(always)]
+    pub(crate) fn placement_of(&mut self, center: Vec3, radius: f32) -> Placed {
+        Placed(self.lattice.locate_memo(center, radius, &mut self.memo))
+    }
+}
+
+/// A sphere's placement from [`Placer::placement_of`], for [`Record::store_in_place`].
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Placed(placement::Located);
 
-impl Placed {
-    /// A placement no sphere has: a filler for buffers.
-    pub(crate) const NONE: Placed = Placed(placement::Located {
-        qmin: [0; 3],
-        qmax: [0; 3],
-        node: NONE,
-        outside: false,
-    });
-}
+/// A sphere's record in the tree (opaque outside it), lent out by
+/// [`Octree::split_for_update`].
+pub(crate) type Record = Obj;
 
-/// The batched update (read-only placement, then store and relink).
-impl Octree {
-    /// Where a sphere at `center`, `radius` goes in the tree as it is now; reads only. Valid
-    /// for [`Octree::update_placed`] until the region changes ([`Octree::maintain`]).
+impl Obj {
+    /// Stores `center`, `radius` placed at `at` (from `placer`, this record's tree) if the
+    /// sphere stays in its node and the update leaves the count of spheres outside the region
+    /// as it was: the record is all such a move changes. False, with nothing stored, if the
+    /// move needs [`Octree::update_live`].
     #[inline(always)]
-    pub(crate) fn placement_of(&self, center: Vec3, radius: f32) -> Placed {
-        Placed(self.lattice.locate(center, radius))
-    }
-
-    /// [`Octree::update_live`] with the placement [`Octree::placement_of`] computed for the
-    /// same `center` and `radius`: stores the sphere, relinking it if its node changed.
-    #[inline(always)]
-    pub(crate) fn update_placed(&mut self, key: ProxyKey, center: Vec3, radius: f32, at: &Placed) {
-        debug_assert!(
-            self.id_of(key).is_some(),
-            "update_placed of a key not live here"
-        );
-        self.store_located(crate::pair::slot(key), center, radius, &at.0);
+    pub(crate) fn store_in_place(
+        &mut self,
+        placer: &Placer<'_>,
+        center: Vec3,
+        radius: f32,
+        at: &Placed,
+    ) -> bool {
+        let at = &at.0;
+        // Only a sphere in the root (node 0) can be outside the region.
+        let counted = self.node == 0
+            && (at.outside()
+                || placer
+                    .lattice
+                    .is_outside(&self.aabb(), self.center, self.radius));
+        if self.node != at.node() || self.node == NONE || counted {
+            return false;
+        }
+        (self.center, self.radius) = (center, radius);
+        (self.qmin, self.qmax) = (at.qmin, at.qmax);
+        true
     }
 }
 

@@ -4,7 +4,7 @@
 use super::cell::{Cell, code_of, level_of, node_index};
 use super::{MAX_DEPTH, NONE};
 
-/// Nodes per page of the paged node arrays, as a power of two: 4096 nodes (16 KB of heads and
+/// Nodes per page of the paged node arrays, as a power of two: 4096 nodes (16 KB of heads or
 /// 4 KB of masks), small enough that a sparse deep tree touches little memory and large enough
 /// that a dense level is a handful of pages.
 const PAGE_BITS: u32 = 12;
@@ -28,27 +28,39 @@ fn ancestors(node: u32) -> impl Iterator<Item = (u32, u32)> {
     })
 }
 
-/// Per-node list heads and child-occupancy masks, paged: `table[node >> PAGE_BITS]` is the
-/// page's position in `head`/`mask` plus one, or 0 while no node of the page was ever
-/// occupied (reads then see an empty node). Pages are never freed.
+/// Per-node list heads and child-occupancy masks, paged apart: `table[node >> PAGE_BITS]` is
+/// the page's position in `head` plus one and the page's position in `mask` plus one, each 0
+/// while no node of the page was given one (reads then see an empty node). A level that holds
+/// no sphere keeps no head pages, and the deepest level, which has no children, no mask pages.
+/// Pages are never freed.
 #[derive(Clone, Debug)]
 pub(super) struct Nodes {
-    table: Vec<u32>,
+    table: Vec<[u32; 2]>,
     /// First object of each node's list, `NONE` if empty. 4 bytes per node.
     head: Vec<u32>,
     /// Bit `c` set iff child octant `c`'s subtree holds a sphere. 1 byte per node.
     mask: Vec<u8>,
 }
 
+/// Which of a page's two positions `Nodes::table` holds.
+const HEAD: usize = 0;
+const MASK: usize = 1;
+
+/// Position of `node` in the pages whose page positions (plus one) are `at`.
+#[inline]
+fn position(at: u32, node: u32) -> usize {
+    (((at - 1) as usize) << PAGE_BITS) | (node as usize & (PAGE - 1))
+}
+
 impl Nodes {
     /// Heap bytes held (capacities).
     pub(super) fn heap_bytes(&self) -> usize {
-        (self.table.capacity() + self.head.capacity()) * 4 + self.mask.capacity()
+        self.table.capacity() * 8 + self.head.capacity() * 4 + self.mask.capacity()
     }
 
     pub(super) fn new(count: u32) -> Self {
         Nodes {
-            table: vec![0; (count as usize).div_ceil(PAGE)],
+            table: vec![[0; 2]; (count as usize).div_ceil(PAGE)],
             head: Vec::new(),
             mask: Vec::new(),
         }
@@ -57,28 +69,45 @@ impl Nodes {
     /// Empties the arrays for a tree of `count` nodes, keeping their capacity (a re-root).
     pub(super) fn reset(&mut self, count: u32) {
         self.table.clear();
-        self.table.resize((count as usize).div_ceil(PAGE), 0);
+        self.table.resize((count as usize).div_ceil(PAGE), [0; 2]);
         self.head.clear();
         self.mask.clear();
     }
 
-    /// Position of `node` in `head`/`mask`, if its page exists.
+    /// Position of `node` in `head`, if its head page exists.
     #[inline]
     pub(super) fn slot(&self, node: u32) -> Option<usize> {
-        let p = self.table[(node >> PAGE_BITS) as usize];
-        (p != 0).then(|| (((p - 1) as usize) << PAGE_BITS) | (node as usize & (PAGE - 1)))
+        let p = self.table[(node >> PAGE_BITS) as usize][HEAD];
+        (p != 0).then(|| position(p, node))
     }
 
-    /// Position of `node`, allocating its page first if needed.
+    /// Position of `node` in `mask`, if its mask page exists.
+    #[inline]
+    fn mask_slot(&self, node: u32) -> Option<usize> {
+        let p = self.table[(node >> PAGE_BITS) as usize][MASK];
+        (p != 0).then(|| position(p, node))
+    }
+
+    /// Position of `node` in `head`, allocating its head page first if needed.
     fn slot_mut(&mut self, node: u32) -> usize {
         let t = (node >> PAGE_BITS) as usize;
-        if self.table[t] == 0 {
+        if self.table[t][HEAD] == 0 {
             let pages = self.head.len() / PAGE;
             self.head.resize(self.head.len() + PAGE, NONE);
-            self.mask.resize(self.mask.len() + PAGE, 0);
-            self.table[t] = pages as u32 + 1;
+            self.table[t][HEAD] = pages as u32 + 1;
         }
-        (((self.table[t] - 1) as usize) << PAGE_BITS) | (node as usize & (PAGE - 1))
+        position(self.table[t][HEAD], node)
+    }
+
+    /// Position of `node` in `mask`, allocating its mask page first if needed.
+    fn mask_slot_mut(&mut self, node: u32) -> usize {
+        let t = (node >> PAGE_BITS) as usize;
+        if self.table[t][MASK] == 0 {
+            let pages = self.mask.len() / PAGE;
+            self.mask.resize(self.mask.len() + PAGE, 0);
+            self.table[t][MASK] = pages as u32 + 1;
+        }
+        position(self.table[t][MASK], node)
     }
 
     /// Nodes allocated in pages so far: every [`Nodes::slot`] is below this.
@@ -99,7 +128,7 @@ impl Nodes {
 
     #[inline]
     pub(super) fn mask(&self, node: u32) -> u8 {
-        self.slot(node).map_or(0, |s| self.mask[s])
+        self.mask_slot(node).map_or(0, |s| self.mask[s])
     }
 
     pub(super) fn set_head(&mut self, node: u32, id: u32) {
@@ -109,8 +138,7 @@ impl Nodes {
 
     /// True if neither the node nor any descendant holds a sphere.
     pub(super) fn is_empty(&self, node: u32) -> bool {
-        self.slot(node)
-            .is_none_or(|s| self.head[s] == NONE && self.mask[s] == 0)
+        self.head(node) == NONE && self.mask(node) == 0
     }
 
     /// Marks the path from `node` to the root as occupied; call after `node` became non-empty.
@@ -118,7 +146,7 @@ impl Nodes {
     pub(super) fn mark_occupied(&mut self, node: u32) {
         for (parent, octant) in ancestors(node) {
             let was_empty = self.is_empty(parent);
-            let s = self.slot_mut(parent);
+            let s = self.mask_slot_mut(parent);
             self.mask[s] |= 1 << octant;
             if !was_empty {
                 return;
@@ -129,7 +157,7 @@ impl Nodes {
     /// Clears occupancy bits up from `node`; call after `node` became empty.
     pub(super) fn mark_empty(&mut self, node: u32) {
         for (parent, octant) in ancestors(node) {
-            let s = self.slot_mut(parent);
+            let s = self.mask_slot_mut(parent);
             self.mask[s] &= !(1 << octant);
             if !self.is_empty(parent) {
                 return;
@@ -138,8 +166,9 @@ impl Nodes {
     }
 
     /// Depth-first over the occupied subtree of `start`, allocation-free: calls
-    /// `visit(cell, slot)` for each node entered whose page exists (`start` is always entered),
-    /// and enters an occupied child (per the child masks) only if `enter(child)`.
+    /// `visit(cell, slot)` for each node entered whose head page exists (`slot` its position
+    /// in it; `start` is always entered), and enters an occupied child (per the child masks)
+    /// only if `enter(child)`.
     #[inline]
     pub(super) fn walk(
         &self,
@@ -153,11 +182,11 @@ impl Nodes {
         while len > 0 {
             len -= 1;
             let cell = stack[len];
-            let Some(slot) = self.slot(cell.node()) else {
-                continue;
-            };
-            visit(&cell, slot);
-            let mut m = self.mask[slot];
+            let node = cell.node();
+            if let Some(slot) = self.slot(node) {
+                visit(&cell, slot);
+            }
+            let mut m = self.mask(node);
             while m != 0 {
                 let child = cell.child(m.trailing_zeros());
                 m &= m - 1;

@@ -160,16 +160,61 @@ impl LooseKey {
     }
 }
 
-/// Where a sphere goes, from [`Lattice::locate`].
+/// Where a sphere goes, from [`Lattice::locate`]. 16 bytes: the parallel apply keeps one per
+/// slot.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Located {
     /// The box's corners as lattice coordinates, clamped to the lattice.
     pub(super) qmin: [u16; 3],
     pub(super) qmax: [u16; 3],
+    /// The node the sphere lives in ([`Located::node`]), with [`Located::OUTSIDE`] set if it is
+    /// kept in the root for not fitting the tree (counted in `OctreeStats::overflow`): node
+    /// indices stay below it (`cell::node_count(MAX_DEPTH) < 2^31`).
+    node_outside: u32,
+}
+const _: () = assert!(core::mem::size_of::<Located>() == 16);
+
+impl Located {
+    /// The bit of `node_outside` that says the sphere is outside.
+    const OUTSIDE: u32 = 1 << 31;
+
+    pub(super) const fn new(qmin: [u16; 3], qmax: [u16; 3], node: u32, outside: bool) -> Self {
+        let flag = if outside { Self::OUTSIDE } else { 0 };
+        Located {
+            qmin,
+            qmax,
+            node_outside: (node & !Self::OUTSIDE) | flag,
+        }
+    }
+
     /// The node the sphere lives in.
-    pub(super) node: u32,
-    /// Kept in the root for not fitting the tree (counted in `OctreeStats::overflow`).
-    pub(super) outside: bool,
+    #[inline]
+    pub(super) fn node(&self) -> u32 {
+        self.node_outside & !Self::OUTSIDE
+    }
+
+    /// True if the sphere is kept in the root for not fitting the tree.
+    #[inline]
+    pub(super) fn outside(&self) -> bool {
+        self.node_outside & Self::OUTSIDE != 0
+    }
+}
+
+/// The last radius placed through [`Lattice::locate_memo`] and its loose level by radius
+/// ([`Lattice::loose_level`]), valid for the lattice it was noted on.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct LevelMemo {
+    /// The radius's bits; a NaN's (no radius placed) when empty.
+    radius_bits: u32,
+    level: Option<u32>,
+}
+
+impl LevelMemo {
+    /// Holds no radius: a NaN is never placed.
+    pub(crate) const EMPTY: LevelMemo = LevelMemo {
+        radius_bits: f32::NAN.to_bits(),
+        level: None,
+    };
 }
 
 /// A tree's bounds, depth, placement and the integer lattice boxes are mapped to.
@@ -215,19 +260,31 @@ impl Lattice {
     /// the root for not fitting.
     #[inline(always)]
     pub(super) fn locate(&self, center: Vec3, radius: f32) -> Located {
+        let mut memo = LevelMemo::EMPTY;
+        self.locate_memo(center, radius, &mut memo)
+    }
+
+    /// [`Lattice::locate`] reading a loose sphere's level by radius from `memo` when it holds
+    /// `radius` (and noting it there when not): a world of one sphere size places each sphere
+    /// without working its level out again. `memo` belongs to this lattice.
+    #[inline(always)]
+    pub(super) fn locate_memo(&self, center: Vec3, radius: f32, memo: &mut LevelMemo) -> Located {
         let aabb = Aabb::from_center_radius(center, radius);
         let qmin = self.quantize(aabb.min);
         let qmax = self.quantize(aabb.max);
         let (node, outside) = match self.placement {
             Placement::Strict => self.strict_node(&aabb, qmin, qmax),
-            Placement::Loose => self.loose_node(center, radius, qmin, qmax),
+            Placement::Loose => {
+                if memo.radius_bits != radius.to_bits() {
+                    *memo = LevelMemo {
+                        radius_bits: radius.to_bits(),
+                        level: self.loose_level(radius),
+                    };
+                }
+                self.loose_node(memo.level, center, qmin, qmax)
+            }
         };
-        Located {
-            qmin,
-            qmax,
-            node,
-            outside,
-        }
+        Located::new(qmin, qmax, node, outside)
     }
 
     /// True if a sphere placed in the root is there for not fitting the tree
@@ -236,7 +293,7 @@ impl Lattice {
     pub(super) fn is_outside(&self, aabb: &Aabb, center: Vec3, radius: f32) -> bool {
         match self.placement {
             Placement::Strict => !self.bounds.contains(aabb),
-            Placement::Loose => self.locate(center, radius).outside,
+            Placement::Loose => self.locate(center, radius).outside(),
         }
     }
 
@@ -283,8 +340,14 @@ impl Lattice {
     /// Centres outside the bounds and spheres too big for the root's loose bounds go to the
     /// root as overflow.
     #[inline]
-    fn loose_node(&self, center: Vec3, radius: f32, qmin: [u16; 3], qmax: [u16; 3]) -> (u32, bool) {
-        let Some(by_radius) = self.loose_level(radius) else {
+    fn loose_node(
+        &self,
+        by_radius: Option<u32>,
+        center: Vec3,
+        qmin: [u16; 3],
+        qmax: [u16; 3],
+    ) -> (u32, bool) {
+        let Some(by_radius) = by_radius else {
             return (0, true);
         };
         if !self.bounds.contains_point(center) {
@@ -485,7 +548,7 @@ impl Lattice {
         cell: [u32; 3],
     ) {
         let wrong = "is not in the node placement gives";
-        if at.outside {
+        if at.outside() {
             let left = !self.bounds.contains(aabb);
             assert!(node == 0 && left, "id {id} {wrong}: it overflows the root");
             return;
@@ -527,7 +590,7 @@ impl Lattice {
             .max()
             .unwrap_or(0);
         let reach_fits = |l: u32| reach <= 1 << (self.depth - l);
-        if at.outside {
+        if at.outside() {
             assert_eq!(node, 0, "overflow sphere {id} is not in the root");
             assert!(
                 !fits(0) || !self.bounds.contains_point(c) || !reach_fits(0),

@@ -180,7 +180,7 @@ impl Octree {
     ) -> ControlFlow<()> {
         self.candidates(aabb, |id| {
             if self.box_of(id).overlaps(aabb) {
-                f(self.keys[id as usize])
+                f(self.key_of(id))
             } else {
                 ControlFlow::Continue(())
             }
@@ -209,7 +209,7 @@ impl Octree {
         self.candidates(&Aabb::from_center_radius(center, radius), |id| {
             let (c, r) = self.sphere_of(id);
             if geom::spheres_touch(c, r, center, radius) {
-                f(self.keys[id as usize])
+                f(self.key_of(id))
             } else {
                 ControlFlow::Continue(())
             }
@@ -229,7 +229,7 @@ impl Octree {
         self.ray_ids(origin, dir, max_t, 0.0, |id, limit| {
             let (c, r) = self.sphere_of(id);
             let t = geom::ray_sphere(origin, dir, c, r, limit);
-            hit.offer(self.keys[id as usize], t)
+            hit.offer(self.key_of(id), t)
         });
         hit.best()
     }
@@ -278,7 +278,7 @@ impl Octree {
             |id| {
                 let (c, r) = self.sphere_of(id);
                 if let Some(t) = hit(c, r) {
-                    f(self.keys[id as usize], t);
+                    f(self.key_of(id), t);
                 }
                 ControlFlow::Continue(())
             },
@@ -476,7 +476,7 @@ impl Octree {
         self.ray_ids(origin, dir, max_t, inflate, |id, best| {
             let aabb = self.box_of(id);
             match slab.entry(&SimdBox::new(&aabb), best) {
-                Some(_) => visit(self.keys[id as usize], &aabb),
+                Some(_) => visit(self.key_of(id), &aabb),
                 None => best,
             }
         });
@@ -512,7 +512,7 @@ impl Octree {
         let cube = Aabb::from_center_radius(p, radius);
         self.near_ids(p, radius, |id| {
             if self.box_of(id).overlaps(&cube) {
-                f(self.keys[id as usize])
+                f(self.key_of(id))
             } else {
                 ControlFlow::Continue(())
             }
@@ -539,7 +539,7 @@ impl Octree {
         self.ray_ids(center, dir, max_t, inflate, |id, limit| {
             let (c, r) = self.sphere_of(id);
             let t = geom::sphere_cast_sphere(center, radius, dir, limit, c, r);
-            hit.offer(self.keys[id as usize], t)
+            hit.offer(self.key_of(id), t)
         });
         hit.best()
     }
@@ -567,7 +567,7 @@ impl Octree {
             let _ = self.near_ids(point, reach, |id| {
                 let (c, r) = self.sphere_of(id);
                 let d = geom::point_sphere_distance(point, c, r);
-                out.push((self.keys[id as usize], d));
+                out.push((self.key_of(id), d));
                 ControlFlow::Continue(())
             });
             out.len()

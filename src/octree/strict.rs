@@ -92,7 +92,7 @@ pub(super) struct Parts {
 /// Buffers of the strict pass, reused by every pass; they never shrink.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Scratch {
-    /// By walk position: the sphere's sweep group (see the module docs).
+    /// By sphere id: the sphere's sweep group (see the module docs).
     group: Vec<u8>,
     path: Vec<Level>,
     /// The ancestor copies of every level of the path; `anc[..path.last().cands.1]` is live,
@@ -169,7 +169,7 @@ impl Octree {
             return PassCost::default();
         };
         let d = self.lattice.depth;
-        s.start(hot, node_key, d);
+        s.start(hot, node_key, d, self.objs.len());
         let mut visited = 0;
         for (key, i, j) in runs(node_key) {
             let key = StrictKey(key);
@@ -198,24 +198,23 @@ impl Octree {
 impl Scratch {
     /// Readies the buffers for a pass over `hot`: the sweep groups, the octant buffer and a
     /// path holding only the root.
-    fn start(&mut self, hot: &[Hot], node_key: &[u64], depth: u32) {
-        room_for(&mut self.group, hot.len());
+    fn start(&mut self, hot: &[Hot], node_key: &[u64], depth: u32, ids: usize) {
+        room_for(&mut self.group, ids);
         room_for(&mut self.hot_oct, hot.len());
-        self.group.clear();
+        self.group.resize(ids, 0);
         // Without a branch per axis: bit `a` of `straddles` is set if the sphere straddles
         // the axis-`a` mid plane of its node (`(q ^ q') >> (shift − 1) != 0`, written as
         // `(q ^ q') << 1 >> shift`, and masked off at the deepest level, `shift == 0`, where
         // there is no mid plane), and the group is the lowest set bit, 2 if none.
-        self.group
-            .extend(hot.iter().zip(node_key.iter()).map(|(h, &key)| {
-                let shift = depth - StrictKey(key).level();
-                let deeper = u32::from(shift != 0);
-                let straddles = (0..3).fold(0u32, |m, a| {
-                    let x = u32::from(h.qmin[a] ^ h.qmax[a]);
-                    m | ((u32::from((x << 1) >> shift != 0) & deeper) << a)
-                });
-                (straddles | 4).trailing_zeros() as u8
-            }));
+        for (h, &key) in hot.iter().zip(node_key) {
+            let shift = depth - StrictKey(key).level();
+            let deeper = u32::from(shift != 0);
+            let straddles = (0..3).fold(0u32, |m, a| {
+                let x = u32::from(h.qmin[a] ^ h.qmax[a]);
+                m | ((u32::from((x << 1) >> shift != 0) & deeper) << a)
+            });
+            self.group[h.id as usize] = (straddles | 4).trailing_zeros() as u8;
+        }
         self.hot_oct.resize(hot.len(), 0);
         self.path.clear();
         self.path.push(Level::ROOT);
@@ -312,7 +311,7 @@ fn cross_pairs<F: FnMut(ProxyKey, ProxyKey)>(
         return;
     }
     for axis in 0..3 {
-        let of_axis = |h: &Hot| usize::from(group[h.pos as usize]) == axis;
+        let of_axis = |h: &Hot| usize::from(group[h.id as usize]) == axis;
         sweep::sort_entries_where(&mut sweeps.a, cands, axis, of_axis);
         if !sweeps.a.is_empty() {
             t.sweep_sorted(cands, own, axis, sweeps);

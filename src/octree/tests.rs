@@ -21,11 +21,9 @@ fn sorted_pairs(t: &mut Octree) -> Vec<Pair> {
 }
 
 fn proxies(t: &Octree) -> Vec<Proxy> {
-    t.keys
-        .iter()
-        .filter(|&&k| t.contains(k))
-        .map(|&k| Proxy::new(k, t.aabb(k).unwrap()))
-        .collect()
+    let mut out = Vec::new();
+    t.for_each(|k, b| out.push(Proxy::new(k, b)));
+    out
 }
 
 #[test]

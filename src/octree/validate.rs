@@ -2,7 +2,6 @@
 
 use super::cell::{Cell, level_of};
 use super::{MAX_DEPTH, NONE, Octree};
-use slotmap::Key as _;
 
 impl Octree {
     /// Checks every invariant and panics with a message naming the first one broken: each
@@ -17,7 +16,11 @@ impl Octree {
     pub fn validate(&self) {
         let n = self.objs.len();
         assert_eq!(self.links.len(), n, "links and objects differ in length");
-        assert_eq!(self.keys.len(), n, "keys and objects differ in length");
+        assert_eq!(
+            self.versions.len(),
+            n,
+            "versions and objects differ in length"
+        );
         let live = self.objs.iter().filter(|o| o.node != NONE).count();
         assert_eq!(live, self.live, "live count");
         assert!(
@@ -27,11 +30,11 @@ impl Octree {
         let mut per_level = [0u32; MAX_DEPTH as usize + 1];
         let mut overflow = 0;
         for (id, o) in self.objs.iter().enumerate() {
-            let key = self.keys[id];
             if o.node == NONE {
-                assert!(key.is_null(), "a hole at id {id} keeps a key");
+                assert_eq!(self.versions[id], 0, "a hole at id {id} keeps a key");
                 continue;
             }
+            let key = self.key_of(id as u32);
             assert_eq!(
                 self.id_of(key),
                 Some(id as u32),
@@ -46,16 +49,17 @@ impl Octree {
             );
             self.lattice.check_rule(id, c, r, &at, o.node);
             assert_eq!(
-                o.node, at.node,
+                o.node,
+                at.node(),
                 "id {id} is not in the node placement gives"
             );
             assert_eq!(
                 o.walk_key,
-                self.lattice.walk_key(at.node),
+                self.lattice.walk_key(at.node()) as u32,
                 "stale walk key at id {id}"
             );
-            per_level[level_of(at.node) as usize] += 1;
-            overflow += u32::from(at.outside);
+            per_level[level_of(at.node()) as usize] += 1;
+            overflow += u32::from(at.outside());
         }
         assert_eq!(per_level, self.per_level, "per-level counts disagree");
         assert_eq!(overflow, self.overflow, "overflow count disagrees");

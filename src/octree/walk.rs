@@ -30,7 +30,7 @@ pub(super) const SHORT_CROSS: usize = 1024;
 /// of the other side then costs at most this many tests, less than its share of a sort.
 pub(super) const SHORT_SIDE: usize = 4;
 
-/// A sphere as the passes read it: box, integer cell range and walk position. 48 bytes.
+/// A sphere as the passes read it: box, integer cell range and id. 48 bytes.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Hot {
     /// `center ± radius`. 32 bytes.
@@ -38,8 +38,8 @@ pub(super) struct Hot {
     /// Range on the integer lattice, clamped to the lattice. 12 bytes.
     pub(super) qmin: [u16; 3],
     pub(super) qmax: [u16; 3],
-    /// Position in walk order (index of `Scratch::keys`). 4 bytes.
-    pub(super) pos: u32,
+    /// The sphere's id (its key is the tree's `key_of(id)`). 4 bytes.
+    pub(super) id: u32,
 }
 const _: () = assert!(core::mem::size_of::<Hot>() == 48);
 
@@ -49,7 +49,7 @@ impl Hot {
         bx: SimdBox::EMPTY,
         qmin: [0; 3],
         qmax: [0; 3],
-        pos: 0,
+        id: 0,
     };
 
     #[inline]
@@ -83,12 +83,9 @@ pub(super) struct Scratch {
     wide: Vec<(u64, u32)>,
     wide_tmp: Vec<(u64, u32)>,
     counts: Vec<u32>,
-    /// By sphere id: its position in walk order.
-    rank: Vec<u32>,
-    /// Walk-ordered copies: hot data, walk key and proxy key of each sphere.
+    /// Walk-ordered copies: hot data and walk key of each sphere.
     pub(super) hot: Vec<Hot>,
     pub(super) node_key: Vec<u64>,
-    pub(super) keys: Vec<ProxyKey>,
     pub(super) sweeps: Sweeps,
     /// The parallel sort's buffers (see [`Octree::sort_into_walk_order_par`]).
     #[cfg(feature = "parallel")]
@@ -150,16 +147,15 @@ impl Scratch {
             counts: &mut self.counts,
         }
     }
-
     /// Heap bytes held (capacities).
     pub(super) fn heap_bytes(&self) -> usize {
         use core::mem::size_of_val;
         let v = |n: usize, one: usize| n * one;
         v(self.items.capacity(), 8)
             + v(self.wide.capacity() + self.wide_tmp.capacity(), 16)
-            + v(self.counts.capacity() + self.rank.capacity(), 4)
+            + v(self.counts.capacity(), 4)
             + v(self.hot.capacity(), size_of_val(&Hot::EMPTY))
-            + v(self.node_key.capacity() + self.keys.capacity(), 8)
+            + v(self.node_key.capacity(), 8)
             + v(self.sweeps.a.capacity() + self.sweeps.b.capacity(), 8)
             + self.par_heap_bytes()
     }
@@ -195,9 +191,10 @@ pub(super) struct Walk<'a, F> {
     pub(super) sweeps: &'a mut Sweeps,
 }
 
-/// Runs and counts the box tests of one pass, mapping walk positions to proxy keys.
+/// Runs and counts the box tests of one pass, mapping ids to proxy keys.
 pub(super) struct Tester<'a, F> {
-    pub(super) keys: &'a [ProxyKey],
+    /// The tree's key versions by id.
+    pub(super) versions: &'a [u32],
     pub(super) tests: u64,
     pub(super) emit: F,
 }
@@ -221,7 +218,10 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
     /// Emits a pair known to overlap.
     #[inline]
     pub(super) fn emit(&mut self, a: &Hot, b: &Hot) {
-        (self.emit)(self.keys[a.pos as usize], self.keys[b.pos as usize]);
+        (self.emit)(
+            super::key_at(self.versions, a.id),
+            super::key_at(self.versions, b.id),
+        );
     }
 
     /// Every pair within `list`: all against all when short, else a sweep along x.
@@ -283,7 +283,7 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
 impl Octree {
     /// Sorts the spheres into walk order in `s` and returns a pass's view of it, with a tester
     /// that hands the overlapping pairs to `emit`; `None` for an empty tree.
-    pub(super) fn begin_pass<'a, F>(&self, s: &'a mut Scratch, emit: F) -> Option<Walk<'a, F>> {
+    pub(super) fn begin_pass<'a, F>(&'a self, s: &'a mut Scratch, emit: F) -> Option<Walk<'a, F>> {
         if self.objs.is_empty() {
             return None;
         }
@@ -292,7 +292,7 @@ impl Octree {
             hot: &s.hot,
             node_key: &s.node_key,
             t: Tester {
-                keys: &s.keys,
+                versions: &self.versions,
                 tests: 0,
                 emit,
             },
@@ -300,8 +300,8 @@ impl Octree {
         })
     }
 
-    /// Sorts the spheres by walk key and fills the walk-ordered arrays of `s`: box and cell
-    /// range, walk key and proxy key.
+    /// Sorts the spheres by walk key and fills the walk-ordered arrays of `s`: box, cell
+    /// range and id, and walk key.
     fn sort_into_walk_order(&self, s: &mut Scratch) {
         let Scratch {
             items,
@@ -310,17 +310,14 @@ impl Octree {
             counts,
             hot,
             node_key,
-            keys,
-            rank,
             ..
         } = s;
         let key_bits = walk_key_bits(self.lattice.depth);
         // Every buffer sized by the sphere count grows by `room_for`, not by doubling.
         let n = self.live;
-        room_for(node_key, n);
+        // `node_key` first maps ids to walk positions (see `scatter`).
+        room_for(node_key, self.objs.len());
         room_for(hot, n);
-        room_for(keys, n);
-        room_for(rank, self.objs.len());
         if key_bits <= 32 {
             room_for(items, n);
             items.clear();
@@ -329,16 +326,10 @@ impl Octree {
                     .iter()
                     .enumerate()
                     .filter(|(_, o)| o.node != NONE)
-                    .map(|(id, o)| (o.walk_key << 32) | id as u64),
+                    .map(|(id, o)| (u64::from(o.walk_key) << 32) | id as u64),
             );
             sort_bits(items, node_key, counts, 32, key_bits);
-            self.scatter(
-                items.iter().map(|&x| (x >> 32, x as u32)),
-                rank,
-                hot,
-                node_key,
-                keys,
-            );
+            self.scatter(items.iter().map(|&x| (x >> 32, x as u32)), hot, node_key);
         } else {
             room_for(wide, n);
             wide.clear();
@@ -347,39 +338,36 @@ impl Octree {
                     .iter()
                     .enumerate()
                     .filter(|(_, o)| o.node != NONE)
-                    .map(|(id, o)| (o.walk_key, id as u32)),
+                    .map(|(id, o)| (self.lattice.walk_key(o.node), id as u32)),
             );
             // Ids are unique and listed in increasing order, so the stable sort by walk key
             // alone gives the `(walk key, id)` order.
             sort_bits_by(wide, wide_tmp, counts, |&(key, _)| key, 0, key_bits);
-            self.scatter(wide.iter().copied(), rank, hot, node_key, keys);
+            self.scatter(wide.iter().copied(), hot, node_key);
         }
     }
 
     /// Fills the walk-ordered copies from the sorted `(walk key, id)` sequence. Each sphere's
-    /// walk position is noted by id first; then one pass reads the spheres in id order, as
-    /// they lie in memory, and stores each at its position: stores to scattered places do not
-    /// stall the loop the way loads from them would.
+    /// walk position is noted by id first (in `node_key`, free until its keys are written
+    /// last); then one pass reads the spheres in id order, as they lie in memory, and stores
+    /// each at its position: stores to scattered places do not stall the loop the way loads
+    /// from them would.
     fn scatter(
         &self,
         order: impl Iterator<Item = (u64, u32)> + Clone,
-        rank: &mut Vec<u32>,
         hot: &mut Vec<Hot>,
         node_key: &mut Vec<u64>,
-        keys: &mut Vec<ProxyKey>,
     ) {
         let n = self.live;
-        node_key.clear();
-        node_key.extend(order.clone().map(|(key, _)| key));
+        let rank = node_key;
         rank.resize(self.objs.len(), 0);
-        for (pos, (_, id)) in order.enumerate() {
-            rank[id as usize] = pos as u32;
+        for (pos, (_, id)) in order.clone().enumerate() {
+            rank[id as usize] = pos as u64;
         }
         // `rank` maps the live ids onto `0..n`: every entry below is overwritten, so the
         // buffers only change length when the sphere count does.
         hot.resize(n, Hot::EMPTY);
-        keys.resize(n, ProxyKey::default());
-        for ((o, &key), &pos) in self.objs.iter().zip(&self.keys).zip(rank.iter()) {
+        for (id, (o, &pos)) in self.objs.iter().zip(rank.iter()).enumerate() {
             if o.node == NONE {
                 continue;
             }
@@ -387,10 +375,12 @@ impl Octree {
                 bx: o.simd_box(),
                 qmin: o.qmin,
                 qmax: o.qmax,
-                pos,
+                id: id as u32,
             };
-            keys[pos as usize] = key;
         }
+        let node_key = rank;
+        node_key.clear();
+        node_key.extend(order.map(|(key, _)| key));
     }
 }
 
@@ -422,7 +412,6 @@ impl Octree {
             items,
             hot,
             node_key,
-            keys,
             par,
             ..
         } = s;
@@ -433,7 +422,7 @@ impl Octree {
             objs.iter()
                 .step_by(stride)
                 .filter(|o| o.node != NONE)
-                .map(|o| o.walk_key),
+                .map(|o| u64::from(o.walk_key)),
         );
         if par.sample.is_empty() {
             self.sort_into_walk_order(s);
@@ -468,9 +457,10 @@ impl Octree {
                         // Counted without a branch: there are at most `MAX_PARTS − 1`.
                         let p: usize = splitters
                             .iter()
-                            .map(|&x| usize::from(x <= o.walk_key))
+                            .map(|&x| usize::from(x <= u64::from(o.walk_key)))
                             .sum();
-                        buckets[p].push((o.walk_key << 32) | (c * range + i) as u64);
+                        let key = u64::from(o.walk_key);
+                        buckets[p].push((key << 32) | (c * range + i) as u64);
                     }
                 }
                 buckets.iter_mut().for_each(ahead);
@@ -487,11 +477,9 @@ impl Octree {
         room_for(items, n);
         room_for(hot, n);
         room_for(node_key, n);
-        room_for(keys, n);
         items.resize(n, 0);
         hot.resize(n, Hot::EMPTY);
         node_key.resize(n, 0);
-        keys.resize(n, ProxyKey::default());
         if par.parts.len() < np {
             par.parts.resize_with(np, PartSort::default);
         }
@@ -501,7 +489,7 @@ impl Octree {
             bounds: &par.bounds,
             key_bits,
         };
-        job.fill(0, &mut par.parts[..np], items, hot, node_key, keys);
+        job.fill(0, &mut par.parts[..np], items, hot, node_key);
     }
 }
 
@@ -517,7 +505,7 @@ struct Parts<'a> {
 #[cfg(feature = "parallel")]
 impl Parts<'_> {
     /// Fills the walk-ordered copies of parts `first..first + parts.len()`, whose positions
-    /// `items`, `hot`, `node_key` and `keys` are, halving the parts between two tasks until
+    /// `items`, `hot` and `node_key` are, halving the parts between two tasks until
     /// one is left.
     fn fill(
         &self,
@@ -526,10 +514,9 @@ impl Parts<'_> {
         items: &mut [u64],
         hot: &mut [Hot],
         node_key: &mut [u64],
-        keys: &mut [ProxyKey],
     ) {
         if let [part] = parts {
-            self.fill_one(first, part, items, hot, node_key, keys);
+            self.fill_one(first, part, items, hot, node_key);
             return;
         }
         let mid = parts.len() / 2;
@@ -538,10 +525,9 @@ impl Parts<'_> {
         let (ia, ib) = items.split_at_mut(at);
         let (ha, hb) = hot.split_at_mut(at);
         let (na, nb) = node_key.split_at_mut(at);
-        let (ka, kb) = keys.split_at_mut(at);
         rayon::join(
-            || self.fill(first, pa, ia, ha, na, ka),
-            || self.fill(first + mid, pb, ib, hb, nb, kb),
+            || self.fill(first, pa, ia, ha, na),
+            || self.fill(first + mid, pb, ib, hb, nb),
         );
     }
 
@@ -557,10 +543,8 @@ impl Parts<'_> {
         items: &mut [u64],
         hot: &mut [Hot],
         node_key: &mut [u64],
-        keys: &mut [ProxyKey],
     ) {
         let np = self.bounds.len() - 1;
-        let base = self.bounds[p];
         let mut at = 0;
         for listed in self.buckets.iter().skip(p).step_by(np) {
             items[at..at + listed.len()].copy_from_slice(listed);
@@ -580,9 +564,8 @@ impl Parts<'_> {
                 bx: o.simd_box(),
                 qmin: o.qmin,
                 qmax: o.qmax,
-                pos: base + j as u32,
+                id: id as u32,
             };
-            keys[j] = tree.keys[id];
         }
     }
 }
