@@ -10,8 +10,9 @@
 //! `2·drift < m` needs no test: each side moved less than half the pair's slack, so the
 //! status at the anchors, which the candidate records, is the status now.
 //!
-//! A step (see [`BroadPhase::classify`]) makes *loud* every proxy that escaped its fat box,
-//! was inserted, was marked *pending* by the last step, or moved with `2·drift ≥ m`: a loud
+//! A step makes *loud* every proxy that moved with `2·drift ≥ m` (as its update is applied:
+//! [`settle`], or the apply's walk over the stale spheres), and every one that escaped its fat
+//! box, was inserted or was marked *pending* by the last step ([`BroadPhase::classify`]): a loud
 //! proxy is re-anchored at its exact box and all its candidates are re-tested
 //! ([`BroadPhase::update_candidates`], which finds them through the sorted candidate list and
 //! its reverse index, without looking at the others). Each re-tested pair lowers both sides' `m`
