@@ -28,7 +28,7 @@
 //! the last step left them.
 
 use super::store::flag;
-use super::{BroadPhase, Shape, fat};
+use super::{BroadPhase, Shape, fat, slack};
 use crate::radix::sort_bits_by;
 
 /// The stale slots are applied by walking every slot's flags once at least one slot in this
@@ -64,6 +64,9 @@ impl BroadPhase {
         if self.stale >= slots / DENSE_FRACTION {
             // Most slots are stale: one streaming walk over the flags is cheaper than sorting
             // the mover list (whose order then stays the caller's).
+            if self.cached && self.apply_spheres_fat(true) == 0 {
+                return;
+            }
             for s in 0..slots {
                 let f = &mut self.store.flags[s];
                 if *f & flag::STALE != 0 {
@@ -83,6 +86,9 @@ impl BroadPhase {
                     bits,
                 );
             }
+            if self.cached && self.apply_spheres_fat(false) == 0 {
+                return;
+            }
             for i in 0..self.movers.len() {
                 let slot = self.movers[i];
                 let f = &mut self.store.flags[slot as usize];
@@ -100,7 +106,6 @@ impl BroadPhase {
     #[inline(always)]
     fn apply(&mut self, slot: u32) {
         let s = slot as usize;
-        let key = self.store.key(slot);
         match self.store.shape[s] {
             Shape::Sphere { center, radius } => {
                 let grown = fat::grown_sphere(center, radius, self.config.margin);
@@ -109,6 +114,7 @@ impl BroadPhase {
                 if self.cached {
                     self.refresh_fat(slot, &grown.aabb);
                 } else {
+                    let key = self.store.key(slot);
                     self.octree.update_live(key, center, grown.radius);
                 }
             }
@@ -119,11 +125,36 @@ impl BroadPhase {
                 if self.cached {
                     self.refresh_fat(slot, &exact);
                 } else {
+                    let key = self.store.key(slot);
                     let placed = self.tree_mut(kind).update_box_deferred(key, &exact);
                     debug_assert!(placed.is_ok(), "a live body missing from its BVH");
                 }
             }
         }
+    }
+
+    /// The walk over the stale spheres in the incremental regime (every slot with `dense`, else
+    /// the sorted movers), in one pass over the per-slot arrays: each gets its exact box and
+    /// motion, and either still lies in its fat box, where it is classified quiet or loud at
+    /// once (see [`super::slack`]), or escaped, and is listed to get its new fat box after the
+    /// walk, in slot order. Returns how many stale slots it left for [`BroadPhase::apply`]: the
+    /// bodies, and the spheres already listed as escaped (inserted or regrouped since the last
+    /// step).
+    fn apply_spheres_fat(&mut self, dense: bool) -> usize {
+        let (margin, now) = (self.config.margin, self.now);
+        let first_escape = self.escaped.len();
+        let (st, loud, escaped) = (&mut self.store, &mut self.loud, &mut self.escaped);
+        // The fast movers are not counted: only the estimate outside the regime reads them.
+        let rest = if dense {
+            fat_walk(0..st.slots(), st, loud, escaped, margin, now)
+        } else {
+            let movers = self.movers.iter().map(|&m| m as usize);
+            fat_walk(movers, st, loud, escaped, margin, now)
+        };
+        for i in first_escape..self.escaped.len() {
+            self.hold(self.escaped[i], true);
+        }
+        rest
     }
 
     /// The dense walk with its spheres' share split over rayon's current pool, outside the
@@ -231,4 +262,58 @@ impl BroadPhase {
         }
         core::ops::ControlFlow::Continue(())
     }
+}
+
+/// [`BroadPhase::apply_spheres_fat`]'s walk over `slots`: returns how many it left for
+/// [`BroadPhase::apply`]. Inlined into each caller, so that the dense walk over `0..slots`
+/// needs no bounds checks on the cut slices.
+#[inline(always)]
+fn fat_walk(
+    slots: impl Iterator<Item = usize>,
+    st: &mut super::store::Store,
+    loud: &mut Vec<u32>,
+    escaped: &mut Vec<u32>,
+    margin: f32,
+    now: u32,
+) -> usize {
+    let n = st.slots();
+    let (flags, shape) = (&mut st.flags[..n], &st.shape[..n]);
+    let (exact, speed, stamp) = (&mut st.exact[..n], &mut st.speed[..n], &mut st.stamp[..n]);
+    let (held, anchor) = (&st.held[..n], &mut st.anchor[..n]);
+    let (slk, drift) = (&mut st.slack[..n], &mut st.drift[..n]);
+    let mut rest = 0;
+    for s in slots {
+        let f = flags[s];
+        if f & flag::STALE == 0 {
+            continue;
+        }
+        let Shape::Sphere { center, radius } = shape[s] else {
+            rest += 1;
+            continue;
+        };
+        if f & flag::ESCAPED != 0 {
+            // Inserted or regrouped since the last step: already listed as escaped.
+            rest += 1;
+            continue;
+        }
+        let new = fat::grown_sphere(center, radius, margin).aabb;
+        let v = fat::speed(&exact[s], &new, stamp[s], now);
+        (exact[s], speed[s], stamp[s]) = (new, v, now);
+        if !held[s].contains(&new) {
+            flags[s] = f & !flag::STALE | flag::ESCAPED;
+            escaped.push(s as u32);
+            continue;
+        }
+        // Still in its fat box: quiet or loud (see `slack::settle`; nothing is loud yet).
+        let d = slack::drift(&new, &anchor[s]);
+        if slack::quiet(d, slk[s]) {
+            flags[s] = f & !flag::STALE;
+            drift[s] = d;
+        } else {
+            flags[s] = f & !flag::STALE | flag::LOUD;
+            loud.push(s as u32);
+            (anchor[s], slk[s], drift[s]) = (new, f32::MAX, 0.0);
+        }
+    }
+    rest
 }

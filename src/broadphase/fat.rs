@@ -41,16 +41,22 @@ fn jitter(slot: u32, now: u32) -> f32 {
 /// ([`outgrows_min_margin`]).
 #[inline(always)]
 pub(super) fn motion(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> (f32, bool) {
+    let speed = speed(old, new, stamp, now);
+    (
+        speed,
+        outgrows_min_margin(speed, new.extent().max_element()),
+    )
+}
+
+/// The speed of [`motion`] alone.
+#[inline(always)]
+pub(super) fn speed(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> f32 {
     let moved = ((new.min + new.max) - (old.min + old.max))
         .abs()
         .max_element()
         * 0.5;
     let steps = now.wrapping_sub(stamp).max(1);
-    let speed = moved / steps as f32;
-    (
-        speed,
-        outgrows_min_margin(speed, new.extent().max_element()),
-    )
+    moved / steps as f32
 }
 
 /// True if a box of largest extent `size` moving `speed` per step gets a margin above the
@@ -71,12 +77,14 @@ impl BroadPhase {
         self.store.stamp[s] = self.now;
     }
 
-    /// In the incremental regime: keeps the fat box if it still holds `exact`, else gives the
-    /// slot a new one, which its structure holds from now on.
+    /// In the incremental regime: keeps the fat box if it still holds `exact` (and classifies
+    /// the slot quiet or loud, see [`super::slack::settle`]), else gives the slot a new one,
+    /// which its structure holds from now on.
     #[inline]
     pub(super) fn refresh_fat(&mut self, slot: u32, exact: &SimdBox) {
         if self.store.held[slot as usize].contains(exact) {
             self.mark(slot, flag::MOVED);
+            super::slack::settle(&mut self.store, &mut self.loud, slot);
         } else {
             self.hold(slot, true);
             self.mark(slot, flag::MOVED | flag::ESCAPED);

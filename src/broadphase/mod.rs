@@ -217,10 +217,10 @@ pub struct BroadPhase {
     fast_movers: usize,
     /// Candidate pairs (packed slot pairs, `HIT` set if their exact boxes overlapped at the
     /// last step), sorted.
-    cand: Vec<u64>,
+    cand: slack::Gapped<u64>,
     /// The candidates' reverse index: `(higher slot, lower slot)` of each, sorted, so that a
     /// proxy's lower partners are found without a scan.
-    rev: Vec<u64>,
+    rev: slack::Gapped<u64>,
     /// The incremental pass's list patches.
     patch: slack::Patch,
     /// This step's pairs and the previous step's, packed, sorted.
@@ -231,8 +231,8 @@ pub struct BroadPhase {
     sort_buf: Vec<u64>,
     added_packed: Vec<u64>,
     removed_packed: Vec<u64>,
-    /// The lists handed out by `step`.
-    pairs: Vec<Pair>,
+    /// The lists handed out by `step` (the pair list behind a gap, see [`slack::Gapped`]).
+    pairs: slack::Gapped<Pair>,
     added: Vec<Pair>,
     removed: Vec<Pair>,
     /// Steps taken: the clock of the per-proxy speed estimates.
@@ -307,8 +307,8 @@ impl BroadPhase {
             pending: Vec::new(),
             removals: 0,
             fast_movers: 0,
-            cand: Vec::new(),
-            rev: Vec::new(),
+            cand: slack::Gapped::default(),
+            rev: slack::Gapped::default(),
             patch: slack::Patch::default(),
             packed: Vec::new(),
             prev_packed: Vec::new(),
@@ -316,7 +316,7 @@ impl BroadPhase {
             sort_buf: Vec::new(),
             added_packed: Vec::new(),
             removed_packed: Vec::new(),
-            pairs: Vec::new(),
+            pairs: slack::Gapped::default(),
             added: Vec::new(),
             removed: Vec::new(),
             now: 0,

@@ -10,8 +10,9 @@
 //! `2·drift < m` needs no test: each side moved less than half the pair's slack, so the
 //! status at the anchors, which the candidate records, is the status now.
 //!
-//! A step (see [`BroadPhase::classify`]) makes *loud* every proxy that escaped its fat box,
-//! was inserted, was marked *pending* by the last step, or moved with `2·drift ≥ m`: a loud
+//! A step makes *loud* every proxy that moved with `2·drift ≥ m` (as its update is applied:
+//! [`settle`], or the apply's walk over the stale spheres), and every one that escaped its fat
+//! box, was inserted or was marked *pending* by the last step ([`BroadPhase::classify`]): a loud
 //! proxy is re-anchored at its exact box and all its candidates are re-tested
 //! ([`BroadPhase::update_candidates`], which finds them through the sorted candidate list and
 //! its reverse index, without looking at the others). Each re-tested pair lowers both sides' `m`
@@ -24,21 +25,28 @@
 //! re-tested whenever either side moves.
 //!
 //! The same pass keeps the lists exact in place: the candidates (minus those of escaped or
-//! removed proxies, plus the escaped proxies' new ones) and their reverse index, the sorted
-//! pair list and the key pair list are patched by position ([`patch`]) with the few pairs that
-//! started or stopped overlapping, which are the step's `added` and `removed`.
+//! removed proxies, plus the escaped proxies' new ones), their reverse index and the key pair
+//! list are patched by position ([`Gapped::patch`]) with the few pairs that started or stopped
+//! overlapping, which are the step's `added` and `removed`. The packed pair list, which the
+//! candidates marked overlapping and the key pairs both hold, is not kept in this regime: a
+//! full pass rebuilds it from the key pairs when it needs the previous step's.
 
 use super::BroadPhase;
 use super::step::{HIT, unpack};
 use super::store::{Store, flag};
 use crate::geom::SimdBox;
-use crate::radix::{PairBits, sort_u64};
+use crate::radix::{PairBits, sort_bits_by, sort_u64};
 use glam::Vec3A;
 
 /// Finding one proxy's candidates through the sorted list and the reverse index (a few
 /// binary searches, each a chain of cache misses) costs about as much as scanning this many
 /// candidates for a loud or removed side: past that many proxies to visit, the step scans.
 const CANDIDATES_PER_LOOKUP: usize = 100;
+
+/// The candidates to visit and the reverse entries that change are sorted by a radix sort
+/// from this many on, by the standard library's sort below it (whose cost per item is
+/// higher, but which has no fixed cost).
+const RADIX_FROM: usize = 2048;
 
 /// `1 + 2⁻²²`: a product with it rounds a positive normal `f32` up by at least one ulp.
 const ROUND_UP: f32 = 1.0 + 1.0 / (1u32 << 22) as f32;
@@ -78,7 +86,7 @@ pub(super) fn slack(a: &SimdBox, b: &SimdBox) -> f32 {
 /// True if a proxy that drifted `d` from its anchor, with least candidate slack `m`, keeps
 /// every candidate's status: it has not moved, or it moved less than half of `m`.
 #[inline]
-fn quiet(d: f32, m: f32) -> bool {
+pub(super) fn quiet(d: f32, m: f32) -> bool {
     d == 0.0 || d + d < m
 }
 
@@ -88,6 +96,9 @@ fn quiet(d: f32, m: f32) -> bool {
 pub(super) struct Patch {
     /// Indices of the candidates to visit, ascending.
     touched: Vec<u32>,
+    /// The radix sort's second buffer for `touched`, and its counters.
+    touched_tmp: Vec<u32>,
+    counts: Vec<u32>,
     /// Indices of the candidates dropped, ascending.
     cand_gone: Vec<u32>,
     /// The new candidates, each with the index of the old list it goes before.
@@ -99,20 +110,23 @@ pub(super) struct Patch {
     /// The reverse entries of the new candidates, with where they go.
     rev_at: Vec<u32>,
     rev_new: Vec<u64>,
+    /// The radix sort's second buffer for `rev_keys` and `rev_new`.
+    keys_tmp: Vec<u64>,
     /// Indices of the pairs that stopped overlapping, in the old pair list, ascending.
     pairs_gone: Vec<u32>,
     /// Where each pair that started overlapping goes in the old pair list.
     pairs_at: Vec<u32>,
-    /// [`patch`]'s runs.
-    runs: Vec<Run>,
+    /// [`patch_in`]'s scratch.
+    scratch: Scratch,
 }
 
 impl Patch {
     /// Every list: the index lists and the key lists.
-    fn lists(&mut self) -> ([&mut Vec<u32>; 7], [&mut Vec<u64>; 3]) {
+    fn lists(&mut self) -> ([&mut Vec<u32>; 8], [&mut Vec<u64>; 4]) {
         (
             [
                 &mut self.touched,
+                &mut self.touched_tmp,
                 &mut self.cand_gone,
                 &mut self.cand_at,
                 &mut self.rev_gone,
@@ -120,7 +134,12 @@ impl Patch {
                 &mut self.pairs_gone,
                 &mut self.pairs_at,
             ],
-            [&mut self.cand_new, &mut self.rev_keys, &mut self.rev_new],
+            [
+                &mut self.cand_new,
+                &mut self.rev_keys,
+                &mut self.rev_new,
+                &mut self.keys_tmp,
+            ],
         )
     }
 
@@ -143,11 +162,15 @@ impl Patch {
         let (index, keys) = self.lists();
         index.into_iter().for_each(|v| grow(v, floor));
         keys.into_iter().for_each(|v| grow(v, floor));
+        crate::radix::ahead(&mut self.scratch.runs);
+        crate::radix::ahead(&mut self.scratch.per_shift);
     }
 
     /// Heap bytes held (capacities).
     pub(super) fn heap_bytes(&self) -> usize {
         (self.touched.capacity()
+            + self.touched_tmp.capacity()
+            + self.counts.capacity()
             + self.cand_gone.capacity()
             + self.cand_at.capacity()
             + self.rev_gone.capacity()
@@ -155,8 +178,13 @@ impl Patch {
             + self.pairs_gone.capacity()
             + self.pairs_at.capacity())
             * 4
-            + (self.cand_new.capacity() + self.rev_keys.capacity() + self.rev_new.capacity()) * 8
-            + self.runs.capacity() * core::mem::size_of::<Run>()
+            + (self.cand_new.capacity()
+                + self.rev_keys.capacity()
+                + self.rev_new.capacity()
+                + self.keys_tmp.capacity())
+                * 8
+            + self.scratch.runs.capacity() * core::mem::size_of::<Run>()
+            + self.scratch.per_shift.capacity() * 4
     }
 }
 
@@ -167,9 +195,10 @@ fn reverse(a: usize, b: usize) -> u64 {
 }
 
 impl BroadPhase {
-    /// Makes loud every proxy that must re-test its candidates this step: the pending ones,
-    /// the escaped (and inserted) ones, and the movers that drifted half their slack. A loud
-    /// proxy is re-anchored at its exact box; a quiet mover records its drift.
+    /// Makes loud every proxy that must re-test its candidates this step: the pending ones and
+    /// the escaped (and inserted) ones; the movers that drifted half their slack were made loud
+    /// as their updates were applied ([`settle`]). A loud proxy is re-anchored at its exact
+    /// box.
     pub(super) fn classify(&mut self) {
         let (st, loud) = (&mut self.store, &mut self.loud);
         for &p in &self.pending {
@@ -180,17 +209,11 @@ impl BroadPhase {
             }
         }
         self.pending.clear();
-        for &m in &self.movers {
-            let s = m as usize;
-            let f = st.flags[s];
-            if f & (flag::GONE | flag::LOUD) != 0 {
-                continue;
-            }
-            let d = drift(&st.exact[s], &st.anchor[s]);
-            if f & flag::ESCAPED == 0 && quiet(d, st.slack[s]) {
-                st.drift[s] = d;
-            } else {
-                make_loud(st, loud, m);
+        // The movers that stayed in their fat boxes were classified as their updates were
+        // applied ([`settle`]); every other mover escaped (or was inserted, or changed groups).
+        for &e in &self.escaped {
+            if st.flags[e as usize] & (flag::GONE | flag::LOUD) == 0 {
+                make_loud(st, loud, e);
             }
         }
     }
@@ -205,19 +228,19 @@ impl BroadPhase {
             st.slack[s] = f32::MAX;
             st.drift[s] = 0.0;
         }
-        self.rev.clear();
-        for &c in &self.cand {
+        // The reverse entries are sorted in `fresh` (the pass is done with it), then copied.
+        let rev = &mut self.fresh;
+        rev.clear();
+        for &c in self.cand.iter() {
             let (a, b) = unpack(c & !HIT);
             let s = slack(&st.exact[a], &st.exact[b]);
             st.slack[a] = st.slack[a].min(s);
             st.slack[b] = st.slack[b].min(s);
-            self.rev.push(reverse(a, b));
+            rev.push(reverse(a, b));
         }
-        sort_u64(
-            &mut self.rev,
-            &mut self.sort_buf,
-            PairBits::for_slots(st.slots()),
-        );
+        sort_u64(rev, &mut self.sort_buf, PairBits::for_slots(st.slots()));
+        self.rev
+            .refill(rev.len(), 0, |list| list.extend_from_slice(rev));
         self.clear_pending();
     }
 
@@ -239,7 +262,7 @@ impl BroadPhase {
     pub(super) fn update_candidates(&mut self) {
         let p = &mut self.patch;
         p.clear();
-        let (cand, rev) = (&self.cand, &self.rev);
+        let (cand, rev) = (&self.cand[..], &self.rev[..]);
         let visits = self.loud.len() + self.store.freed().len();
         if visits * CANDIDATES_PER_LOOKUP < cand.len() {
             let key_at = |i: usize| cand[i] & !HIT;
@@ -260,7 +283,23 @@ impl BroadPhase {
                     r += 1;
                 }
             }
+            // A pair of two loud sides is listed twice.
+            if p.touched.len() < RADIX_FROM {
+                p.touched.sort_unstable();
+            } else {
+                let bits = u32::BITS - (cand.len() as u32).leading_zeros();
+                sort_bits_by(
+                    &mut p.touched,
+                    &mut p.touched_tmp,
+                    &mut p.counts,
+                    |&i| u64::from(i),
+                    0,
+                    bits,
+                );
+            }
+            p.touched.dedup();
         } else {
+            // In the candidates' order, each once.
             let flags = &self.store.flags;
             for (i, &c) in cand.iter().enumerate() {
                 let (a, b) = unpack(c);
@@ -269,8 +308,6 @@ impl BroadPhase {
                 }
             }
         }
-        p.touched.sort_unstable();
-        p.touched.dedup();
 
         let st = &mut self.store;
         let (flags, exact, anchor) = (&mut st.flags, &st.exact, &st.anchor);
@@ -295,7 +332,7 @@ impl BroadPhase {
             exact[a].overlaps(&exact[b])
         };
         let fresh = &self.fresh;
-        let cand = &mut self.cand;
+        let cand: &mut [u64] = &mut self.cand;
         let mut j = 0;
         // A new candidate: tested, and inserted where it sorts.
         fn insert(
@@ -357,7 +394,8 @@ impl BroadPhase {
 
         // The reverse index: a dropped candidate's entry goes, a new one's comes.
         let rev = &mut self.rev;
-        p.rev_keys.sort_unstable();
+        let layout = PairBits::for_slots(self.store.slots());
+        sort_keys(&mut p.rev_keys, &mut p.keys_tmp, layout);
         for &e in &p.rev_keys {
             p.rev_gone.push(rev.partition_point(|&r| r < e) as u32);
         }
@@ -365,35 +403,55 @@ impl BroadPhase {
             let (a, b) = unpack(c & !HIT);
             p.rev_new.push(reverse(a, b));
         }
-        p.rev_new.sort_unstable();
+        sort_keys(&mut p.rev_new, &mut p.keys_tmp, layout);
         for &e in &p.rev_new {
             p.rev_at.push(rev.partition_point(|&r| r < e) as u32);
         }
-        patch(rev, &p.rev_gone, &p.rev_at, &p.rev_new, &mut p.runs);
-        patch(cand, &p.cand_gone, &p.cand_at, &p.cand_new, &mut p.runs);
+        rev.patch(&p.rev_gone, &p.rev_at, &p.rev_new, &mut p.scratch);
+        self.cand
+            .patch(&p.cand_gone, &p.cand_at, &p.cand_new, &mut p.scratch);
 
-        // The pair list and the key pairs: the changed pairs' places in the old list.
-        let packed = &mut self.packed;
-        for &k in removed.iter() {
-            p.pairs_gone.push(packed.partition_point(|&q| q < k) as u32);
-        }
-        for &k in added.iter() {
-            p.pairs_at.push(packed.partition_point(|&q| q < k) as u32);
-        }
-        patch(packed, &p.pairs_gone, &p.pairs_at, added, &mut p.runs);
+        // The key pairs: the changed pairs' places in the old list, which is in the packed
+        // pairs' order. The packed pair list is not kept in this regime (see
+        // [`BroadPhase::packed_from_pairs`]).
+        let pairs = &self.pairs;
+        let at = |k: u64| pairs.partition_point(|q| super::step::pack_pair(q) < k) as u32;
+        p.pairs_gone.extend(removed.iter().map(|&k| at(k)));
+        p.pairs_at.extend(added.iter().map(|&k| at(k)));
         let store = &self.store;
         let to_pair = |&q: &u64| super::step::key_pair(store, q);
         self.added.clear();
         self.added.extend(self.added_packed.iter().map(to_pair));
         self.removed.clear();
         self.removed.extend(self.removed_packed.iter().map(to_pair));
-        patch(
-            &mut self.pairs,
-            &p.pairs_gone,
-            &p.pairs_at,
-            &self.added,
-            &mut p.runs,
-        );
+        self.pairs
+            .patch(&p.pairs_gone, &p.pairs_at, &self.added, &mut p.scratch);
+    }
+}
+
+/// Classifies the mover `slot`, whose new exact box still lies in its fat box: quiet (its
+/// drift recorded) while it drifted less than half its slack, else loud.
+#[inline]
+pub(super) fn settle(st: &mut Store, loud: &mut Vec<u32>, slot: u32) {
+    let s = slot as usize;
+    if st.flags[s] & flag::LOUD != 0 {
+        return;
+    }
+    let d = drift(&st.exact[s], &st.anchor[s]);
+    if quiet(d, st.slack[s]) {
+        st.drift[s] = d;
+    } else {
+        make_loud(st, loud, slot);
+    }
+}
+
+/// Sorts packed pairs: by the standard library's sort below [`RADIX_FROM`], by the radix
+/// sort from there (`tmp` its second buffer, which may trade places with `keys`).
+fn sort_keys(keys: &mut Vec<u64>, tmp: &mut Vec<u64>, layout: PairBits) {
+    if keys.len() < RADIX_FROM {
+        keys.sort_unstable();
+    } else {
+        sort_u64(keys, tmp, layout);
     }
 }
 
@@ -416,54 +474,99 @@ struct Run {
     shift: i32,
 }
 
-/// Removes `v[i]` for every `i` of `gone` (ascending, distinct) and inserts `new[k]` before
-/// the old entry `at[k]` (`at` ascending, repeats allowed, `v.len()` appends), in place,
-/// moving only the entries whose index changes. Between two changes the old entries move by
-/// the same shift, and their order is kept: no entry's new place is still held by an entry
-/// moving the other way, so the runs that move left are moved first, front to back, then
-/// those that move right, back to front, and the new entries are written last.
-fn patch<T: Copy>(v: &mut Vec<T>, gone: &[u32], at: &[u32], new: &[T], runs: &mut Vec<Run>) {
+/// [`patch_in`]'s scratch: the runs and the length of old entries per shift.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Scratch {
+    runs: Vec<Run>,
+    per_shift: Vec<u32>,
+}
+
+/// Removes `buf[start + i]` for every `i` of `gone` (ascending, distinct) and inserts `new[k]`
+/// before the old entry `at[k]` (`at` ascending, repeats allowed, the list's length appends),
+/// in place, moving only the entries whose index changes; the list `buf[start..]` may move to
+/// start anywhere in `0..=max_start`.
+/// Between two changes the old entries all move by the same shift, and their order is kept.
+/// The list's new start is chosen so that the longest total stretch of old entries stays
+/// where it is (with `max_start` 0, the start stays 0 and the entries before the first change
+/// stay): a change near the front then moves the few entries before it, not the many after
+/// it. No entry's new place is still held by an entry moving the other way, so the runs that
+/// move left are moved first, front to back, then those that move right, back to front, and
+/// the new entries are written last. Returns the list's new start.
+fn patch_in<T: Copy>(
+    buf: &mut Vec<T>,
+    start: usize,
+    max_start: usize,
+    gone: &[u32],
+    at: &[u32],
+    new: &[T],
+    scratch: &mut Scratch,
+) -> usize {
     debug_assert_eq!(at.len(), new.len());
+    debug_assert!(start <= buf.len());
     if gone.is_empty() && new.is_empty() {
-        return;
+        return start;
     }
-    let old = v.len();
+    let old = buf.len() - start;
+    let Scratch { runs, per_shift } = scratch;
     runs.clear();
-    let (mut g, mut k, mut start, mut shift) = (0, 0, 0usize, 0i32);
+    let (mut g, mut k, mut from, mut shift) = (0, 0, 0usize, 0i32);
     loop {
         let next_at = at.get(k).map_or(old, |&a| a as usize);
         let next_gone = gone.get(g).map_or(old, |&i| i as usize);
         let end = next_at.min(next_gone);
-        if end > start && shift != 0 {
+        if end > from {
             runs.push(Run {
-                start: start as u32,
+                start: from as u32,
                 end: end as u32,
                 shift,
             });
         }
-        start = start.max(end);
+        from = from.max(end);
         if k < at.len() && next_at <= next_gone {
             shift += 1;
             k += 1;
         } else if g < gone.len() {
             shift -= 1;
             g += 1;
-            start = next_gone + 1;
+            from = next_gone + 1;
         } else {
             break;
         }
     }
+    // The base shift `c`: an old entry at `j` goes to `start - c + j + shift_j`, so the
+    // entries whose shift is `c` stay. `c` keeps the new start in `0..=max_start`.
+    let lowest = -(gone.len() as i64);
+    let (lo, hi) = (start as i64 - max_start as i64, start as i64);
+    let mut c = 0i64.clamp(lo, hi);
+    if max_start > 0 {
+        per_shift.clear();
+        per_shift.resize(gone.len() + at.len() + 1, 0);
+        for r in runs.iter() {
+            per_shift[(i64::from(r.shift) - lowest) as usize] += r.end - r.start;
+        }
+        let mut best = 0;
+        for (i, &n) in per_shift.iter().enumerate() {
+            let shift = i as i64 + lowest;
+            if n > best && (lo..=hi).contains(&shift) {
+                (best, c) = (n, shift);
+            }
+        }
+    }
+    let new_start = (start as i64 - c) as usize;
     let len = old + new.len() - gone.len();
-    if len > old {
-        v.resize(len, new[0]);
+    let need = (new_start + len).max(buf.len());
+    if need > buf.len() {
+        let fill = new.first().copied().unwrap_or_else(|| buf[start]);
+        buf.resize(need, fill);
     }
-    for r in runs.iter().filter(|r| r.shift < 0) {
-        let to = (r.start as i64 + i64::from(r.shift)) as usize;
-        v.copy_within(r.start as usize..r.end as usize, to);
+    let place = |r: &Run| (new_start as i64 + i64::from(r.start) + i64::from(r.shift)) as usize;
+    for r in runs.iter().filter(|r| i64::from(r.shift) < c) {
+        let from = start + r.start as usize;
+        buf.copy_within(from..from + (r.end - r.start) as usize, place(r));
     }
-    for r in runs.iter().rev().filter(|r| r.shift > 0) {
-        let to = r.start as usize + r.shift as usize;
-        v.copy_within(r.start as usize..r.end as usize, to);
+    for r in runs.iter().rev().filter(|r| i64::from(r.shift) > c) {
+        let from = start + r.start as usize;
+        buf.copy_within(from..from + (r.end - r.start) as usize, place(r));
     }
     // The new entry `k` lands after the `k` new ones before it and the old ones before
     // `at[k]` that stay.
@@ -472,9 +575,98 @@ fn patch<T: Copy>(v: &mut Vec<T>, gone: &[u32], at: &[u32], new: &[T], runs: &mu
         while g < gone.len() && gone[g] < a {
             g += 1;
         }
-        v[a as usize + k - g] = x;
+        buf[new_start + a as usize + k - g] = x;
     }
-    v.truncate(len);
+    buf.truncate(new_start + len);
+    new_start
+}
+
+/// A list kept behind a gap at the front of its buffer, which [`Gapped::patch`] may grow or
+/// shrink to move fewer entries: a sorted list patched in place each step (the pair list)
+/// moves only the entries between the changes that do not cancel out, instead of every entry
+/// after the first change.
+#[derive(Clone, Debug)]
+pub(super) struct Gapped<T> {
+    buf: Vec<T>,
+    start: usize,
+}
+
+impl<T> Default for Gapped<T> {
+    fn default() -> Self {
+        Gapped {
+            buf: Vec::new(),
+            start: 0,
+        }
+    }
+}
+
+impl<T> core::ops::DerefMut for Gapped<T> {
+    #[inline]
+    fn deref_mut(&mut self) -> &mut [T] {
+        &mut self.buf[self.start..]
+    }
+}
+
+impl<T> core::ops::Deref for Gapped<T> {
+    type Target = [T];
+    #[inline]
+    fn deref(&self) -> &[T] {
+        &self.buf[self.start..]
+    }
+}
+
+/// The gap a list of `len` entries keeps at its front after a rebuild; patches keep it
+/// between none and twice this.
+fn gap_for(len: usize) -> usize {
+    (len / GAP_FRACTION).clamp(MIN_GAP, MAX_GAP)
+}
+
+/// A [`Gapped`] list of `len` entries keeps a gap of `len / GAP_FRACTION` entries, at least
+/// [`MIN_GAP`] and at most [`MAX_GAP`]: the changes of one step seldom shift the entries by more.
+const GAP_FRACTION: usize = 64;
+const MIN_GAP: usize = 16;
+const MAX_GAP: usize = 4096;
+
+impl<T: Copy> Gapped<T> {
+    /// Replaces the list by what `fill` appends to an empty one, behind a gap made of `filler`
+    /// for `len` entries (what the list is expected to hold).
+    pub(super) fn refill(&mut self, len: usize, filler: T, fill: impl FnOnce(&mut Vec<T>)) {
+        self.buf.clear();
+        self.start = gap_for(len);
+        self.buf.resize(self.start, filler);
+        fill(&mut self.buf);
+    }
+
+    /// [`patch_in`] of the list, moving its start within the gap.
+    fn patch(&mut self, gone: &[u32], at: &[u32], new: &[T], scratch: &mut Scratch) {
+        let len = self.buf.len() - self.start;
+        let max_start = 2 * gap_for(len);
+        self.start = patch_in(
+            &mut self.buf,
+            self.start,
+            max_start.max(self.start),
+            gone,
+            at,
+            new,
+            scratch,
+        );
+    }
+
+    /// Empties the list (and its gap).
+    pub(super) fn clear(&mut self) {
+        self.buf.clear();
+        self.start = 0;
+    }
+
+    /// Grows the buffer ahead of its peaks (see `radix::ahead`).
+    pub(super) fn ahead(&mut self) {
+        crate::radix::ahead(&mut self.buf);
+    }
+
+    /// Entries the buffer holds room for, the gap's included.
+    pub(super) fn capacity(&self) -> usize {
+        self.buf.capacity()
+    }
 }
 
 #[cfg(test)]
@@ -521,7 +713,8 @@ mod tests {
         assert!(!quiet(drift(&far, &back), f32::MAX));
     }
 
-    /// `patch` against the obvious rebuild, on random removals and insertions.
+    /// `patch_in` (from start 0 without room to move, and from other starts with room) against the obvious
+    /// rebuild, on random removals and insertions.
     #[test]
     fn patch_equals_rebuild() {
         let mut seed = 7u64;
@@ -531,8 +724,9 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (seed >> 33) % n.max(1)
         };
-        let mut runs = Vec::new();
-        for round in 0..2000 {
+        let mut scratch = Scratch::default();
+        let mut moved_less = 0;
+        for round in 0..4000 {
             let n = next(40) as u32;
             let old: Vec<u32> = (0..n).map(|i| 10 * i).collect();
             let gone: Vec<u32> = (0..n).filter(|_| next(4) == 0).collect();
@@ -556,9 +750,44 @@ mod tests {
                     want.push(old[i as usize]);
                 }
             }
-            let mut v = old.clone();
-            patch(&mut v, &gone, &at, &new, &mut runs);
-            assert_eq!(v, want, "round {round}: gone {gone:?} at {at:?}");
+            if round % 2 == 0 {
+                let mut v = old.clone();
+                patch_in(&mut v, 0, 0, &gone, &at, &new, &mut scratch);
+                assert_eq!(v, want, "round {round}: gone {gone:?} at {at:?}");
+            } else {
+                let start = next(8) as usize;
+                let max_start = start + next(8) as usize;
+                let mut buf: Vec<u32> = vec![u32::MAX; start];
+                buf.extend_from_slice(&old);
+                // Old entries found at their old place, the list starting at `buf`'s index
+                // `-from` (entries are distinct).
+                let stay = |buf: &[u32], from: isize| {
+                    (0..n as usize)
+                        .filter(|&j| {
+                            let p = from + j as isize;
+                            p >= 0 && buf.get(p as usize) == Some(&old[j])
+                        })
+                        .count()
+                };
+                let at_zero = {
+                    let mut v = old.clone();
+                    patch_in(&mut v, 0, 0, &gone, &at, &new, &mut scratch);
+                    stay(&v, 0)
+                };
+                let new_start =
+                    patch_in(&mut buf, start, max_start, &gone, &at, &new, &mut scratch);
+                assert!(new_start <= max_start, "round {round}: start {new_start}");
+                assert_eq!(
+                    &buf[new_start..],
+                    &want[..],
+                    "round {round}: start {start} max {max_start} gone {gone:?} at {at:?}"
+                );
+                // Entries that kept their place: never fewer than with the start fixed.
+                let kept = stay(&buf[new_start..], start as isize - new_start as isize);
+                assert!(kept >= at_zero, "round {round}: kept {kept} < {at_zero}");
+                moved_less += usize::from(kept > at_zero);
+            }
         }
+        assert!(moved_less > 0, "the start never moved");
     }
 }

@@ -246,9 +246,9 @@ impl Snapshot {
             free: free.to_vec(),
             quarantine: quarantine.to_vec(),
             pairs: bp
-                .packed
+                .pairs
                 .iter()
-                .map(|&p| ((p >> 32) as u32, p as u32))
+                .map(|p| (crate::pair::slot(p.a), crate::pair::slot(p.b)))
                 .collect(),
         }
     }
@@ -351,14 +351,13 @@ impl Snapshot {
             .map(|&(lo, hi)| step::pack(lo, hi))
             .collect();
         let st = &bp.store;
-        bp.pairs = self
-            .pairs
-            .iter()
-            .map(|&(lo, hi)| Pair {
+        let pairs = &self.pairs;
+        bp.pairs.refill(pairs.len(), step::null_pair(), |list| {
+            list.extend(pairs.iter().map(|&(lo, hi)| Pair {
                 a: st.key(lo),
                 b: st.key(hi),
-            })
-            .collect();
+            }));
+        });
         Ok(bp)
     }
 

@@ -143,6 +143,14 @@ impl Parallel {
     }
 }
 
+/// What fills the pair list's gap (see [`super::slack::Gapped`]): never read.
+pub(super) fn null_pair() -> Pair {
+    Pair {
+        a: ProxyKey::default(),
+        b: ProxyKey::default(),
+    }
+}
+
 /// The key pair of a packed slot pair (slots live, or quarantined since their removal).
 #[inline]
 pub(super) fn key_pair(store: &Store, p: u64) -> Pair {
@@ -158,6 +166,13 @@ pub(super) fn key_pair(store: &Store, p: u64) -> Pair {
 pub(super) fn pack(a: u32, b: u32) -> u64 {
     let (lo, hi) = if a < b { (a, b) } else { (b, a) };
     (u64::from(lo) << 32) | u64::from(hi)
+}
+
+/// The packed pair of a key pair (both keys live, or quarantined since their removal): the
+/// key pairs are sorted as their packed pairs are.
+#[inline]
+pub(super) fn pack_pair(p: &Pair) -> u64 {
+    pack(crate::pair::slot(p.a), crate::pair::slot(p.b))
 }
 
 #[inline]
@@ -219,7 +234,7 @@ impl BroadPhase {
             Passes::Adaptive => {}
         }
         let n = self.store.len() as f64;
-        let full = n * cost::FULL + self.packed.len() as f64 * cost::FULL_PAIR;
+        let full = n * cost::FULL + self.pairs.len() as f64 * cost::FULL_PAIR;
         if self.cached {
             // Leaving drops the candidates, which a later return rebuilds with a full pass of
             // its own: a single step over the full pass's cost (a burst of escapes) does not
@@ -306,11 +321,11 @@ impl BroadPhase {
     /// Grows the lists whose length swings from step to step ahead of their peaks, so that a
     /// world in steady state stops allocating after its first few swings.
     fn keep_headroom(&mut self) {
-        ahead(&mut self.cand);
+        self.cand.ahead();
         ahead(&mut self.fresh);
         ahead(&mut self.packed);
         ahead(&mut self.prev_packed);
-        ahead(&mut self.pairs);
+        self.pairs.ahead();
         let n = self.store.len();
         if self.cached {
             ahead(&mut self.loud);
@@ -319,7 +334,8 @@ impl BroadPhase {
         }
         // A full pass finds every pair (or candidate) into `fresh`, sorts it, and rotates it
         // with `packed` and `prev_packed`; the incremental steps fill `fresh` only with the
-        // escaped proxies' new candidates and patch `packed` in place. All four stay ready
+        // escaped proxies' new candidates and patch the key pairs in place (`packed` is
+        // rebuilt from them when a full pass follows). All four stay ready
         // for the largest list a full pass can make, grown as `ahead` grows a list: to half
         // again that length once within a quarter of it.
         let most = self.cand.len().max(self.packed.len());
@@ -358,6 +374,9 @@ impl BroadPhase {
     /// [`BroadPhase::full`] with its split phases in `tasks` tasks each (1: serial).
     #[inline(always)]
     fn full_in(&mut self, fat: bool, tasks: usize) {
+        if self.cached {
+            self.packed_from_pairs();
+        }
         core::mem::swap(&mut self.prev_packed, &mut self.packed);
         if self.cached || fat {
             for s in 0..self.store.slots() as u32 {
@@ -379,16 +398,17 @@ impl BroadPhase {
         }
         self.packed.clear();
         if fat {
-            self.cand.clear();
-            let exact = &self.store.exact;
-            for &c in &self.fresh {
-                let (a, b) = unpack(c);
-                let hit = exact[a].overlaps(&exact[b]);
-                self.cand.push(c | if hit { HIT } else { 0 });
-                if hit {
-                    self.packed.push(c);
+            let (exact, fresh, packed) = (&self.store.exact, &self.fresh, &mut self.packed);
+            self.cand.refill(fresh.len(), 0, |cand| {
+                for &c in fresh {
+                    let (a, b) = unpack(c);
+                    let hit = exact[a].overlaps(&exact[b]);
+                    cand.push(c | if hit { HIT } else { 0 });
+                    if hit {
+                        packed.push(c);
+                    }
                 }
-            }
+            });
             self.stats.candidates_tested = self.fresh.len();
             let n = self.store.len().max(1) as f64;
             self.costs.cand_per_proxy = self.cand.len() as f64 / n;
@@ -409,6 +429,13 @@ impl BroadPhase {
             }
             _ => self.emit(),
         }
+    }
+
+    /// The packed pair list of the key pairs: the incremental regime patches only the key
+    /// pairs, and a full pass that follows it diffs against the packed ones.
+    pub(super) fn packed_from_pairs(&mut self) {
+        self.packed.clear();
+        self.packed.extend(self.pairs.iter().map(pack_pair));
     }
 
     /// How many tasks each split phase of a full pass hands to rayon's current pool: 1 (the
@@ -609,8 +636,10 @@ impl BroadPhase {
         }
         let store = &self.store;
         let to_pair = |&p: &u64| key_pair(store, p);
-        self.pairs.clear();
-        self.pairs.par_extend(self.packed.par_iter().map(to_pair));
+        let packed = &self.packed;
+        self.pairs.refill(packed.len(), null_pair(), |pairs| {
+            pairs.par_extend(packed.par_iter().map(to_pair));
+        });
         self.added.clear();
         self.added
             .par_extend(self.added_packed.par_iter().map(to_pair));
@@ -629,8 +658,10 @@ impl BroadPhase {
         );
         let store = &self.store;
         let to_pair = |&p: &u64| key_pair(store, p);
-        self.pairs.clear();
-        self.pairs.extend(self.packed.iter().map(to_pair));
+        let packed = &self.packed;
+        self.pairs.refill(packed.len(), null_pair(), |pairs| {
+            pairs.extend(packed.iter().map(to_pair));
+        });
         self.added.clear();
         self.added.extend(self.added_packed.iter().map(to_pair));
         self.removed.clear();
