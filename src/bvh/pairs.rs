@@ -2,7 +2,7 @@
 //! lists against both (tree queries and sort-and-sweep on x).
 
 use super::Bvh;
-use super::lanes::{GROUP, Group, Lanes, Splat, bits, low_bits};
+use super::lanes::{Found, GROUP, Group, Lanes, Splat, bits, low_bits};
 use super::node::Node;
 use crate::geom::SimdBox;
 use crate::pair::{Pair, ProxyKey};
@@ -412,7 +412,7 @@ fn drain_own(
         }
         let node = &t.nodes[a as usize];
         if node.is_leaf() {
-            leaf_self_pairs(t, node, f);
+            leaf_self_pairs(t, node, &mut noted.found, f);
         } else {
             own_children(t, a, node, stack);
         }
@@ -533,12 +533,17 @@ fn cross_children(ta: &Tree, tb: &Tree, a: u32, b: u32, stack: &mut Vec<(u32, u3
     }
 }
 
-/// Every overlapping pair within one leaf: each box is tested against the blocks that hold
-/// the boxes after it, [`GROUP`] at a time ([`Lanes`]), and the pairs are read from the set
-/// bits of the result. Leaves too long for one mask, which only a `max_leaf_size` above 61
-/// makes, take the plain loop.
+/// Every overlapping pair within one leaf: each box is tested against all the leaf's blocks,
+/// [`GROUP`] at a time ([`Lanes`]), the lanes up to its own masked off, and the pairs go
+/// through `found` (no branch on a test's outcome, nor on a box's place in the leaf). Leaves
+/// too long for one mask, which only a `max_leaf_size` above 61 makes, take the plain loop.
 #[inline]
-fn leaf_self_pairs(t: &Tree, node: &Node, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
+fn leaf_self_pairs(
+    t: &Tree,
+    node: &Node,
+    found: &mut Found,
+    f: &mut impl FnMut(ProxyKey, ProxyKey),
+) {
     let range = node.range();
     let keys = &t.keys[range.clone()];
     let Some(leaf) = t.lanes.leaf(range.start, range.len()) else {
@@ -546,17 +551,13 @@ fn leaf_self_pairs(t: &Tree, node: &Node, f: &mut impl FnMut(ProxyKey, ProxyKey)
         return;
     };
     for (i, b) in t.boxes[range].iter().enumerate() {
+        let q = Splat::of(b);
         // Lanes after box i's own: bits `off + i + 1..`.
         let after = leaf.off + i + 1;
         let later = leaf.valid & !low_bits(after);
-        if later == 0 {
-            break;
-        }
-        let m = leaf.mask_from(after / GROUP, &Splat::of(b)) & later;
-        for k in bits(m) {
-            f(keys[i], keys[k - leaf.off]);
-        }
+        found.push(i, leaf.mask_from(after / GROUP, &q) & later);
     }
+    found.drain(|i, k| f(keys[i], keys[k - leaf.off]));
 }
 
 /// Every overlapping pair of the primitives of leaf `na` (in `ta`) × leaf `nb` (in `tb`). A
@@ -635,6 +636,8 @@ type NotedSide<'a> = (&'a [SimdBox], &'a [ProxyKey], usize, u64);
 struct Noted {
     blocks: [Group; 64 / GROUP],
     keys: [ProxyKey; 64],
+    /// The pairs found by the leaf kernels, before they are handed on.
+    found: Found,
 }
 
 impl Noted {
@@ -642,27 +645,33 @@ impl Noted {
         Noted {
             blocks: [Group::EMPTY; 64 / GROUP],
             keys: [ProxyKey::default(); 64],
+            found: Found::new(),
         }
     }
 
     /// Calls `f(a, b)` for every overlapping pair of a noted box `a` of `splat` and a noted
     /// box `b` of `pack`. The noted boxes of `pack` are packed into blocks of their own, the
     /// last one's spare lanes empty (they overlap nothing), so that each noted box of `splat`
-    /// is tested against `ceil(noted / 4)` blocks however the noted boxes lie in their leaf,
-    /// and its pairs are read from one mask over all of them.
+    /// is tested against `ceil(noted / 4)` blocks however the noted boxes lie in their leaf;
+    /// the pairs go through [`Found`].
     #[inline]
     fn pairs(&mut self, splat: NotedSide, pack: NotedSide, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
+        let Noted {
+            blocks,
+            keys: packed,
+            found,
+        } = self;
         let (boxes, keys, off, near) = pack;
         let mut n = 0;
         for k in bits(near) {
-            self.blocks[n / GROUP].set(n, &boxes[k - off]);
-            self.keys[n] = keys[k - off];
+            blocks[n / GROUP].set(n, &boxes[k - off]);
+            packed[n] = keys[k - off];
             n += 1;
         }
         for k in n..n.next_multiple_of(GROUP) {
-            self.blocks[k / GROUP].set(k, &SimdBox::EMPTY);
+            blocks[k / GROUP].set(k, &SimdBox::EMPTY);
         }
-        let (blocks, packed) = (&self.blocks[..n.div_ceil(GROUP)], &self.keys[..n]);
+        let (blocks, packed) = (&blocks[..n.div_ceil(GROUP)], &packed[..n]);
         let (boxes, keys, off, near) = splat;
         for i in bits(near) {
             let q = Splat::of(&boxes[i - off]);
@@ -670,11 +679,9 @@ impl Noted {
             for (g, block) in blocks.iter().enumerate() {
                 m |= u64::from(block.overlaps(&q)) << (GROUP * g);
             }
-            let key = keys[i - off];
-            for k in bits(m) {
-                f(key, packed[k]);
-            }
+            found.push(i - off, m);
         }
+        found.drain(|i, k| f(keys[i], packed[k]));
     }
 }
 
