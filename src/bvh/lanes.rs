@@ -170,6 +170,55 @@ impl Lanes {
     }
 }
 
+/// The most rows one leaf kernel records: one per box of a leaf.
+const FOUND_ROWS: usize = 64;
+
+/// The overlap masks of a leaf kernel's rows (one box's tests against a leaf's blocks), kept
+/// only if not empty without a branch on that: each row is stored unconditionally and the
+/// length advances by whether its mask has a bit set. The pairs are then handed on by one
+/// loop over all the set bits of all the rows ([`Found::drain`]) instead of one set-bit loop
+/// per row, whose exits the branch predictor cannot guess.
+pub(super) struct Found {
+    /// `(row, mask)`; one spare entry takes the last unconditional store.
+    rows: [(usize, u64); FOUND_ROWS + 1],
+    len: usize,
+}
+
+impl Found {
+    pub(super) fn new() -> Found {
+        Found {
+            rows: [(0, 0); FOUND_ROWS + 1],
+            len: 0,
+        }
+    }
+
+    /// Records the pairs `(row, k)` for each set bit `k` of `mask`. At most [`FOUND_ROWS`]
+    /// rows between two [`Found::drain`]s.
+    #[inline(always)]
+    pub(super) fn push(&mut self, row: usize, mask: u64) {
+        debug_assert!(self.len < FOUND_ROWS);
+        let at = self.len.min(FOUND_ROWS);
+        self.rows[at] = (row, mask);
+        self.len = at + usize::from(mask != 0);
+    }
+
+    /// Calls `f(row, k)` for each recorded pair, rows in the order recorded and each row's
+    /// bits lowest first, and forgets them. One loop over the pairs: each turn clears the bit
+    /// it hands on in the row's stored mask and moves to the next row when none is left, by
+    /// arithmetic, not a branch.
+    #[inline(always)]
+    pub(super) fn drain(&mut self, mut f: impl FnMut(usize, usize)) {
+        let rows = &mut self.rows[..self.len];
+        self.len = 0;
+        let mut r = 0;
+        while let Some(&mut (row, ref mut mask)) = rows.get_mut(r) {
+            f(row, mask.trailing_zeros() as usize);
+            *mask &= *mask - 1;
+            r += usize::from(*mask == 0);
+        }
+    }
+}
+
 /// The positions of the set bits of `m`, lowest first.
 #[inline]
 pub(super) fn bits(mut m: u64) -> impl Iterator<Item = usize> {
@@ -230,5 +279,33 @@ mod tests {
         }
         lanes.set(3, &boxes[7]);
         assert_eq!(lanes.get(3), boxes[7]);
+    }
+
+    /// `Found` hands on every set bit of every pushed row once, in push order and lowest bit
+    /// first, as the set-bit loops did, skipping empty rows, and is empty after a drain.
+    #[test]
+    fn found_hands_on_each_set_bit_once() {
+        let mut rng = Rng::new(7);
+        let mut found = Found::new();
+        let word = |rng: &mut Rng| u64::from(rng.next_u32()) << 32 | u64::from(rng.next_u32());
+        for round in 0..200 {
+            let masks: Vec<u64> = (0..rng.below(65) as usize)
+                .map(|_| match rng.below(4) {
+                    0 => 0,
+                    1 => 1 << rng.below(64),
+                    2 => u64::MAX,
+                    _ => word(&mut rng) & word(&mut rng),
+                })
+                .collect();
+            let mut want = Vec::new();
+            for (row, &m) in masks.iter().enumerate() {
+                found.push(row, m);
+                want.extend(bits(m).map(|k| (row, k)));
+            }
+            let mut got = Vec::new();
+            found.drain(|row, k| got.push((row, k)));
+            assert_eq!(got, want, "round {round}");
+            found.drain(|_, _| panic!("drained twice"));
+        }
     }
 }

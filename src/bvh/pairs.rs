@@ -2,7 +2,7 @@
 //! lists against both (tree queries and sort-and-sweep on x).
 
 use super::Bvh;
-use super::lanes::{GROUP, Group, Lanes, Splat, bits, low_bits};
+use super::lanes::{Found, GROUP, Group, Lanes, Splat, bits, low_bits};
 use super::node::Node;
 use crate::geom::SimdBox;
 use crate::pair::{Pair, ProxyKey};
@@ -412,7 +412,7 @@ fn drain_own(
         }
         let node = &t.nodes[a as usize];
         if node.is_leaf() {
-            leaf_self_pairs(t, node, f);
+            leaf_self_pairs(t, node, &mut noted.found, f);
         } else {
             own_children(t, a, node, stack);
         }
@@ -533,12 +533,17 @@ fn cross_children(ta: &Tree, tb: &Tree, a: u32, b: u32, stack: &mut Vec<(u32, u3
     }
 }
 
-/// Every overlapping pair within one leaf: each box is tested against the blocks that hold
-/// the boxes after it, [`GROUP`] at a time ([`Lanes`]), and the pairs are read from the set
-/// bits of the result. Leaves too long for one mask, which only a `max_leaf_size` above 61
-/// makes, take the plain loop.
+/// Every overlapping pair within one leaf: each box is tested against all the leaf's blocks,
+/// [`GROUP`] at a time ([`Lanes`]), the lanes up to its own masked off, and the pairs go
+/// through `found` (no branch on a test's outcome, nor on a box's place in the leaf). Leaves
+/// too long for one mask, which only a `max_leaf_size` above 61 makes, take the plain loop.
 #[inline]
-fn leaf_self_pairs(t: &Tree, node: &Node, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
+fn leaf_self_pairs(
+    t: &Tree,
+    node: &Node,
+    found: &mut Found,
+    f: &mut impl FnMut(ProxyKey, ProxyKey),
+) {
     let range = node.range();
     let keys = &t.keys[range.clone()];
     let Some(leaf) = t.lanes.leaf(range.start, range.len()) else {
@@ -546,26 +551,23 @@ fn leaf_self_pairs(t: &Tree, node: &Node, f: &mut impl FnMut(ProxyKey, ProxyKey)
         return;
     };
     for (i, b) in t.boxes[range].iter().enumerate() {
+        let q = Splat::of(b);
         // Lanes after box i's own: bits `off + i + 1..`.
         let after = leaf.off + i + 1;
         let later = leaf.valid & !low_bits(after);
-        if later == 0 {
-            break;
-        }
-        let m = leaf.mask_from(after / GROUP, &Splat::of(b)) & later;
-        for k in bits(m) {
-            f(keys[i], keys[k - leaf.off]);
-        }
+        found.push(i, leaf.mask_from(after / GROUP, &q) & later);
     }
+    found.drain(|i, k| f(keys[i], keys[k - leaf.off]));
 }
 
 /// Every overlapping pair of the primitives of leaf `na` (in `ta`) × leaf `nb` (in `tb`). A
 /// box of either leaf that misses the other leaf's box pairs with nothing there, so the boxes
-/// of each leaf that meet the other leaf's box are noted in a bit mask first, and only those
-/// are tested against each other: two leaves that overlap at a corner cost one pass over each,
-/// not the product. The tests run [`GROUP`] boxes at a time, each noted box of the leaf with
-/// fewer against the other's noted boxes packed into blocks ([`Noted::pairs`]); their results
-/// are bit masks, and the pairs are read from the set bits, so the loops branch on their counts, not on the tests
+/// of b that meet a's leaf box are noted first, then those of a that meet the union of b's
+/// noted boxes (tighter than b's leaf box), and only those are tested against each other:
+/// two leaves that overlap at a corner cost one pass over each, not the product. b's noted
+/// boxes are packed into blocks of their own ([`Noted::pack`]) while their union is taken,
+/// and each noted box of a is tested against them [`GROUP`] at a time; the results are bit
+/// masks read through [`Found`], so the loops branch on their counts, not on the tests
 /// (whose outcomes the branch predictor cannot guess). Leaves too long for one mask, which
 /// only a `max_leaf_size` above 61 makes, take the plain loop.
 #[inline]
@@ -595,35 +597,26 @@ fn leaf_pairs(
         }
         return;
     };
-    // The boxes of b near a's box, then those of a near the union of those (a box of a that
-    // misses it misses each of them, and is tighter than b's leaf box).
     let near_b = lb.mask(&Splat::of(&na.bounds()));
     if near_b == 0 {
         return;
     }
-    let boxes_b = &tb.boxes[rb.clone()];
-    if near_b & (near_b - 1) == 0 {
-        // One box of b: its pairs are one mask over a's blocks, without noting a.
-        let k = near_b.trailing_zeros() as usize - lb.off;
-        for i in bits(la.mask(&Splat::of(&boxes_b[k]))) {
-            f(keys_a[i - la.off], keys_b[k]);
+    let Noted {
+        blocks,
+        keys: packed,
+        found,
+    } = noted;
+    let (blocks, union) = Noted::pack(blocks, packed, (&tb.boxes[rb], keys_b, lb.off, near_b));
+    let boxes_a = &ta.boxes[ra];
+    for i in bits(la.mask(&Splat::of(&union))) {
+        let q = Splat::of(&boxes_a[i - la.off]);
+        let mut m = 0u64;
+        for (g, block) in blocks.iter().enumerate() {
+            m |= u64::from(block.overlaps(&q)) << (GROUP * g);
         }
-        return;
+        found.push(i - la.off, m);
     }
-    let noted_b = bits(near_b).fold(SimdBox::EMPTY, |u, k| u.union(&boxes_b[k - lb.off]));
-    let near_a = la.mask(&Splat::of(&noted_b));
-    if near_a == 0 {
-        return;
-    }
-    // The side with fewer noted boxes is splatted, box by box, and tested against the other
-    // side's noted boxes packed into blocks.
-    let a = (&ta.boxes[ra], keys_a, la.off, near_a);
-    let b = (&tb.boxes[rb], keys_b, lb.off, near_b);
-    if near_a.count_ones() <= near_b.count_ones() {
-        noted.pairs(a, b, f);
-    } else {
-        noted.pairs(b, a, &mut |kb, ka| f(ka, kb));
-    }
+    found.drain(|i, k| f(keys_a[i], packed[k]));
 }
 
 /// The noted boxes of one leaf: its boxes, keys, the bit of its first box, and the mask of the
@@ -633,48 +626,47 @@ type NotedSide<'a> = (&'a [SimdBox], &'a [ProxyKey], usize, u64);
 /// The noted boxes of one leaf of a leaf pair, packed into blocks, and their keys: a
 /// descent's scratch, reused by each of its leaf pairs.
 struct Noted {
-    blocks: [Group; 64 / GROUP],
+    /// One block more than 64 lanes: [`Noted::pack`] empties the three lanes after the last
+    /// noted box unconditionally.
+    blocks: [Group; 64 / GROUP + 1],
     keys: [ProxyKey; 64],
+    /// The pairs found by the leaf kernels, before they are handed on.
+    found: Found,
 }
 
 impl Noted {
     fn new() -> Noted {
         Noted {
-            blocks: [Group::EMPTY; 64 / GROUP],
+            blocks: [Group::EMPTY; 64 / GROUP + 1],
             keys: [ProxyKey::default(); 64],
+            found: Found::new(),
         }
     }
 
-    /// Calls `f(a, b)` for every overlapping pair of a noted box `a` of `splat` and a noted
-    /// box `b` of `pack`. The noted boxes of `pack` are packed into blocks of their own, the
-    /// last one's spare lanes empty (they overlap nothing), so that each noted box of `splat`
-    /// is tested against `ceil(noted / 4)` blocks however the noted boxes lie in their leaf,
-    /// and its pairs are read from one mask over all of them.
+    /// Packs the noted boxes of `side` into `blocks` and their keys into `keys`, in leaf
+    /// order, the spare lanes of the last block empty (they overlap nothing), so that a box is
+    /// tested against all of them in `ceil(noted / 4)` block tests however they lie in their
+    /// leaf. Returns those blocks and the union of the noted boxes.
     #[inline]
-    fn pairs(&mut self, splat: NotedSide, pack: NotedSide, f: &mut impl FnMut(ProxyKey, ProxyKey)) {
-        let (boxes, keys, off, near) = pack;
-        let mut n = 0;
+    fn pack<'b>(
+        blocks: &'b mut [Group; 64 / GROUP + 1],
+        keys: &mut [ProxyKey; 64],
+        side: NotedSide,
+    ) -> (&'b [Group], SimdBox) {
+        let (boxes, side_keys, off, near) = side;
+        let (mut n, mut union) = (0, SimdBox::EMPTY);
         for k in bits(near) {
-            self.blocks[n / GROUP].set(n, &boxes[k - off]);
-            self.keys[n] = keys[k - off];
+            let b = &boxes[k - off];
+            union = union.union(b);
+            blocks[n / GROUP].set(n, b);
+            keys[n] = side_keys[k - off];
             n += 1;
         }
-        for k in n..n.next_multiple_of(GROUP) {
-            self.blocks[k / GROUP].set(k, &SimdBox::EMPTY);
+        // Lanes n..n + 3: past the last noted box, within its block or the next one.
+        for k in n..n + GROUP - 1 {
+            blocks[k / GROUP].set(k, &SimdBox::EMPTY);
         }
-        let (blocks, packed) = (&self.blocks[..n.div_ceil(GROUP)], &self.keys[..n]);
-        let (boxes, keys, off, near) = splat;
-        for i in bits(near) {
-            let q = Splat::of(&boxes[i - off]);
-            let mut m = 0u64;
-            for (g, block) in blocks.iter().enumerate() {
-                m |= u64::from(block.overlaps(&q)) << (GROUP * g);
-            }
-            let key = keys[i - off];
-            for k in bits(m) {
-                f(key, packed[k]);
-            }
-        }
+        (&blocks[..n.div_ceil(GROUP)], union)
     }
 }
 
