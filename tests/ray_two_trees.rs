@@ -133,6 +133,19 @@ fn rays_and_casts_over_both_trees_equal_brute_force() {
     }
 }
 
+/// Query `q`'s sphere cast: origin, direction, `max_t` (zero, short, long, unbounded) and
+/// radius (zero, small, large) in turn.
+fn random_cast(rng: &mut Rng, half: f32, q: usize) -> (Vec3, Vec3, f32, f32) {
+    let o = random_origin(rng, half);
+    let d = random_dir(rng);
+    (
+        o,
+        d,
+        [0.0, 3.0, 40.0, f32::MAX][q % 4],
+        [0.0, 0.25, 1.0][q % 3],
+    )
+}
+
 /// `Bvh::cast_sphere` over a tree with twin boxes (each twin the same `t`): the smaller key,
 /// at the same `t` as brute force, including casts whose exact `f64` time rounds down to the
 /// `f32` answer.
@@ -151,10 +164,7 @@ fn bvh_sphere_casts_keep_ties_to_the_smaller_key() {
     }
     let (bvh, keys) = Bvh::from_aabbs(BvhConfig::default(), &boxes).unwrap();
     for q in 0..2000 {
-        let o = random_origin(&mut rng, half);
-        let d = random_dir(&mut rng);
-        let max_t = [0.0, 3.0, 40.0, f32::MAX][q % 4];
-        let r = [0.0, 0.25, 1.0][q % 3];
+        let (o, d, max_t, r) = random_cast(&mut rng, half, q);
         let want = first_of(
             keys.iter()
                 .zip(&boxes)
@@ -197,10 +207,7 @@ fn octree_casts_keep_ties_to_the_smaller_key() {
         }
         tree.maintain();
         for q in 0..2000 {
-            let o = random_origin(&mut rng, half);
-            let d = random_dir(&mut rng);
-            let max_t = [0.0, 3.0, 40.0, f32::MAX][q % 4];
-            let r = [0.0, 0.25, 1.0][q % 3];
+            let (o, d, max_t, r) = random_cast(&mut rng, half, q);
             let want = first_of(
                 spheres
                     .iter()

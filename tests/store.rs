@@ -352,6 +352,26 @@ fn snapshot_between_an_update_and_a_step_holds_the_latest_shapes() {
     }
 }
 
+/// A world for the split apply (feature `parallel`): `Passes::Full` (never the incremental
+/// regime) and 12 000 small spheres in a 120 m cube, more than `PARALLEL_MIN_SPHERES`.
+#[cfg(feature = "parallel")]
+fn split_apply_world(rng: &mut Rng) -> (BroadPhase, Model) {
+    let mut bp = BroadPhase::new(Config {
+        passes: Passes::Full,
+        ..Config::default()
+    });
+    let mut model = Model::new(0.0);
+    model.quadratic = false;
+    for _ in 0..12_000 {
+        let s = ModelShape::Sphere {
+            center: rng.offset(60.0),
+            radius: rng.range(0.1, 0.6),
+        };
+        model.insert(&mut bp, s);
+    }
+    (bp, model)
+}
+
 /// Feature `parallel`: the apply pass splits its spheres over the pool when most slots are
 /// stale in a world of more than `PARALLEL_MIN_SPHERES` (10 000) spheres outside the
 /// incremental regime. Updated in random slot order, with bodies among them and removes and
@@ -367,19 +387,7 @@ fn parallel_apply_equals_brute_force_at_one_and_two_threads() {
             .expect("a pool");
         pool.install(|| {
             let mut rng = Rng::new(11);
-            let mut bp = BroadPhase::new(Config {
-                passes: Passes::Full,
-                ..Config::default()
-            });
-            let mut model = Model::new(0.0);
-            model.quadratic = false;
-            for _ in 0..12_000 {
-                let s = ModelShape::Sphere {
-                    center: rng.offset(60.0),
-                    radius: rng.range(0.1, 0.6),
-                };
-                model.insert(&mut bp, s);
-            }
+            let (mut bp, mut model) = split_apply_world(&mut rng);
             for _ in 0..200 {
                 model.insert(&mut bp, random_shape(&mut rng));
             }
@@ -422,19 +430,7 @@ fn parallel_apply_moves_root_and_outside_spheres_exactly() {
         .expect("a pool");
     pool.install(|| {
         let mut rng = Rng::new(12);
-        let mut bp = BroadPhase::new(Config {
-            passes: Passes::Full,
-            ..Config::default()
-        });
-        let mut model = Model::new(0.0);
-        model.quadratic = false;
-        for _ in 0..12_000 {
-            let s = ModelShape::Sphere {
-                center: rng.offset(60.0),
-                radius: rng.range(0.1, 0.6),
-            };
-            model.insert(&mut bp, s);
-        }
+        let (mut bp, mut model) = split_apply_world(&mut rng);
         let far = Vec3::new(2.0e4, -1.5e4, 3.0e4);
         let sphere = |center, radius| ModelShape::Sphere { center, radius };
         let outliers: Vec<ProxyKey> = (0..4)
