@@ -13,7 +13,7 @@
 //!   ([`CollisionGroups`]), and queries of the shapes as given: boxes, spheres, rays, sphere
 //!   casts and the nearest proxies. It adapts by itself to how much of the world moves: a step either runs the
 //!   structures' own pair passes over exact boxes, or has them hold fat boxes (whose margin
-//!   follows each proxy's own motion) and re-tests only the candidates of what moved, whichever
+//!   follows each proxy's own motion, stretched along it for a proxy that keeps moving) and re-tests only the candidates of what moved, whichever
 //!   its work estimate says is cheaper; [`BroadPhase::stats`] says which ran. Nothing in
 //!   [`Config`] needs tuning for speed.
 //! - **[`Octree`]** — many moving spheres, on their own. A top-down preallocated octree

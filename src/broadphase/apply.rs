@@ -109,10 +109,10 @@ impl BroadPhase {
         match self.store.shape[s] {
             Shape::Sphere { center, radius } => {
                 let grown = fat::grown_sphere(center, radius, self.config.margin);
-                self.note_motion(s, &grown.aabb);
+                let motion = self.note_motion(s, &grown.aabb);
                 self.store.exact[s] = grown.aabb;
                 if self.cached {
-                    self.refresh_fat(slot, &grown.aabb);
+                    self.refresh_fat(slot, &grown.aabb, motion);
                 } else {
                     let key = self.store.key(slot);
                     self.octree.update_live(key, center, grown.radius);
@@ -120,10 +120,10 @@ impl BroadPhase {
             }
             shape @ Shape::Body { kind, .. } => {
                 let exact = fat::grown(shape, self.config.margin).aabb;
-                self.note_motion(s, &exact);
+                let motion = self.note_motion(s, &exact);
                 self.store.exact[s] = exact;
                 if self.cached {
-                    self.refresh_fat(slot, &exact);
+                    self.refresh_fat(slot, &exact, motion);
                 } else {
                     let key = self.store.key(slot);
                     let placed = self.tree_mut(kind).update_box_deferred(key, &exact);
@@ -152,7 +152,14 @@ impl BroadPhase {
             fat_walk(movers, st, loud, escaped, margin, now)
         };
         for i in first_escape..self.escaped.len() {
-            self.hold(self.escaped[i], true);
+            // The walk left an escaped sphere's exact box, speed and stamp as they were: its
+            // motion is read from the box it left, for the new fat box's sweep.
+            let slot = self.escaped[i];
+            let s = slot as usize;
+            let new = self.exact_box(&self.store.shape[s]);
+            let motion = self.note_motion(s, &new);
+            self.store.exact[s] = new;
+            self.hold_moving(slot, motion);
         }
         rest
     }
@@ -297,13 +304,14 @@ fn fat_walk(
             continue;
         }
         let new = fat::grown_sphere(center, radius, margin).aabb;
-        let v = fat::speed(&exact[s], &new, stamp[s], now);
-        (exact[s], speed[s], stamp[s]) = (new, v, now);
         if !held[s].contains(&new) {
+            // Its exact box and motion are noted with its new fat box, after the walk.
             flags[s] = f & !flag::STALE | flag::ESCAPED;
             escaped.push(s as u32);
             continue;
         }
+        let v = fat::speed(&exact[s], &new, stamp[s], now);
+        (exact[s], speed[s], stamp[s]) = (new, v, now);
         // Still in its fat box: quiet or loud (see `slack::settle`; nothing is loud yet).
         let d = slack::drift(&new, &anchor[s]);
         if slack::quiet(d, slk[s]) {

@@ -6,9 +6,22 @@ use super::store::flag;
 use super::{BodyKind, BroadPhase, Shape};
 use crate::geom::SimdBox;
 use crate::{Aabb, Vec3};
+use glam::Vec3A;
 
 /// A proxy's fat margin covers this many steps of its last measured motion.
 pub(super) const LOOKAHEAD_STEPS: f32 = 3.0;
+/// A proxy that leaves its fat box while moving gets one stretched along its last motion:
+/// the box it would sweep over this many steps (times the jitter, see [`jitter`]) of that
+/// motion. A body or sphere keeps its velocity from one step to the next far more often than
+/// it turns, so the next escape comes about twice as late as from a box of the same size
+/// centred where the proxy is.
+const PREDICT_STEPS: f32 = 6.0;
+/// The predicted fat box is grown on every side by this many steps of the speed, so that a
+/// proxy that turns does not leave it at once.
+const PREDICT_SIDE_STEPS: f32 = 1.0;
+/// The longest predicted sweep, as a multiple of the box's largest extent (a teleport must
+/// not leave a long box behind).
+const MAX_PREDICT: f32 = 1.0;
 /// The smallest fat margin, as a fraction of the box's largest extent: resting proxies keep a
 /// box this much larger than exact, so jitter does not make them escape.
 const MIN_MARGIN: f32 = 1.0 / 64.0;
@@ -51,10 +64,14 @@ pub(super) fn motion(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> (f32
 /// The speed of [`motion`] alone.
 #[inline(always)]
 pub(super) fn speed(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> f32 {
-    let moved = ((new.min + new.max) - (old.min + old.max))
-        .abs()
-        .max_element()
-        * 0.5;
+    displacement(old, new, stamp, now).abs().max_element()
+}
+
+/// How far the centre of a box that moved from `old` to `new` since step `stamp` moved per
+/// step, at step `now`.
+#[inline(always)]
+pub(super) fn displacement(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> Vec3A {
+    let moved = ((new.min + new.max) - (old.min + old.max)) * 0.5;
     let steps = now.wrapping_sub(stamp).max(1);
     moved / steps as f32
 }
@@ -69,24 +86,27 @@ pub(super) fn outgrows_min_margin(speed: f32, size: f32) -> bool {
 impl BroadPhase {
     /// Records how far slot `s` moved per step since its last update (its new exact box is
     /// `exact`), for its fat margin and the pass estimate.
+    /// Returns the motion per step (see [`displacement`]).
     #[inline]
-    pub(super) fn note_motion(&mut self, s: usize, exact: &SimdBox) {
-        let (speed, fast) = motion(&self.store.exact[s], exact, self.store.stamp[s], self.now);
+    pub(super) fn note_motion(&mut self, s: usize, exact: &SimdBox) -> Vec3A {
+        let d = displacement(&self.store.exact[s], exact, self.store.stamp[s], self.now);
+        let speed = d.abs().max_element();
         self.store.speed[s] = speed;
-        self.fast_movers += usize::from(fast);
+        self.fast_movers += usize::from(outgrows_min_margin(speed, exact.extent().max_element()));
         self.store.stamp[s] = self.now;
+        d
     }
 
     /// In the incremental regime: keeps the fat box if it still holds `exact` (and classifies
-    /// the slot quiet or loud, see [`super::slack::settle`]), else gives the slot a new one,
-    /// which its structure holds from now on.
+    /// the slot quiet or loud, see [`super::slack::settle`]), else gives the slot a new one
+    /// stretched along its `motion` per step, which its structure holds from now on.
     #[inline]
-    pub(super) fn refresh_fat(&mut self, slot: u32, exact: &SimdBox) {
+    pub(super) fn refresh_fat(&mut self, slot: u32, exact: &SimdBox, motion: Vec3A) {
         if self.store.held[slot as usize].contains(exact) {
             self.mark(slot, flag::MOVED);
             super::slack::settle(&mut self.store, &mut self.loud, slot);
         } else {
-            self.hold(slot, true);
+            self.hold_moving(slot, motion);
             self.mark(slot, flag::MOVED | flag::ESCAPED);
         }
     }
@@ -95,13 +115,25 @@ impl BroadPhase {
     /// writes it to the slot's structure.
     #[inline]
     pub(super) fn hold(&mut self, slot: u32, fat: bool) {
+        self.hold_held(slot, fat, Vec3A::ZERO);
+    }
+
+    /// Gives `slot` a new fat box stretched along its `motion` per step (see
+    /// [`BroadPhase::held_shape`]) and writes it to the slot's structure.
+    #[inline]
+    pub(super) fn hold_moving(&mut self, slot: u32, motion: Vec3A) {
+        self.hold_held(slot, true, motion);
+    }
+
+    #[inline]
+    fn hold_held(&mut self, slot: u32, fat: bool, motion: Vec3A) {
         let s = slot as usize;
-        let held = self.held_shape(slot, fat);
+        let held = self.held_shape(slot, fat, motion);
         self.store.set_held(s, held.aabb);
         let key = self.store.key(slot);
         // The key is live: the structures hold every live proxy under its key.
         let placed = match self.store.shape[s] {
-            Shape::Sphere { center, .. } => self.octree.update_checked(key, center, held.radius),
+            Shape::Sphere { .. } => self.octree.update_checked(key, held.center, held.radius),
             Shape::Body { kind, .. } => {
                 if kind == BodyKind::Dynamic && fat {
                     self.dynamic_escapes += 1;
@@ -135,8 +167,15 @@ impl BroadPhase {
     /// What `slot`'s structure should hold: its exact box, or with `fat` one grown by a
     /// margin sized by the slot's speed. A sphere is held as a sphere of the same centre and
     /// a larger radius, whose box contains the exact one (rounding is monotone).
+    ///
+    /// With a `motion` per step (non-zero only for a proxy that just left its fat box) whose
+    /// speed outgrows the smallest margin, the fat box is the one swept over
+    /// [`PREDICT_STEPS`] of that motion instead, grown on every side by
+    /// [`PREDICT_SIDE_STEPS`] of the speed; a sphere is held as the sphere around that sweep
+    /// (centred half-way along it, its radius grown by half the sweep's length). Where
+    /// rounding would leave the exact box outside it, the centred box is held.
     #[inline]
-    pub(super) fn held_shape(&self, slot: u32, fat: bool) -> Held {
+    pub(super) fn held_shape(&self, slot: u32, fat: bool, motion: Vec3A) -> Held {
         let s = slot as usize;
         let exact = self.store.exact[s];
         let margin = if !fat {
@@ -146,7 +185,14 @@ impl BroadPhase {
         } else {
             let resting = self.now.wrapping_sub(self.store.stamp[s]) > 1;
             let speed = if resting { 0.0 } else { self.store.speed[s] };
-            margin(speed, exact.extent().max_element()) * jitter(slot, self.now)
+            let size = exact.extent().max_element();
+            let j = jitter(slot, self.now);
+            if motion != Vec3A::ZERO && outgrows_min_margin(speed, size) {
+                if let Some(held) = self.predicted(s, &exact, motion * (PREDICT_STEPS * j), speed) {
+                    return held;
+                }
+            }
+            margin(speed, size) * j
         };
         // The exact shape, [`grown`] by the fat margin.
         let exact_shape = match self.store.shape[s] {
@@ -161,6 +207,43 @@ impl BroadPhase {
         };
         grown(exact_shape, margin)
     }
+
+    /// [`BroadPhase::held_shape`]'s box swept along `sweep` for slot `s` of exact box `exact`
+    /// and `speed`, or `None` where it does not contain `exact` (rounding, overflow).
+    #[inline]
+    fn predicted(&self, s: usize, exact: &SimdBox, sweep: Vec3A, speed: f32) -> Option<Held> {
+        let size = exact.extent().max_element();
+        let len = sweep.length();
+        let longest = size * MAX_PREDICT;
+        let sweep = if len > longest {
+            sweep * (longest / len)
+        } else {
+            sweep
+        };
+        let side = (speed * PREDICT_SIDE_STEPS)
+            .min(size * MAX_MARGIN)
+            .max(size * MIN_MARGIN);
+        let held = match self.store.shape[s] {
+            Shape::Sphere { center, radius } => {
+                let r = grown_radius(radius, self.config.margin);
+                let half = sweep * 0.5;
+                grown_sphere((Vec3A::from(center) + half).into(), r, half.length() + side)
+            }
+            Shape::Body { .. } => {
+                let swept = SimdBox {
+                    min: exact.min.min(exact.min + sweep) - Vec3A::splat(side),
+                    max: exact.max.max(exact.max + sweep) + Vec3A::splat(side),
+                };
+                Held {
+                    aabb: swept,
+                    radius: 0.0,
+                    center: Vec3::ZERO,
+                }
+            }
+        };
+        (held.aabb.contains(exact) && held.aabb.min.is_finite() && held.aabb.max.is_finite())
+            .then_some(held)
+    }
 }
 
 /// What a structure holds for a proxy: its box, and for a sphere the radius that box is
@@ -169,6 +252,8 @@ impl BroadPhase {
 pub(super) struct Held {
     pub(super) aabb: SimdBox,
     pub(super) radius: f32,
+    /// For a sphere, the centre the box is `center ± radius` around.
+    pub(super) center: Vec3,
 }
 
 /// The grown-box rule: `shape` grown by `margin`, as a structure holds it. A sphere keeps its
@@ -183,6 +268,7 @@ pub(super) fn grown(shape: Shape, margin: f32) -> Held {
         Shape::Body { aabb, .. } if margin == 0.0 => Held {
             aabb: SimdBox::new(&aabb),
             radius: 0.0,
+            center: Vec3::ZERO,
         },
         Shape::Body { aabb, .. } => {
             let g = aabb.grown(margin);
@@ -193,6 +279,7 @@ pub(super) fn grown(shape: Shape, margin: f32) -> Held {
             Held {
                 aabb: SimdBox::new(&finite),
                 radius: 0.0,
+                center: Vec3::ZERO,
             }
         }
     }
@@ -206,6 +293,7 @@ pub(super) fn grown_sphere(center: Vec3, radius: f32, margin: f32) -> Held {
     Held {
         aabb: SimdBox::from_center_radius(center, radius),
         radius,
+        center,
     }
 }
 

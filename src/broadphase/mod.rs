@@ -455,7 +455,7 @@ impl BroadPhase {
     /// both place proxies here.
     fn place(&mut self, slot: u32) {
         let key = self.store.key(slot);
-        let held = self.held_shape(slot, self.cached);
+        let held = self.held_shape(slot, self.cached, glam::Vec3A::ZERO);
         if self.cached {
             self.store.set_held(slot as usize, held.aabb);
         }

@@ -5,7 +5,8 @@
 //! static BVH for body × body, and sphere × body by queries from the smaller side into the
 //! other's structure. Its cost follows the number of proxies. The **incremental pass** needs
 //! the structures to hold *fat* boxes (each exact box grown by a margin that follows how far
-//! that proxy moves per step) and the sorted list of *candidates*, the pairs of overlapping fat
+//! that proxy moves per step, or swept along its motion once it left one, see
+//! [`super::fat`]) and the sorted list of *candidates*, the pairs of overlapping fat
 //! boxes. Since an exact box lies in its fat box, every overlapping pair is a candidate. A step
 //! then
 //! 1. drops the candidates of proxies that were removed or left their fat box ("escaped"),
