@@ -12,9 +12,9 @@ use glam::Vec3A;
 pub(super) const LOOKAHEAD_STEPS: f32 = 3.0;
 /// A proxy that leaves its fat box while moving gets one stretched along its last motion:
 /// the box it would sweep over this many steps (times the jitter, see [`jitter`]) of that
-/// motion. A body or sphere keeps its velocity from one step to the next far more often than
-/// it turns, so the next escape comes about twice as late as from a box of the same size
-/// centred where the proxy is.
+/// motion, at most [`MAX_PREDICT`] of its size (half of it before the jitter). A body or sphere keeps its velocity from one
+/// step to the next far more often than it turns, so the next escape comes about twice as
+/// late as from a box of the same size centred where the proxy is.
 const PREDICT_STEPS: f32 = 6.0;
 /// The predicted fat box is grown on every side by this many steps of the speed, so that a
 /// proxy that turns does not leave it at once.
@@ -188,7 +188,7 @@ impl BroadPhase {
             let size = exact.extent().max_element();
             let j = jitter(slot, self.now);
             if motion != Vec3A::ZERO && outgrows_min_margin(speed, size) {
-                if let Some(held) = self.predicted(s, &exact, motion * (PREDICT_STEPS * j), speed) {
+                if let Some(held) = self.predicted(s, &exact, motion * PREDICT_STEPS, j, speed) {
                     return held;
                 }
             }
@@ -208,18 +208,28 @@ impl BroadPhase {
         grown(exact_shape, margin)
     }
 
-    /// [`BroadPhase::held_shape`]'s box swept along `sweep` for slot `s` of exact box `exact`
-    /// and `speed`, or `None` where it does not contain `exact` (rounding, overflow).
+    /// [`BroadPhase::held_shape`]'s box swept along `sweep` (times `jitter`) for slot `s` of
+    /// exact box `exact` and `speed`, or `None` where it does not contain `exact` (rounding,
+    /// overflow).
     #[inline]
-    fn predicted(&self, s: usize, exact: &SimdBox, sweep: Vec3A, speed: f32) -> Option<Held> {
+    fn predicted(
+        &self,
+        s: usize,
+        exact: &SimdBox,
+        sweep: Vec3A,
+        jitter: f32,
+        speed: f32,
+    ) -> Option<Held> {
         let size = exact.extent().max_element();
+        // Capped before the jitter, so that capped sweeps keep spread lengths (equal ones
+        // would bring their proxies back in the same later step).
         let len = sweep.length();
-        let longest = size * MAX_PREDICT;
+        let longest = size * MAX_PREDICT * 0.5;
         let sweep = if len > longest {
             sweep * (longest / len)
         } else {
             sweep
-        };
+        } * jitter;
         let side = (speed * PREDICT_SIDE_STEPS)
             .min(size * MAX_MARGIN)
             .max(size * MIN_MARGIN);
