@@ -345,13 +345,20 @@ impl Octree {
                 None => {
                     // No finite region covers the world: keep this one, and wait for twice
                     // the overflow (or spheres) before trying again.
-                    self.regrow.rooted(self.live, None);
+                    let sampled = region::Sampled::of(&self.objs, self.passes.walk.lend().values);
+                    self.regrow.rooted(self.live, None, sampled);
                     self.overflow_after = self.overflow;
                 }
             }
             return;
         }
         if self.regrow.tick() {
+            let sampled = region::Sampled::of(&self.objs, self.passes.walk.lend().values);
+            if self.regrow.sample_unchanged(sampled) {
+                self.regrow.back_off();
+                return;
+            }
+            self.regrow.full_audits += 1;
             match self.propose() {
                 Some(p) if region::worth_it(&self.lattice, &p) => self.reroot(&p),
                 _ => self.regrow.back_off(),
@@ -390,7 +397,8 @@ impl Octree {
             self.overflow += u32::from(at.outside());
             self.link(id, at.node());
         }
-        self.regrow.rooted(self.live, Some(p.span_center));
+        let sampled = region::Sampled::of(&self.objs, self.passes.walk.lend().values);
+        self.regrow.rooted(self.live, Some(p.span_center), sampled);
         self.overflow_after = self.overflow;
         self.reroots += 1;
     }

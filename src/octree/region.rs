@@ -11,7 +11,12 @@
 //! - an audit, run every so many calls to `maintain` (the period doubles each time an audit
 //!   finds nothing to gain, up to [`MAX_AUDIT_PERIOD`]), finds that a fresh region would give
 //!   the typical sphere cells at least [`AUDIT_GAIN`] times smaller (or, strict, larger): the
-//!   spheres shrank, grew, or gathered in a corner of a region chosen for a wider world.
+//!   spheres shrank, grew, or gathered in a corner of a region chosen for a wider world. An
+//!   audit first looks at a sample of at most [`AUDIT_SAMPLE`] spheres (every k-th id) and
+//!   compares its median radius and its span with the same sample's at the last re-root: while
+//!   neither changed by [`AUDIT_SAMPLE_CHANGE`], the typical cells cannot have, and the audit
+//!   ends there, so a world at rest pays O(sample) per audit instead of the full proposal's
+//!   O(n) sorts (a pause of several steps' work in a large resting world).
 //!
 //! The cube. Let `r` be the median radius of the spheres and `c = CELL_DIAMETERS · 2r` the
 //! cell a sphere of that radius should get. The cube's side is `c · 2^k` for the least `k` that
@@ -72,6 +77,12 @@ const FIRST_AUDIT_PERIOD: u32 = 16;
 const MAX_AUDIT_PERIOD: u32 = 1024;
 /// An audit re-roots when a fresh region changes the median sphere's cell by this factor.
 const AUDIT_GAIN: f32 = 2.0;
+/// An audit samples at most this many spheres before it computes a full proposal.
+const AUDIT_SAMPLE: usize = 4096;
+/// An audit computes a full proposal once its sample's median radius or span changed by this
+/// factor since the last re-root (well below [`AUDIT_GAIN`]: the sample's figures are
+/// estimates).
+const AUDIT_SAMPLE_CHANGE: f32 = 1.25;
 /// Cells are doubled past the median sphere's while the spheres per occupied cell of the
 /// doubled size stay below this: a sparse world gets cells near its spacing, so its spheres
 /// share node pages and neighbour lookups instead of each touching pages of its own, while a
@@ -112,6 +123,42 @@ pub(super) struct Regrow {
     /// Calls to `maintain` left until the next audit, and the current period.
     countdown: u32,
     period: u32,
+    /// The audit sample's figures at the last re-root, if one was taken.
+    sampled: Option<Sampled>,
+    /// Audits that went on past their sample to a full proposal (a count for tests).
+    pub(super) full_audits: u32,
+}
+
+/// An audit's sample of the spheres: its median radius and the largest extent of its span.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Sampled {
+    radius: f32,
+    side: f32,
+}
+
+impl Sampled {
+    /// Every k-th id's sphere of `objs` (holes skipped), k chosen so that at most
+    /// [`AUDIT_SAMPLE`] ids are read; `None` if it holds none. `s` is scratch.
+    pub(super) fn of(objs: &[Obj], s: &mut Vec<u64>) -> Option<Sampled> {
+        let stride = objs.len().div_ceil(AUDIT_SAMPLE).max(1);
+        let sample = || objs.iter().step_by(stride).filter(|o| o.node != NONE);
+        let radius = median(s, sample().map(|o| o.radius));
+        let span = sample().fold(Aabb::EMPTY, |b, o| b.union(&o.aabb()));
+        let side = span.extent().max_element();
+        (!s.is_empty()).then_some(Sampled { radius, side })
+    }
+
+    /// True if `self` is within [`AUDIT_SAMPLE_CHANGE`] of `then` in both figures (a
+    /// non-finite figure never is).
+    fn unchanged_since(&self, then: &Sampled) -> bool {
+        let near = |a: f32, b: f32| {
+            a.is_finite()
+                && b.is_finite()
+                && a <= b * AUDIT_SAMPLE_CHANGE
+                && b <= a * AUDIT_SAMPLE_CHANGE
+        };
+        near(self.radius, then.radius) && near(self.side, then.side)
+    }
 }
 
 /// Scratch a re-root proposal borrows from the pair passes' walk-order buffers (which hold
@@ -125,14 +172,29 @@ pub(super) struct Lent<'a> {
 
 impl Regrow {
     /// Resets the audit clock after a re-root of `live` spheres around `span_center` (`None`:
-    /// no region was found, the tree kept its own).
-    pub(super) fn rooted(&mut self, live: usize, span_center: Option<Vec3>) {
+    /// no region was found, the tree kept its own), whose audit sample is `sampled`.
+    pub(super) fn rooted(
+        &mut self,
+        live: usize,
+        span_center: Option<Vec3>,
+        sampled: Option<Sampled>,
+    ) {
         self.rooted = live;
         if span_center.is_some() {
             self.last_center = span_center;
         }
+        self.sampled = sampled;
         self.period = FIRST_AUDIT_PERIOD;
         self.countdown = FIRST_AUDIT_PERIOD;
+    }
+
+    /// True if an audit may stop at its sample (`now`): the sample at the last re-root is
+    /// known and neither figure changed by [`AUDIT_SAMPLE_CHANGE`] since.
+    pub(super) fn sample_unchanged(&self, now: Option<Sampled>) -> bool {
+        match (now, self.sampled) {
+            (Some(now), Some(then)) => now.unchanged_since(&then),
+            _ => false,
+        }
     }
 
     /// Counts one call to `maintain`; true when an audit is due.

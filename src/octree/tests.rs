@@ -485,6 +485,38 @@ fn a_drifting_world_keeps_its_overflow_bounded() {
     }
 }
 
+/// A world whose spheres keep their sizes and span is audited by its sample alone; once the
+/// radii grow by half, the next audit computes a full proposal.
+#[test]
+fn an_unchanged_world_is_audited_by_its_sample() {
+    for p in BOTH {
+        let gas = gas_at(Vec3::ZERO, 2000, 6);
+        let mut t = Octree::growing(p);
+        let keys: Vec<_> = gas
+            .centers
+            .iter()
+            .map(|&c| t.insert(c, 0.5).unwrap())
+            .collect();
+        t.maintain();
+        // The audits at calls 16, 48, 112, 240 and 496 after the re-root.
+        for _ in 0..500 {
+            t.maintain();
+        }
+        assert_eq!(t.regrow.full_audits, 0, "{p:?}");
+        assert_eq!(t.stats().reroots, 1, "{p:?}");
+        for (&k, &c) in keys.iter().zip(&gas.centers) {
+            t.update(k, c, 0.75).unwrap();
+        }
+        // The next audit, at call 1008.
+        for _ in 0..520 {
+            t.maintain();
+        }
+        assert_eq!(t.regrow.full_audits, 1, "{p:?}");
+        assert_eq!(sorted_pairs(&mut t), brute::pairs(&proxies(&t)));
+        t.validate();
+    }
+}
+
 /// When the spheres shrink a hundredfold, an audit notices the cells no longer fit them and
 /// re-roots; a fixed-region tree never re-roots.
 #[test]
