@@ -402,10 +402,11 @@ const TREE_BIT: u32 = 1 << 31;
 /// [`Bvh::ray_candidates`] over the boxes of `N` (one or two) trees in one walk: the trees'
 /// roots are the children of a virtual root, pushed on one stack of `(node, entry t)` farther
 /// first (the first tree popped first on a tie), each node tagged with its tree
-/// ([`TREE_BIT`]); each interior node's children are pushed farther first too, and a node
-/// popped with an entry behind `best` is skipped. Each box of each tree is visited at most once
-/// (a tree's boxes lie in its leaves' disjoint ranges), and one is skipped only if its
-/// entry, no smaller than its node's, lies behind `best`.
+/// ([`TREE_BIT`]). At an interior node the walk goes on into the nearer child the segment
+/// enters by `best` and pushes the farther one; a node popped with an entry behind `best` is
+/// skipped. Each box of each tree is visited at most once (a tree's boxes lie in its leaves'
+/// disjoint ranges), and one is skipped only if its entry, no smaller than its node's, lies
+/// behind `best`.
 #[inline(always)]
 fn ray_walk<const N: usize>(
     trees: [&Bvh; N],
@@ -419,29 +420,31 @@ fn ray_walk<const N: usize>(
     if !ray_is_valid(origin, dir, max_t) || inflate.is_nan() || inflate < 0.0 {
         return;
     }
-    // A ray's leaf test skips the growth by zero ([`Slab::group_mask`]).
-    if inflate == 0.0 {
-        ray_walk_in::<N, false>(trees, origin, dir, max_t, inflate, visit);
-    } else {
-        ray_walk_in::<N, true>(trees, origin, dir, max_t, inflate, visit);
+    // A ray's tests skip the growth by zero ([`Slab::group_mask`]), and a segment with no
+    // zero direction component takes the NaN-free tests.
+    let slab = Slab::new(origin, dir, inflate);
+    match (inflate == 0.0, slab.finite) {
+        (true, true) => ray_walk_in::<N, false, true>(trees, &slab, max_t, visit),
+        (true, false) => ray_walk_in::<N, false, false>(trees, &slab, max_t, visit),
+        (false, true) => ray_walk_in::<N, true, true>(trees, &slab, max_t, visit),
+        (false, false) => ray_walk_in::<N, true, false>(trees, &slab, max_t, visit),
     }
 }
 
-/// [`ray_walk`] of a valid segment, with `INFLATED` false iff `inflate` is 0.
+/// [`ray_walk`] of a valid segment, with `INFLATED` false iff `slab.inflate` is 0 and
+/// `FINITE` iff `slab.finite`.
 #[inline(always)]
-fn ray_walk_in<const N: usize, const INFLATED: bool>(
+fn ray_walk_in<const N: usize, const INFLATED: bool, const FINITE: bool>(
     trees: [&Bvh; N],
-    origin: Vec3,
-    dir: Vec3,
+    slab: &Slab,
     max_t: f32,
-    inflate: f32,
     mut visit: impl FnMut(ProxyKey, &Aabb) -> f32,
 ) {
-    let slab = Slab::new(origin, dir, inflate);
-    let entry = |b: SimdBox, limit: f32| slab.entry(&b, limit);
+    debug_assert!(FINITE == slab.finite && INFLATED == (slab.inflate != 0.0));
+    let entry = |b: &SimdBox, limit: f32| slab.entry_or_miss::<INFLATED, FINITE>(b, limit);
     let mut best = max_t;
     let mut consider = |key: ProxyKey, b: &SimdBox, best: &mut f32| {
-        if !key.is_null() && entry(*b, *best).is_some() {
+        if !key.is_null() && entry(b, *best).1 {
             *best = best.min(visit(key, &b.aabb()));
         }
     };
@@ -450,30 +453,33 @@ fn ray_walk_in<const N: usize, const INFLATED: bool>(
             consider(key, b, &mut best);
         }
     }
-    let mut stack = SmallStack::<(u32, f32), INLINE_STACK>::new((0, 0.0));
+    let mut stack = RayStack::new();
     // The virtual root's children: the roots the segment enters, the nearer pushed last.
-    let mut roots = [(0, f32::INFINITY); N];
-    let mut entered = 0;
+    let mut roots = [((0, f32::INFINITY), false); N];
     for (k, tree) in trees.iter().enumerate() {
         debug_assert!(tree.nodes.len() <= TREE_BIT as usize);
-        if let Some(t) = tree.nodes.first().and_then(|r| entry(r.bounds(), best)) {
-            roots[entered] = (k as u32 * TREE_BIT, t);
-            entered += 1;
+        if let Some(root) = tree.nodes.first() {
+            let (t, enters) = entry(&root.bounds(), best);
+            roots[k] = ((k as u32 * TREE_BIT, t), enters);
         }
     }
-    let roots = &mut roots[..entered];
-    if let [first, second] = roots
-        && first.1 <= second.1
+    if let [first, second] = &mut roots[..]
+        && first.0.1 <= second.0.1
     {
         core::mem::swap(first, second);
     }
-    for &root in roots.iter() {
-        stack.push(root);
-    }
-    while let Some((tagged, t_enter)) = stack.pop() {
-        if t_enter > best {
-            continue;
+    for (root, enters) in roots {
+        if enters {
+            stack.push(root);
         }
+    }
+    // The node being entered: the nearer entered child of the last interior node, taken
+    // without the stack's round trip, else the top of the stack not behind `best`.
+    let mut next = None;
+    loop {
+        let Some((tagged, _)) = next.take().or_else(|| stack.pop_before(best)) else {
+            break;
+        };
         let (tag, n) = (tagged & TREE_BIT, tagged & !TREE_BIT);
         // `% N`: an index into `trees` that needs no bounds check.
         let tree = trees[(tag / TREE_BIT) as usize % N];
@@ -483,7 +489,7 @@ fn ray_walk_in<const N: usize, const INFLATED: bool>(
             match tree.lanes.leaf(range.start, range.len()) {
                 // Four boxes per test; each that passes is tested again (it may lie
                 // behind a hit found since).
-                Some(leaf) if slab.finite => {
+                Some(leaf) if FINITE => {
                     let mut m = 0u64;
                     for (j, group) in leaf.blocks.iter().enumerate() {
                         m |= u64::from(slab.group_mask::<INFLATED>(group, best)) << (GROUP * j);
@@ -505,25 +511,110 @@ fn ray_walk_in<const N: usize, const INFLATED: bool>(
             continue;
         }
         // Nodes are read as one 16-byte load per corner (`Node::bounds`), whose fourth lane
-        // the slab test ignores.
-        let node_entry = |c: u32| entry(tree.nodes[c as usize].bounds(), best);
+        // the slab test ignores. The nearer entered child is entered next (`a` on a tie),
+        // the farther one pushed.
         let (a, b) = node.children(n);
-        let (ta, tb) = (node_entry(a), node_entry(b));
-        let (a, b) = (a | tag, b | tag);
-        match (ta, tb) {
-            (Some(ta), Some(tb)) if tb < ta => {
-                stack.push((a, ta));
-                stack.push((b, tb));
+        let (ta, a_in) = entry(&tree.nodes[a as usize].bounds(), best);
+        let (tb, b_in) = entry(&tree.nodes[b as usize].bounds(), best);
+        let (a, b) = ((a | tag, ta), (b | tag, tb));
+        next = match (a_in, b_in) {
+            (true, true) => {
+                let (near, far) = if tb < ta { (b, a) } else { (a, b) };
+                stack.push(far);
+                Some(near)
             }
-            (Some(ta), Some(tb)) => {
-                stack.push((b, tb));
-                stack.push((a, ta));
-            }
-            (Some(ta), None) => stack.push((a, ta)),
-            (None, Some(tb)) => stack.push((b, tb)),
-            (None, None) => {}
+            (true, false) => Some(a),
+            (false, true) => Some(b),
+            (false, false) => None,
+        };
+    }
+}
+
+impl Slab {
+    /// [`Slab::entry`] of `b` by `limit` as its `t` and whether the segment enters (the `t`
+    /// of a miss is unspecified). `FINITE` (iff [`Slab::finite`]) takes the NaN-free test,
+    /// without a branch on the answer; `INFLATED` false skips the growth by zero.
+    #[inline(always)]
+    fn entry_or_miss<const INFLATED: bool, const FINITE: bool>(
+        &self,
+        b: &SimdBox,
+        limit: f32,
+    ) -> (f32, bool) {
+        debug_assert!(FINITE == self.finite && (INFLATED || self.inflate == 0.0));
+        if !FINITE {
+            return self
+                .entry(b, limit)
+                .map_or((f32::INFINITY, false), |t| (t, true));
+        }
+        let b = if INFLATED { b.grown(self.inflate) } else { *b };
+        let t1 = (b.min - self.origin) * self.inv;
+        let t2 = (b.max - self.origin) * self.inv;
+        // Never NaN (see [`Slab`]): plain compares clamp them.
+        let near = t1.min(t2).max_element();
+        let far = t1.max(t2).min_element();
+        let near = if near > 0.0 { near } else { 0.0 };
+        let far = if far < limit { far } else { limit };
+        (near, near <= far)
+    }
+}
+
+/// Entries [`RayStack`] keeps inline before it spills to the heap (as [`INLINE_STACK`]).
+const RAY_STACK: usize = INLINE_STACK;
+
+/// The LIFO stack of `(node, entry t)` of [`ray_walk`], with [`RAY_STACK`] inline entries
+/// and a heap `Vec` for the rest, so a walk does not allocate unless the trees are deeper
+/// than that.
+struct RayStack {
+    buf: [(u32, f32); RAY_STACK],
+    len: usize,
+    /// Entries pushed while `buf` was full; always newer than all of `buf`.
+    spill: Vec<(u32, f32)>,
+}
+
+impl RayStack {
+    fn new() -> Self {
+        RayStack {
+            buf: [(0, 0.0); RAY_STACK],
+            len: 0,
+            spill: Vec::new(),
         }
     }
+
+    #[inline(always)]
+    fn push(&mut self, x: (u32, f32)) {
+        if let Some(slot) = self.buf.get_mut(self.len) {
+            *slot = x;
+            self.len += 1;
+        } else {
+            spill_push(&mut self.spill, x);
+        }
+    }
+
+    /// Pops entries until one whose `t` is not behind `best`, and returns it.
+    #[inline(always)]
+    fn pop_before(&mut self, best: f32) -> Option<(u32, f32)> {
+        loop {
+            // The spill is only ever non-empty while `buf` is full.
+            let x = if self.len == RAY_STACK
+                && let Some(x) = self.spill.pop()
+            {
+                x
+            } else {
+                self.len = self.len.checked_sub(1)?;
+                *self.buf.get(self.len)?
+            };
+            if x.1 <= best {
+                return Some(x);
+            }
+        }
+    }
+}
+
+/// [`RayStack::push`] past the inline entries, out of the hot loop.
+#[cold]
+#[inline(never)]
+fn spill_push(spill: &mut Vec<(u32, f32)>, x: (u32, f32)) {
+    spill.push(x);
 }
 
 #[cfg(test)]
