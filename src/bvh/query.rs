@@ -394,16 +394,11 @@ impl Bvh {
     }
 }
 
-/// The top bit of a node index on the stack of [`ray_walk`] names the tree (of at most two)
-/// the node is in: a tree's node indices stay below `2³¹` (its 32-byte nodes would not fit
-/// memory otherwise).
-const TREE_BIT: u32 = 1 << 31;
-
-/// [`Bvh::ray_candidates`] over the boxes of `N` (one or two) trees in one walk: the trees'
-/// roots are the children of a virtual root, pushed on one stack of `(node, entry t)` farther
-/// first (the first tree popped first on a tie), each node tagged with its tree
-/// ([`TREE_BIT`]). At an interior node the walk goes on into the nearer child the segment
-/// enters by `best` and pushes the farther one; a node popped with an entry behind `best` is
+/// [`Bvh::ray_candidates`] over the boxes of `N` (one or two) trees in one walk: the
+/// trees' roots are the children of a virtual root, entered nearer first (the first tree on a
+/// tie), each depth-first on one stack of `(node, entry t)`. At an interior node the walk goes
+/// on into the nearer child the segment enters by `best` (the first on a tie) and pushes the
+/// farther one; a node (or root) whose entry lies behind `best` when its turn comes is
 /// skipped. Each box of each tree is visited at most once (a tree's boxes lie in its leaves'
 /// disjoint ranges), and one is skipped only if its entry, no smaller than its node's, lies
 /// behind `best`.
@@ -453,80 +448,82 @@ fn ray_walk_in<const N: usize, const INFLATED: bool, const FINITE: bool>(
             consider(key, b, &mut best);
         }
     }
-    let mut stack = RayStack::new();
-    // The virtual root's children: the roots the segment enters, the nearer pushed last.
-    let mut roots = [((0, f32::INFINITY), false); N];
+    // The trees the segment enters by `best`, nearer root first (the first tree on a tie):
+    // a depth-first walk of a virtual root over them would finish the nearer one first.
+    let mut roots = [(0, f32::INFINITY, false); N];
     for (k, tree) in trees.iter().enumerate() {
-        debug_assert!(tree.nodes.len() <= TREE_BIT as usize);
         if let Some(root) = tree.nodes.first() {
             let (t, enters) = entry(&root.bounds(), best);
-            roots[k] = ((k as u32 * TREE_BIT, t), enters);
+            roots[k] = (k, t, enters);
         }
     }
     if let [first, second] = &mut roots[..]
-        && first.0.1 <= second.0.1
+        && second.1 < first.1
     {
         core::mem::swap(first, second);
     }
-    for (root, enters) in roots {
-        if enters {
-            stack.push(root);
-        }
-    }
-    // The node being entered: the nearer entered child of the last interior node, taken
-    // without the stack's round trip, else the top of the stack not behind `best`.
-    let mut next = None;
-    loop {
-        let Some((tagged, _)) = next.take().or_else(|| stack.pop_before(best)) else {
-            break;
-        };
-        let (tag, n) = (tagged & TREE_BIT, tagged & !TREE_BIT);
-        // `% N`: an index into `trees` that needs no bounds check.
-        let tree = trees[(tag / TREE_BIT) as usize % N];
-        let node = &tree.nodes[n as usize];
-        if node.is_leaf() {
-            let range = node.range();
-            match tree.lanes.leaf(range.start, range.len()) {
-                // Four boxes per test; each that passes is tested again (it may lie
-                // behind a hit found since).
-                Some(leaf) if FINITE => {
-                    let mut m = 0u64;
-                    for (j, group) in leaf.blocks.iter().enumerate() {
-                        m |= u64::from(slab.group_mask::<INFLATED>(group, best)) << (GROUP * j);
-                    }
-                    m &= leaf.valid;
-                    let base = range.start - leaf.off;
-                    while m != 0 {
-                        let i = base + m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        consider(tree.keys[i], &tree.boxes[i], &mut best);
-                    }
-                }
-                _ => {
-                    for i in range {
-                        consider(tree.keys[i], &tree.boxes[i], &mut best);
-                    }
-                }
-            }
+    let mut stack = RayStack::new();
+    for (k, t_root, enters) in roots {
+        // A hit in the first tree may lie before the second one's root.
+        if !enters || t_root > best {
             continue;
         }
-        // Nodes are read as one 16-byte load per corner (`Node::bounds`), whose fourth lane
-        // the slab test ignores. The nearer entered child is entered next (`a` on a tie),
-        // the farther one pushed.
-        let (a, b) = node.children(n);
-        let (ta, a_in) = entry(&tree.nodes[a as usize].bounds(), best);
-        let (tb, b_in) = entry(&tree.nodes[b as usize].bounds(), best);
-        let (a, b) = ((a | tag, ta), (b | tag, tb));
-        next = match (a_in, b_in) {
-            (true, true) => {
-                let (near, far) = if tb < ta { (b, a) } else { (a, b) };
-                stack.push(far);
-                Some(near)
+        // `% N`: an index into `trees` that needs no bounds check.
+        let tree = trees[k % N];
+        let nodes = &tree.nodes[..];
+        // The node being entered: the nearer entered child of the last interior node, taken
+        // without the stack's round trip, else the top of the stack not behind `best`.
+        let mut next = Some((0, t_root));
+        while let Some((n, _)) = next.take().or_else(|| stack.pop_before(best)) {
+            let node = &nodes[n as usize];
+            if node.is_leaf() {
+                let range = node.range();
+                match tree.lanes.leaf(range.start, range.len()) {
+                    // Four boxes per test; each that passes is tested again (it may lie
+                    // behind a hit found since).
+                    Some(leaf) if FINITE => {
+                        let mut m = 0u64;
+                        for (j, group) in leaf.blocks.iter().enumerate() {
+                            let hits = slab.group_mask::<INFLATED>(group, best);
+                            m |= u64::from(hits) << (GROUP * j);
+                        }
+                        m &= leaf.valid;
+                        let base = range.start - leaf.off;
+                        while m != 0 {
+                            let i = base + m.trailing_zeros() as usize;
+                            m &= m - 1;
+                            consider(tree.keys[i], &tree.boxes[i], &mut best);
+                        }
+                    }
+                    _ => {
+                        for i in range {
+                            consider(tree.keys[i], &tree.boxes[i], &mut best);
+                        }
+                    }
+                }
+                continue;
             }
-            (true, false) => Some(a),
-            (false, true) => Some(b),
-            (false, false) => None,
-        };
+            // Nodes are read as one 16-byte load per corner (`Node::bounds`), whose fourth
+            // lane the slab test ignores. The nearer entered child is entered next (`a` on a
+            // tie), the farther one pushed. Which child comes next is a branch, not a select:
+            // a predicted branch lets the next node's load start before both slab tests end.
+            // (`next` carries the entry `t` too, as the stack's entries do; with the index
+            // alone the compiler turns the match into selects.)
+            let (a, b) = node.children(n);
+            let (ta, a_in) = entry(&nodes[a as usize].bounds(), best);
+            let (tb, b_in) = entry(&nodes[b as usize].bounds(), best);
+            let (a, b) = ((a, ta), (b, tb));
+            next = match (a_in, b_in) {
+                (true, true) => {
+                    let (near, far) = if tb < ta { (b, a) } else { (a, b) };
+                    stack.push(far);
+                    Some(near)
+                }
+                (true, false) => Some(a),
+                (false, true) => Some(b),
+                (false, false) => None,
+            };
+        }
     }
 }
 
