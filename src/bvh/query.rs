@@ -415,6 +415,10 @@ fn ray_walk<const N: usize>(
     if !ray_is_valid(origin, dir, max_t) || inflate.is_nan() || inflate < 0.0 {
         return;
     }
+    // Empty trees (a world of spheres alone) skip the segment's setup.
+    if trees.iter().all(|t| t.boxes.is_empty()) {
+        return;
+    }
     // A ray's tests skip the growth by zero ([`Slab::group_mask`]), and a segment with no
     // zero direction component takes the NaN-free tests.
     let slab = Slab::new(origin, dir, inflate);
