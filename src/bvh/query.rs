@@ -828,4 +828,259 @@ mod tests {
         }
         assert_eq!(n, 0);
     }
+
+    /// A box of the integer lattice in `[-6, 6]³` (faces shared between neighbours, rays
+    /// along them graze), or a random one.
+    fn lattice_or_random_box(rng: &mut Rng) -> Aabb {
+        if rng.below(2) == 0 {
+            let lo = Vec3::new(
+                rng.below(12) as f32 - 6.0,
+                rng.below(12) as f32 - 6.0,
+                rng.below(12) as f32 - 6.0,
+            );
+            let size = Vec3::new(
+                1.0 + rng.below(2) as f32,
+                1.0 + rng.below(2) as f32,
+                rng.below(3) as f32,
+            );
+            Aabb::new(lo, lo + size)
+        } else {
+            let c = rng.vec3_in(Vec3::splat(-6.0), Vec3::splat(6.0));
+            let half = rng.vec3_in(Vec3::splat(0.05), Vec3::splat(1.5));
+            Aabb::new(c - half, c + half)
+        }
+    }
+
+    /// Two trees over one key space and the test's own record of every live box: `shape` 0
+    /// fills both (built parts several leaves deep, pending inserts, removed and updated
+    /// boxes, and twins: one box under a key in each tree), 1 leaves the second empty, 2
+    /// gives the second only pending boxes, 3 leaves both empty.
+    fn two_trees(seed: u64, shape: u32) -> ([Bvh; 2], BTreeMap<ProxyKey, Aabb>) {
+        let mut rng = Rng::new(seed);
+        let config = BvhConfig {
+            max_leaf_size: 6,
+            ..BvhConfig::default()
+        };
+        let mut trees = [Bvh::new(config).unwrap(), Bvh::new(config).unwrap()];
+        let mut keys = slotmap::SlotMap::<ProxyKey, ()>::with_key();
+        let mut model = BTreeMap::new();
+        let mut owner = BTreeMap::new();
+        let wanted = |t: usize| match shape {
+            0 => true,
+            1 | 2 => t == 0,
+            _ => false,
+        };
+        let mut add = |trees: &mut [Bvh; 2], t: usize, b: Aabb, rng: &mut Rng| {
+            let mut put = |t: usize| {
+                let k = keys.insert(());
+                trees[t].insert_keyed(k, b).unwrap();
+                model.insert(k, b);
+                owner.insert(k, t);
+            };
+            put(t);
+            if rng.below(4) == 0 && wanted(1 - t) {
+                put(1 - t);
+            }
+        };
+        for _ in 0..200 {
+            let t = rng.below(2) as usize;
+            if wanted(t) {
+                let b = lattice_or_random_box(&mut rng);
+                add(&mut trees, t, b, &mut rng);
+            }
+        }
+        for tree in &mut trees {
+            tree.rebuild();
+        }
+        for _ in 0..30 {
+            let t = rng.below(2) as usize;
+            if wanted(t) || (shape == 2 && t == 1) {
+                let b = lattice_or_random_box(&mut rng);
+                add(&mut trees, t, b, &mut rng);
+            }
+        }
+        let live: Vec<ProxyKey> = model.keys().copied().collect();
+        for (j, &k) in live.iter().enumerate() {
+            let t = owner[&k];
+            if j % 9 == 0 {
+                trees[t].remove(k).unwrap();
+                model.remove(&k);
+            } else if j % 7 == 0 {
+                let b = lattice_or_random_box(&mut rng);
+                trees[t].update(k, b).unwrap();
+                model.insert(k, b);
+            }
+        }
+        for tree in &trees {
+            tree.validate();
+        }
+        (trees, model)
+    }
+
+    /// A segment that grazes lattice faces and edges (lattice origin, axis or lattice-diagonal
+    /// direction), starts inside a box (its centre or a corner), has zero length (zero
+    /// direction or `max_t`), starts outside everything (towards the boxes or away), or is
+    /// random.
+    fn hard_segment(rng: &mut Rng, q: u32, boxes: &[Aabb]) -> (Vec3, Vec3, f32) {
+        let axis = [Vec3::X, Vec3::Y, Vec3::Z, Vec3::new(1.0, 1.0, 0.0)][rng.below(4) as usize];
+        let sign = if rng.below(2) == 0 { 1.0 } else { -1.0 };
+        let random_dir = |rng: &mut Rng| rng.vec3_in(Vec3::splat(-1.0), Vec3::splat(1.0));
+        let max_t = match rng.below(4) {
+            0 => f32::INFINITY,
+            1 => rng.range(0.0, 6.0),
+            _ => 30.0,
+        };
+        let lattice = |rng: &mut Rng| {
+            Vec3::new(
+                rng.below(14) as f32 - 7.0,
+                rng.below(14) as f32 - 7.0,
+                rng.below(14) as f32 - 7.0,
+            )
+        };
+        match q % 5 {
+            0 => (lattice(rng), axis * sign, max_t),
+            1 if !boxes.is_empty() => {
+                let b = boxes[rng.below(boxes.len() as u32) as usize];
+                let o = if rng.below(2) == 0 { b.center() } else { b.min };
+                (o, random_dir(rng), max_t)
+            }
+            2 => {
+                let o = rng.vec3_in(Vec3::splat(-8.0), Vec3::splat(8.0));
+                if rng.below(2) == 0 {
+                    (o, Vec3::ZERO, max_t)
+                } else {
+                    (o, random_dir(rng), 0.0)
+                }
+            }
+            3 => {
+                let o = random_dir(rng).normalize_or(Vec3::X) * 40.0;
+                let d = if rng.below(3) == 0 { o } else { -o };
+                (o, d * 0.05, max_t)
+            }
+            _ => (
+                rng.vec3_in(Vec3::splat(-8.0), Vec3::splat(8.0)),
+                random_dir(rng),
+                max_t,
+            ),
+        }
+    }
+
+    /// The walk over two trees (and over each alone) finds brute force's first hit, the
+    /// same key and `t` (ties to the smaller key), for rays and grown boxes alike, visits
+    /// each box at most once and only boxes the segment enters, whatever the trees hold.
+    #[test]
+    fn two_tree_walk_finds_brute_forces_first_hit() {
+        for shape in 0..4 {
+            let ([a, b], model) = two_trees(40 + u64::from(shape), shape);
+            let boxes: Vec<Aabb> = model.values().copied().collect();
+            let mut rng = Rng::new(404 + u64::from(shape));
+            let mut hits = 0;
+            for q in 0..600 {
+                let (o, d, max_t) = hard_segment(&mut rng, q, &boxes);
+                let inflate = if q % 3 == 0 { rng.range(0.0, 0.6) } else { 0.0 };
+                let inv = inverse_dir(d);
+                let entry = |b: &Aabb| b.grown(inflate).ray_entry(o, inv, max_t);
+                let first = |keys: &mut dyn Iterator<Item = ProxyKey>| {
+                    keys.filter_map(|k| Some((entry(&model[&k])?, k)))
+                        .min_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)))
+                };
+                let walk = |trees: &[&Bvh]| {
+                    let mut seen = BTreeMap::new();
+                    let mut best: Option<(f32, ProxyKey)> = None;
+                    let mut visit = |k: ProxyKey, aabb: &Aabb| {
+                        assert_eq!(model.get(&k), Some(aabb), "query {q}: a stale box");
+                        assert!(seen.insert(k, ()).is_none(), "query {q}: visited twice");
+                        let t = entry(aabb);
+                        assert!(t.is_some(), "query {q}: visited a box it misses");
+                        let t = t.unwrap_or(f32::NAN);
+                        if best.is_none_or(|(bt, bk)| (t, k) < (bt, bk)) {
+                            best = Some((t, k));
+                        }
+                        t
+                    };
+                    match trees {
+                        [one] => one.ray_candidates(o, d, max_t, inflate, &mut visit),
+                        [x, y] => Bvh::ray_candidates_both(x, y, o, d, max_t, inflate, &mut visit),
+                        _ => unreachable!(),
+                    }
+                    best
+                };
+                let want = first(&mut model.keys().copied());
+                hits += usize::from(want.is_some());
+                let ctx = format!("shape {shape} query {q}: {o} {d} {max_t} {inflate}");
+                assert_eq!(walk(&[&a, &b]), want, "{ctx}");
+                assert_eq!(walk(&[&b, &a]), want, "{ctx}, trees swapped");
+                let only_a = first(&mut model.keys().copied().filter(|&k| a.contains(k)));
+                assert_eq!(walk(&[&a]), only_a, "{ctx}, first tree alone");
+            }
+            // The worlds that have boxes are hit by most segments.
+            assert_eq!(hits > 200, shape != 3, "shape {shape}: {hits} hits");
+        }
+    }
+
+    /// The ray stack is LIFO across its spill to the heap, and `pop_before` skips (and
+    /// drops) the entries behind `best`, ties kept.
+    #[test]
+    fn ray_stack_spills_in_order_and_skips_what_lies_behind() {
+        let mut stack = RayStack::new();
+        let n = RAY_STACK as u32 + 40;
+        for i in 0..n {
+            stack.push((i, (i % 10) as f32));
+        }
+        let mut popped = Vec::new();
+        while let Some((i, t)) = stack.pop_before(4.0) {
+            assert!(t <= 4.0);
+            popped.push(i);
+        }
+        let want: Vec<u32> = (0..n).rev().filter(|i| i % 10 <= 4).collect();
+        assert_eq!(popped, want);
+        stack.push((7, 1.0));
+        assert_eq!(stack.pop_before(1.0), Some((7, 1.0)));
+        assert_eq!(stack.pop_before(f32::INFINITY), None);
+    }
+
+    /// A tree deeper than the inline stack (middle splits of exponentially spaced boxes peel
+    /// one box per level): segments along the line from its small end push one farther child
+    /// per level, so the walk spills, and still find brute force's first hit.
+    #[test]
+    fn deep_tree_rays_spill_and_equal_brute_force() {
+        let boxes: Vec<Aabb> = (0..120)
+            .map(|i| {
+                let x = 2f32.powi(i - 20);
+                Aabb::new(Vec3::new(x, 0.0, 0.0), Vec3::new(x * 1.5, 1.0, 1.0))
+            })
+            .collect();
+        let config = BvhConfig {
+            split: crate::bvh::SplitMethod::Middle,
+            max_leaf_size: 1,
+            ..BvhConfig::default()
+        };
+        let (bvh, keys) = Bvh::from_aabbs(config, &boxes).unwrap();
+        assert!(bvh.stats().depth > RAY_STACK, "{}", bvh.stats().depth);
+        let mut rng = Rng::new(9);
+        for q in 0..200 {
+            let along = if q % 2 == 0 { Vec3::X } else { -Vec3::X };
+            let o = match q % 4 {
+                0 => Vec3::new(-1.0, 0.5, 0.5),
+                1 => Vec3::new(2f32.powi(101), 0.5, 0.5),
+                _ => Vec3::new(2f32.powi(rng.below(100) as i32 - 20), 0.5, 0.5),
+            };
+            // Exactly along the line (the test for zero direction components), or off it
+            // by too little to leave the boxes before the last (no zero component), or by
+            // enough to leave them early.
+            let off = [0.0, 1e-38, 1e-3][rng.below(3) as usize];
+            let d = along + Vec3::new(0.0, rng.range(-off, off), rng.range(-off, off));
+            let inv = inverse_dir(d);
+            let want = keys
+                .iter()
+                .zip(&boxes)
+                .filter_map(|(&k, b)| Some((k, b.ray_entry(o, inv, f32::INFINITY)?)))
+                .min_by(|x, y| x.1.total_cmp(&y.1).then(x.0.cmp(&y.0)));
+            assert_eq!(
+                bvh.cast_ray(o, d, f32::INFINITY),
+                want,
+                "query {q}: {o} {d}"
+            );
+        }
+    }
 }
