@@ -394,18 +394,14 @@ impl Bvh {
     }
 }
 
-/// The top bit of a node index on the stack of [`ray_walk`] names the tree (of at most two)
-/// the node is in: a tree's node indices stay below `2³¹` (its 32-byte nodes would not fit
-/// memory otherwise).
-const TREE_BIT: u32 = 1 << 31;
-
-/// [`Bvh::ray_candidates`] over the boxes of `N` (one or two) trees in one walk: the trees'
-/// roots are the children of a virtual root, pushed on one stack of `(node, entry t)` farther
-/// first (the first tree popped first on a tie), each node tagged with its tree
-/// ([`TREE_BIT`]); each interior node's children are pushed farther first too, and a node
-/// popped with an entry behind `best` is skipped. Each box of each tree is visited at most once
-/// (a tree's boxes lie in its leaves' disjoint ranges), and one is skipped only if its
-/// entry, no smaller than its node's, lies behind `best`.
+/// [`Bvh::ray_candidates`] over the boxes of `N` (one or two) trees in one walk: the
+/// trees' roots are the children of a virtual root, entered nearer first (the first tree on a
+/// tie), each depth-first on one stack of `(node, entry t)`. At an interior node the walk goes
+/// on into the nearer child the segment enters by `best` (the first on a tie) and pushes the
+/// farther one; a node (or root) whose entry lies behind `best` when its turn comes is
+/// skipped. Each box of each tree is visited at most once (a tree's boxes lie in its leaves'
+/// disjoint ranges), and one is skipped only if its entry, no smaller than its node's, lies
+/// behind `best`.
 #[inline(always)]
 fn ray_walk<const N: usize>(
     trees: [&Bvh; N],
@@ -419,29 +415,35 @@ fn ray_walk<const N: usize>(
     if !ray_is_valid(origin, dir, max_t) || inflate.is_nan() || inflate < 0.0 {
         return;
     }
-    // A ray's leaf test skips the growth by zero ([`Slab::group_mask`]).
-    if inflate == 0.0 {
-        ray_walk_in::<N, false>(trees, origin, dir, max_t, inflate, visit);
-    } else {
-        ray_walk_in::<N, true>(trees, origin, dir, max_t, inflate, visit);
+    // Empty trees (a world of spheres alone) skip the segment's setup.
+    if trees.iter().all(|t| t.boxes.is_empty()) {
+        return;
+    }
+    // A ray's tests skip the growth by zero ([`Slab::group_mask`]), and a segment with no
+    // zero direction component takes the NaN-free tests.
+    let slab = Slab::new(origin, dir, inflate);
+    match (inflate == 0.0, slab.finite) {
+        (true, true) => ray_walk_in::<N, false, true>(trees, &slab, max_t, visit),
+        (true, false) => ray_walk_in::<N, false, false>(trees, &slab, max_t, visit),
+        (false, true) => ray_walk_in::<N, true, true>(trees, &slab, max_t, visit),
+        (false, false) => ray_walk_in::<N, true, false>(trees, &slab, max_t, visit),
     }
 }
 
-/// [`ray_walk`] of a valid segment, with `INFLATED` false iff `inflate` is 0.
+/// [`ray_walk`] of a valid segment, with `INFLATED` false iff `slab.inflate` is 0 and
+/// `FINITE` iff `slab.finite`.
 #[inline(always)]
-fn ray_walk_in<const N: usize, const INFLATED: bool>(
+fn ray_walk_in<const N: usize, const INFLATED: bool, const FINITE: bool>(
     trees: [&Bvh; N],
-    origin: Vec3,
-    dir: Vec3,
+    slab: &Slab,
     max_t: f32,
-    inflate: f32,
     mut visit: impl FnMut(ProxyKey, &Aabb) -> f32,
 ) {
-    let slab = Slab::new(origin, dir, inflate);
-    let entry = |b: SimdBox, limit: f32| slab.entry(&b, limit);
+    debug_assert!(FINITE == slab.finite && INFLATED == (slab.inflate != 0.0));
+    let entry = |b: &SimdBox, limit: f32| slab.entry_or_miss::<INFLATED, FINITE>(b, limit);
     let mut best = max_t;
     let mut consider = |key: ProxyKey, b: &SimdBox, best: &mut f32| {
-        if !key.is_null() && entry(*b, *best).is_some() {
+        if !key.is_null() && entry(b, *best).1 {
             *best = best.min(visit(key, &b.aabb()));
         }
     };
@@ -450,80 +452,170 @@ fn ray_walk_in<const N: usize, const INFLATED: bool>(
             consider(key, b, &mut best);
         }
     }
-    let mut stack = SmallStack::<(u32, f32), INLINE_STACK>::new((0, 0.0));
-    // The virtual root's children: the roots the segment enters, the nearer pushed last.
-    let mut roots = [(0, f32::INFINITY); N];
-    let mut entered = 0;
+    // The trees the segment enters by `best`, nearer root first (the first tree on a tie):
+    // a depth-first walk of a virtual root over them would finish the nearer one first.
+    let mut roots = [(0, f32::INFINITY, false); N];
     for (k, tree) in trees.iter().enumerate() {
-        debug_assert!(tree.nodes.len() <= TREE_BIT as usize);
-        if let Some(t) = tree.nodes.first().and_then(|r| entry(r.bounds(), best)) {
-            roots[entered] = (k as u32 * TREE_BIT, t);
-            entered += 1;
+        if let Some(root) = tree.nodes.first() {
+            let (t, enters) = entry(&root.bounds(), best);
+            roots[k] = (k, t, enters);
         }
     }
-    let roots = &mut roots[..entered];
-    if let [first, second] = roots
-        && first.1 <= second.1
+    if let [first, second] = &mut roots[..]
+        && second.1 < first.1
     {
         core::mem::swap(first, second);
     }
-    for &root in roots.iter() {
-        stack.push(root);
-    }
-    while let Some((tagged, t_enter)) = stack.pop() {
-        if t_enter > best {
+    let mut stack = RayStack::new();
+    for (k, t_root, enters) in roots {
+        // A hit in the first tree may lie before the second one's root.
+        if !enters || t_root > best {
             continue;
         }
-        let (tag, n) = (tagged & TREE_BIT, tagged & !TREE_BIT);
         // `% N`: an index into `trees` that needs no bounds check.
-        let tree = trees[(tag / TREE_BIT) as usize % N];
-        let node = &tree.nodes[n as usize];
-        if node.is_leaf() {
-            let range = node.range();
-            match tree.lanes.leaf(range.start, range.len()) {
-                // Four boxes per test; each that passes is tested again (it may lie
-                // behind a hit found since).
-                Some(leaf) if slab.finite => {
-                    let mut m = 0u64;
-                    for (j, group) in leaf.blocks.iter().enumerate() {
-                        m |= u64::from(slab.group_mask::<INFLATED>(group, best)) << (GROUP * j);
+        let tree = trees[k % N];
+        let nodes = &tree.nodes[..];
+        // The node being entered: the nearer entered child of the last interior node, taken
+        // without the stack's round trip, else the top of the stack not behind `best`.
+        let mut next = Some((0, t_root));
+        while let Some((n, _)) = next.take().or_else(|| stack.pop_before(best)) {
+            let node = &nodes[n as usize];
+            if node.is_leaf() {
+                let range = node.range();
+                match tree.lanes.leaf(range.start, range.len()) {
+                    // Four boxes per test; each that passes is tested again (it may lie
+                    // behind a hit found since).
+                    Some(leaf) if FINITE => {
+                        let mut m = 0u64;
+                        for (j, group) in leaf.blocks.iter().enumerate() {
+                            let hits = slab.group_mask::<INFLATED>(group, best);
+                            m |= u64::from(hits) << (GROUP * j);
+                        }
+                        m &= leaf.valid;
+                        let base = range.start - leaf.off;
+                        while m != 0 {
+                            let i = base + m.trailing_zeros() as usize;
+                            m &= m - 1;
+                            consider(tree.keys[i], &tree.boxes[i], &mut best);
+                        }
                     }
-                    m &= leaf.valid;
-                    let base = range.start - leaf.off;
-                    while m != 0 {
-                        let i = base + m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        consider(tree.keys[i], &tree.boxes[i], &mut best);
+                    _ => {
+                        for i in range {
+                            consider(tree.keys[i], &tree.boxes[i], &mut best);
+                        }
                     }
                 }
-                _ => {
-                    for i in range {
-                        consider(tree.keys[i], &tree.boxes[i], &mut best);
-                    }
+                continue;
+            }
+            // Nodes are read as one 16-byte load per corner (`Node::bounds`), whose fourth
+            // lane the slab test ignores. The nearer entered child is entered next (`a` on a
+            // tie), the farther one pushed. Which child comes next is a branch, not a select:
+            // a predicted branch lets the next node's load start before both slab tests end.
+            // (`next` carries the entry `t` too, as the stack's entries do; with the index
+            // alone the compiler turns the match into selects.)
+            let (a, b) = node.children(n);
+            let (ta, a_in) = entry(&nodes[a as usize].bounds(), best);
+            let (tb, b_in) = entry(&nodes[b as usize].bounds(), best);
+            let (a, b) = ((a, ta), (b, tb));
+            next = match (a_in, b_in) {
+                (true, true) => {
+                    let (near, far) = if tb < ta { (b, a) } else { (a, b) };
+                    stack.push(far);
+                    Some(near)
                 }
-            }
-            continue;
-        }
-        // Nodes are read as one 16-byte load per corner (`Node::bounds`), whose fourth lane
-        // the slab test ignores.
-        let node_entry = |c: u32| entry(tree.nodes[c as usize].bounds(), best);
-        let (a, b) = node.children(n);
-        let (ta, tb) = (node_entry(a), node_entry(b));
-        let (a, b) = (a | tag, b | tag);
-        match (ta, tb) {
-            (Some(ta), Some(tb)) if tb < ta => {
-                stack.push((a, ta));
-                stack.push((b, tb));
-            }
-            (Some(ta), Some(tb)) => {
-                stack.push((b, tb));
-                stack.push((a, ta));
-            }
-            (Some(ta), None) => stack.push((a, ta)),
-            (None, Some(tb)) => stack.push((b, tb)),
-            (None, None) => {}
+                (true, false) => Some(a),
+                (false, true) => Some(b),
+                (false, false) => None,
+            };
         }
     }
+}
+
+impl Slab {
+    /// [`Slab::entry`] of `b` by `limit` as its `t` and whether the segment enters (the `t`
+    /// of a miss is unspecified). `FINITE` (iff [`Slab::finite`]) takes the NaN-free test,
+    /// without a branch on the answer; `INFLATED` false skips the growth by zero.
+    #[inline(always)]
+    fn entry_or_miss<const INFLATED: bool, const FINITE: bool>(
+        &self,
+        b: &SimdBox,
+        limit: f32,
+    ) -> (f32, bool) {
+        debug_assert!(FINITE == self.finite && (INFLATED || self.inflate == 0.0));
+        if !FINITE {
+            return self
+                .entry(b, limit)
+                .map_or((f32::INFINITY, false), |t| (t, true));
+        }
+        let b = if INFLATED { b.grown(self.inflate) } else { *b };
+        let t1 = (b.min - self.origin) * self.inv;
+        let t2 = (b.max - self.origin) * self.inv;
+        // Never NaN (see [`Slab`]): plain compares clamp them.
+        let near = t1.min(t2).max_element();
+        let far = t1.max(t2).min_element();
+        let near = if near > 0.0 { near } else { 0.0 };
+        let far = if far < limit { far } else { limit };
+        (near, near <= far)
+    }
+}
+
+/// Entries [`RayStack`] keeps inline before it spills to the heap (as [`INLINE_STACK`]).
+const RAY_STACK: usize = INLINE_STACK;
+
+/// The LIFO stack of `(node, entry t)` of [`ray_walk`], with [`RAY_STACK`] inline entries
+/// and a heap `Vec` for the rest, so a walk does not allocate unless the trees are deeper
+/// than that.
+struct RayStack {
+    buf: [(u32, f32); RAY_STACK],
+    len: usize,
+    /// Entries pushed while `buf` was full; always newer than all of `buf`.
+    spill: Vec<(u32, f32)>,
+}
+
+impl RayStack {
+    fn new() -> Self {
+        RayStack {
+            buf: [(0, 0.0); RAY_STACK],
+            len: 0,
+            spill: Vec::new(),
+        }
+    }
+
+    #[inline(always)]
+    fn push(&mut self, x: (u32, f32)) {
+        if let Some(slot) = self.buf.get_mut(self.len) {
+            *slot = x;
+            self.len += 1;
+        } else {
+            spill_push(&mut self.spill, x);
+        }
+    }
+
+    /// Pops entries until one whose `t` is not behind `best`, and returns it.
+    #[inline(always)]
+    fn pop_before(&mut self, best: f32) -> Option<(u32, f32)> {
+        loop {
+            // The spill is only ever non-empty while `buf` is full.
+            let x = if self.len == RAY_STACK
+                && let Some(x) = self.spill.pop()
+            {
+                x
+            } else {
+                self.len = self.len.checked_sub(1)?;
+                *self.buf.get(self.len)?
+            };
+            if x.1 <= best {
+                return Some(x);
+            }
+        }
+    }
+}
+
+/// [`RayStack::push`] past the inline entries, out of the hot loop.
+#[cold]
+#[inline(never)]
+fn spill_push(spill: &mut Vec<(u32, f32)>, x: (u32, f32)) {
+    spill.push(x);
 }
 
 #[cfg(test)]
@@ -735,5 +827,260 @@ mod tests {
             });
         }
         assert_eq!(n, 0);
+    }
+
+    /// A box of the integer lattice in `[-6, 6]³` (faces shared between neighbours, rays
+    /// along them graze), or a random one.
+    fn lattice_or_random_box(rng: &mut Rng) -> Aabb {
+        if rng.below(2) == 0 {
+            let lo = Vec3::new(
+                rng.below(12) as f32 - 6.0,
+                rng.below(12) as f32 - 6.0,
+                rng.below(12) as f32 - 6.0,
+            );
+            let size = Vec3::new(
+                1.0 + rng.below(2) as f32,
+                1.0 + rng.below(2) as f32,
+                rng.below(3) as f32,
+            );
+            Aabb::new(lo, lo + size)
+        } else {
+            let c = rng.vec3_in(Vec3::splat(-6.0), Vec3::splat(6.0));
+            let half = rng.vec3_in(Vec3::splat(0.05), Vec3::splat(1.5));
+            Aabb::new(c - half, c + half)
+        }
+    }
+
+    /// Two trees over one key space and the test's own record of every live box: `shape` 0
+    /// fills both (built parts several leaves deep, pending inserts, removed and updated
+    /// boxes, and twins: one box under a key in each tree), 1 leaves the second empty, 2
+    /// gives the second only pending boxes, 3 leaves both empty.
+    fn two_trees(seed: u64, shape: u32) -> ([Bvh; 2], BTreeMap<ProxyKey, Aabb>) {
+        let mut rng = Rng::new(seed);
+        let config = BvhConfig {
+            max_leaf_size: 6,
+            ..BvhConfig::default()
+        };
+        let mut trees = [Bvh::new(config).unwrap(), Bvh::new(config).unwrap()];
+        let mut keys = slotmap::SlotMap::<ProxyKey, ()>::with_key();
+        let mut model = BTreeMap::new();
+        let mut owner = BTreeMap::new();
+        let wanted = |t: usize| match shape {
+            0 => true,
+            1 | 2 => t == 0,
+            _ => false,
+        };
+        let mut add = |trees: &mut [Bvh; 2], t: usize, b: Aabb, rng: &mut Rng| {
+            let mut put = |t: usize| {
+                let k = keys.insert(());
+                trees[t].insert_keyed(k, b).unwrap();
+                model.insert(k, b);
+                owner.insert(k, t);
+            };
+            put(t);
+            if rng.below(4) == 0 && wanted(1 - t) {
+                put(1 - t);
+            }
+        };
+        for _ in 0..200 {
+            let t = rng.below(2) as usize;
+            if wanted(t) {
+                let b = lattice_or_random_box(&mut rng);
+                add(&mut trees, t, b, &mut rng);
+            }
+        }
+        for tree in &mut trees {
+            tree.rebuild();
+        }
+        for _ in 0..30 {
+            let t = rng.below(2) as usize;
+            if wanted(t) || (shape == 2 && t == 1) {
+                let b = lattice_or_random_box(&mut rng);
+                add(&mut trees, t, b, &mut rng);
+            }
+        }
+        let live: Vec<ProxyKey> = model.keys().copied().collect();
+        for (j, &k) in live.iter().enumerate() {
+            let t = owner[&k];
+            if j % 9 == 0 {
+                trees[t].remove(k).unwrap();
+                model.remove(&k);
+            } else if j % 7 == 0 {
+                let b = lattice_or_random_box(&mut rng);
+                trees[t].update(k, b).unwrap();
+                model.insert(k, b);
+            }
+        }
+        for tree in &trees {
+            tree.validate();
+        }
+        (trees, model)
+    }
+
+    /// A segment that grazes lattice faces and edges (lattice origin, axis or lattice-diagonal
+    /// direction), starts inside a box (its centre or a corner), has zero length (zero
+    /// direction or `max_t`), starts outside everything (towards the boxes or away), or is
+    /// random.
+    fn hard_segment(rng: &mut Rng, q: u32, boxes: &[Aabb]) -> (Vec3, Vec3, f32) {
+        let axis = [Vec3::X, Vec3::Y, Vec3::Z, Vec3::new(1.0, 1.0, 0.0)][rng.below(4) as usize];
+        let sign = if rng.below(2) == 0 { 1.0 } else { -1.0 };
+        let random_dir = |rng: &mut Rng| rng.vec3_in(Vec3::splat(-1.0), Vec3::splat(1.0));
+        let max_t = match rng.below(4) {
+            0 => f32::INFINITY,
+            1 => rng.range(0.0, 6.0),
+            _ => 30.0,
+        };
+        let lattice = |rng: &mut Rng| {
+            Vec3::new(
+                rng.below(14) as f32 - 7.0,
+                rng.below(14) as f32 - 7.0,
+                rng.below(14) as f32 - 7.0,
+            )
+        };
+        match q % 5 {
+            0 => (lattice(rng), axis * sign, max_t),
+            1 if !boxes.is_empty() => {
+                let b = boxes[rng.below(boxes.len() as u32) as usize];
+                let o = if rng.below(2) == 0 { b.center() } else { b.min };
+                (o, random_dir(rng), max_t)
+            }
+            2 => {
+                let o = rng.vec3_in(Vec3::splat(-8.0), Vec3::splat(8.0));
+                if rng.below(2) == 0 {
+                    (o, Vec3::ZERO, max_t)
+                } else {
+                    (o, random_dir(rng), 0.0)
+                }
+            }
+            3 => {
+                let o = random_dir(rng).normalize_or(Vec3::X) * 40.0;
+                let d = if rng.below(3) == 0 { o } else { -o };
+                (o, d * 0.05, max_t)
+            }
+            _ => (
+                rng.vec3_in(Vec3::splat(-8.0), Vec3::splat(8.0)),
+                random_dir(rng),
+                max_t,
+            ),
+        }
+    }
+
+    /// The walk over two trees (and over each alone) finds brute force's first hit, the
+    /// same key and `t` (ties to the smaller key), for rays and grown boxes alike, visits
+    /// each box at most once and only boxes the segment enters, whatever the trees hold.
+    #[test]
+    fn two_tree_walk_finds_brute_forces_first_hit() {
+        for shape in 0..4 {
+            let ([a, b], model) = two_trees(40 + u64::from(shape), shape);
+            let boxes: Vec<Aabb> = model.values().copied().collect();
+            let mut rng = Rng::new(404 + u64::from(shape));
+            let mut hits = 0;
+            for q in 0..600 {
+                let (o, d, max_t) = hard_segment(&mut rng, q, &boxes);
+                let inflate = if q % 3 == 0 { rng.range(0.0, 0.6) } else { 0.0 };
+                let inv = inverse_dir(d);
+                let entry = |b: &Aabb| b.grown(inflate).ray_entry(o, inv, max_t);
+                let first = |keys: &mut dyn Iterator<Item = ProxyKey>| {
+                    keys.filter_map(|k| Some((entry(&model[&k])?, k)))
+                        .min_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)))
+                };
+                let walk = |trees: &[&Bvh]| {
+                    let mut seen = BTreeMap::new();
+                    let mut best: Option<(f32, ProxyKey)> = None;
+                    let mut visit = |k: ProxyKey, aabb: &Aabb| {
+                        assert_eq!(model.get(&k), Some(aabb), "query {q}: a stale box");
+                        assert!(seen.insert(k, ()).is_none(), "query {q}: visited twice");
+                        let t = entry(aabb);
+                        assert!(t.is_some(), "query {q}: visited a box it misses");
+                        let t = t.unwrap_or(f32::NAN);
+                        if best.is_none_or(|(bt, bk)| (t, k) < (bt, bk)) {
+                            best = Some((t, k));
+                        }
+                        t
+                    };
+                    match trees {
+                        [one] => one.ray_candidates(o, d, max_t, inflate, &mut visit),
+                        [x, y] => Bvh::ray_candidates_both(x, y, o, d, max_t, inflate, &mut visit),
+                        _ => unreachable!(),
+                    }
+                    best
+                };
+                let want = first(&mut model.keys().copied());
+                hits += usize::from(want.is_some());
+                let ctx = format!("shape {shape} query {q}: {o} {d} {max_t} {inflate}");
+                assert_eq!(walk(&[&a, &b]), want, "{ctx}");
+                assert_eq!(walk(&[&b, &a]), want, "{ctx}, trees swapped");
+                let only_a = first(&mut model.keys().copied().filter(|&k| a.contains(k)));
+                assert_eq!(walk(&[&a]), only_a, "{ctx}, first tree alone");
+            }
+            // The worlds that have boxes are hit by most segments.
+            assert_eq!(hits > 200, shape != 3, "shape {shape}: {hits} hits");
+        }
+    }
+
+    /// The ray stack is LIFO across its spill to the heap, and `pop_before` skips (and
+    /// drops) the entries behind `best`, ties kept.
+    #[test]
+    fn ray_stack_spills_in_order_and_skips_what_lies_behind() {
+        let mut stack = RayStack::new();
+        let n = RAY_STACK as u32 + 40;
+        for i in 0..n {
+            stack.push((i, (i % 10) as f32));
+        }
+        let mut popped = Vec::new();
+        while let Some((i, t)) = stack.pop_before(4.0) {
+            assert!(t <= 4.0);
+            popped.push(i);
+        }
+        let want: Vec<u32> = (0..n).rev().filter(|i| i % 10 <= 4).collect();
+        assert_eq!(popped, want);
+        stack.push((7, 1.0));
+        assert_eq!(stack.pop_before(1.0), Some((7, 1.0)));
+        assert_eq!(stack.pop_before(f32::INFINITY), None);
+    }
+
+    /// A tree deeper than the inline stack (middle splits of exponentially spaced boxes peel
+    /// one box per level): segments along the line from its small end push one farther child
+    /// per level, so the walk spills, and still find brute force's first hit.
+    #[test]
+    fn deep_tree_rays_spill_and_equal_brute_force() {
+        let boxes: Vec<Aabb> = (0..120)
+            .map(|i| {
+                let x = 2f32.powi(i - 20);
+                Aabb::new(Vec3::new(x, 0.0, 0.0), Vec3::new(x * 1.5, 1.0, 1.0))
+            })
+            .collect();
+        let config = BvhConfig {
+            split: crate::bvh::SplitMethod::Middle,
+            max_leaf_size: 1,
+            ..BvhConfig::default()
+        };
+        let (bvh, keys) = Bvh::from_aabbs(config, &boxes).unwrap();
+        assert!(bvh.stats().depth > RAY_STACK, "{}", bvh.stats().depth);
+        let mut rng = Rng::new(9);
+        for q in 0..200 {
+            let along = if q % 2 == 0 { Vec3::X } else { -Vec3::X };
+            let o = match q % 4 {
+                0 => Vec3::new(-1.0, 0.5, 0.5),
+                1 => Vec3::new(2f32.powi(101), 0.5, 0.5),
+                _ => Vec3::new(2f32.powi(rng.below(100) as i32 - 20), 0.5, 0.5),
+            };
+            // Exactly along the line (the test for zero direction components), or off it
+            // by too little to leave the boxes before the last (no zero component), or by
+            // enough to leave them early.
+            let off = [0.0, 1e-38, 1e-3][rng.below(3) as usize];
+            let d = along + Vec3::new(0.0, rng.range(-off, off), rng.range(-off, off));
+            let inv = inverse_dir(d);
+            let want = keys
+                .iter()
+                .zip(&boxes)
+                .filter_map(|(&k, b)| Some((k, b.ray_entry(o, inv, f32::INFINITY)?)))
+                .min_by(|x, y| x.1.total_cmp(&y.1).then(x.0.cmp(&y.0)));
+            assert_eq!(
+                bvh.cast_ray(o, d, f32::INFINITY),
+                want,
+                "query {q}: {o} {d}"
+            );
+        }
     }
 }
