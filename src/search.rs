@@ -111,17 +111,39 @@ impl Slab {
     /// The segment's entry `t` into `b` grown by `inflate`, if it enters it by `limit`.
     #[inline(always)]
     pub(crate) fn entry(&self, b: &SimdBox, limit: f32) -> Option<f32> {
-        let SimdBox { min, max } = b.grown(self.inflate);
         if !self.finite {
-            return SimdBox { min, max }.ray_entry(self.origin, self.inv, limit);
+            return b
+                .grown(self.inflate)
+                .ray_entry(self.origin, self.inv, limit);
         }
-        let t1 = (min - self.origin) * self.inv;
-        let t2 = (max - self.origin) * self.inv;
+        let (t, enters) = self.entry_or_miss::<true, true>(b, limit);
+        enters.then_some(t)
+    }
+
+    /// [`Slab::entry`] of `b` by `limit` as its `t` and whether the segment enters (the `t`
+    /// of a miss is unspecified). `FINITE` (iff [`Slab::finite`]) takes the NaN-free test,
+    /// without a branch on the answer; `INFLATED` false skips the growth by zero.
+    #[inline(always)]
+    pub(crate) fn entry_or_miss<const INFLATED: bool, const FINITE: bool>(
+        &self,
+        b: &SimdBox,
+        limit: f32,
+    ) -> (f32, bool) {
+        debug_assert!(FINITE == self.finite && (INFLATED || self.inflate == 0.0));
+        if !FINITE {
+            return self
+                .entry(b, limit)
+                .map_or((f32::INFINITY, false), |t| (t, true));
+        }
+        let b = if INFLATED { b.grown(self.inflate) } else { *b };
+        let t1 = (b.min - self.origin) * self.inv;
+        let t2 = (b.max - self.origin) * self.inv;
+        // Never NaN (see [`Slab`]): plain compares clamp them.
         let near = t1.min(t2).max_element();
         let far = t1.max(t2).min_element();
-        let t_near = if near > 0.0 { near } else { 0.0 };
-        let t_far = if far < limit { far } else { limit };
-        (t_near <= t_far).then_some(t_near)
+        let near = if near > 0.0 { near } else { 0.0 };
+        let far = if far < limit { far } else { limit };
+        (near, near <= far)
     }
 }
 

@@ -531,34 +531,6 @@ fn ray_walk_in<const N: usize, const INFLATED: bool, const FINITE: bool>(
     }
 }
 
-impl Slab {
-    /// [`Slab::entry`] of `b` by `limit` as its `t` and whether the segment enters (the `t`
-    /// of a miss is unspecified). `FINITE` (iff [`Slab::finite`]) takes the NaN-free test,
-    /// without a branch on the answer; `INFLATED` false skips the growth by zero.
-    #[inline(always)]
-    fn entry_or_miss<const INFLATED: bool, const FINITE: bool>(
-        &self,
-        b: &SimdBox,
-        limit: f32,
-    ) -> (f32, bool) {
-        debug_assert!(FINITE == self.finite && (INFLATED || self.inflate == 0.0));
-        if !FINITE {
-            return self
-                .entry(b, limit)
-                .map_or((f32::INFINITY, false), |t| (t, true));
-        }
-        let b = if INFLATED { b.grown(self.inflate) } else { *b };
-        let t1 = (b.min - self.origin) * self.inv;
-        let t2 = (b.max - self.origin) * self.inv;
-        // Never NaN (see [`Slab`]): plain compares clamp them.
-        let near = t1.min(t2).max_element();
-        let far = t1.max(t2).min_element();
-        let near = if near > 0.0 { near } else { 0.0 };
-        let far = if far < limit { far } else { limit };
-        (near, near <= far)
-    }
-}
-
 /// Entries [`RayStack`] keeps inline before it spills to the heap (as [`INLINE_STACK`]).
 const RAY_STACK: usize = INLINE_STACK;
 
