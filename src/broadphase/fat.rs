@@ -12,9 +12,10 @@ use glam::Vec3A;
 pub(super) const LOOKAHEAD_STEPS: f32 = 3.0;
 /// A proxy that leaves its fat box while moving gets one stretched along its last motion:
 /// the box it would sweep over this many steps (times the jitter, see [`jitter`]) of that
-/// motion, at most [`MAX_PREDICT`] of its size (half of it before the jitter). A body or sphere keeps its velocity from one
-/// step to the next far more often than it turns, so the next escape comes about twice as
-/// late as from a box of the same size centred where the proxy is.
+/// motion, at most [`MAX_PREDICT`] of its size (half of it before the jitter). A body or
+/// sphere keeps its velocity from one step to the next far more often than it turns, so the
+/// next escape comes about twice as late as from a box of the same size centred where the
+/// proxy is.
 const PREDICT_STEPS: f32 = 6.0;
 /// The predicted fat box is grown on every side by this many steps of the speed, so that a
 /// proxy that turns does not leave it at once.
@@ -85,8 +86,8 @@ pub(super) fn outgrows_min_margin(speed: f32, size: f32) -> bool {
 
 impl BroadPhase {
     /// Records how far slot `s` moved per step since its last update (its new exact box is
-    /// `exact`), for its fat margin and the pass estimate.
-    /// Returns the motion per step (see [`displacement`]).
+    /// `exact`), for its fat margin and the pass estimate, and returns that motion (see
+    /// [`displacement`]).
     #[inline]
     pub(super) fn note_motion(&mut self, s: usize, exact: &SimdBox) -> Vec3A {
         let d = displacement(&self.store.exact[s], exact, self.store.stamp[s], self.now);
@@ -125,6 +126,8 @@ impl BroadPhase {
         self.hold_held(slot, true, motion);
     }
 
+    /// [`BroadPhase::hold`] and [`BroadPhase::hold_moving`]: the held shape of
+    /// [`BroadPhase::held_shape`], written to the store and the slot's structure.
     #[inline]
     fn hold_held(&mut self, slot: u32, fat: bool, motion: Vec3A) {
         let s = slot as usize;
@@ -188,7 +191,8 @@ impl BroadPhase {
             let size = exact.extent().max_element();
             let j = jitter(slot, self.now);
             if motion != Vec3A::ZERO && outgrows_min_margin(speed, size) {
-                if let Some(held) = self.predicted(s, &exact, motion * PREDICT_STEPS, j, speed) {
+                let sweep = motion * PREDICT_STEPS;
+                if let Some(held) = self.predicted(s, &exact, size, sweep, j, speed) {
                     return held;
                 }
             }
@@ -209,18 +213,18 @@ impl BroadPhase {
     }
 
     /// [`BroadPhase::held_shape`]'s box swept along `sweep` (times `jitter`) for slot `s` of
-    /// exact box `exact` and `speed`, or `None` where it does not contain `exact` (rounding,
-    /// overflow).
+    /// exact box `exact` (largest extent `size`) and `speed`, or `None` where it does not
+    /// contain `exact` (rounding, overflow).
     #[inline]
     fn predicted(
         &self,
         s: usize,
         exact: &SimdBox,
+        size: f32,
         sweep: Vec3A,
         jitter: f32,
         speed: f32,
     ) -> Option<Held> {
-        let size = exact.extent().max_element();
         // Capped before the jitter, so that capped sweeps keep spread lengths (equal ones
         // would bring their proxies back in the same later step).
         let len = sweep.length();

@@ -345,7 +345,7 @@ impl Octree {
                 None => {
                     // No finite region covers the world: keep this one, and wait for twice
                     // the overflow (or spheres) before trying again.
-                    let sampled = region::Sampled::of(&self.objs, self.passes.walk.lend().values);
+                    let sampled = self.audit_sample();
                     self.regrow.rooted(self.live, None, sampled);
                     self.overflow_after = self.overflow;
                 }
@@ -353,7 +353,7 @@ impl Octree {
             return;
         }
         if self.regrow.tick() {
-            let sampled = region::Sampled::of(&self.objs, self.passes.walk.lend().values);
+            let sampled = self.audit_sample();
             if self.regrow.sample_unchanged(sampled) {
                 self.regrow.back_off();
                 return;
@@ -364,6 +364,12 @@ impl Octree {
                 _ => self.regrow.back_off(),
             }
         }
+    }
+
+    /// The audit's sample of the spheres now (`region::Sampled::of`, with the walk order's
+    /// buffer lent as scratch).
+    fn audit_sample(&mut self) -> Option<region::Sampled> {
+        region::Sampled::of(&self.objs, self.passes.walk.lend().values)
     }
 
     /// The region and depth the spheres call for now (`Regrow::propose` over this tree's
@@ -397,7 +403,7 @@ impl Octree {
             self.overflow += u32::from(at.outside());
             self.link(id, at.node());
         }
-        let sampled = region::Sampled::of(&self.objs, self.passes.walk.lend().values);
+        let sampled = self.audit_sample();
         self.regrow.rooted(self.live, Some(p.span_center), sampled);
         self.overflow_after = self.overflow;
         self.reroots += 1;

@@ -364,6 +364,17 @@ fn gas_at(center: Vec3, n: usize, seed: u64) -> Gas {
     Gas::in_box(n, seed, 0.5, center, Vec3::splat(edge))
 }
 
+/// A growing tree of placement `p` holding `gas`'s spheres, and their keys in `gas`'s order.
+fn growing_with(p: Placement, gas: &Gas) -> (Octree, Vec<ProxyKey>) {
+    let mut t = Octree::growing(p);
+    let keys = gas
+        .centers
+        .iter()
+        .map(|&c| t.insert(c, gas.radius).unwrap())
+        .collect();
+    (t, keys)
+}
+
 /// A growing tree's first pass re-roots it around its spheres, wherever they are: none is
 /// left outside, the median sphere's cells are a fixed multiple of its diameter (loose) or
 /// the deepest cells two to four diameters (strict), at the origin as 3 km or 100 km away.
@@ -373,13 +384,8 @@ fn a_growing_tree_roots_around_its_spheres_wherever_they_are() {
         let mut cells = Vec::new();
         for center in [Vec3::ZERO, Vec3::new(3000.0, 0.0, 0.0), Vec3::splat(1e5)] {
             let gas = gas_at(center, 4000, 3);
-            let mut t = Octree::growing(p);
+            let (mut t, keys) = growing_with(p, &gas);
             assert!(t.is_growing());
-            let keys: Vec<_> = gas
-                .centers
-                .iter()
-                .map(|&c| t.insert(c, 0.5).unwrap())
-                .collect();
             assert_eq!(t.stats().reroots, 0);
             assert_eq!(sorted_pairs(&mut t), brute::pairs(&proxies(&t)), "{p:?}");
             t.validate();
@@ -413,12 +419,7 @@ fn a_growing_tree_roots_around_its_spheres_wherever_they_are() {
 fn one_outlier_does_not_inflate_the_region() {
     for p in BOTH {
         let gas = gas_at(Vec3::ZERO, 5000, 4);
-        let mut t = Octree::growing(p);
-        let keys: Vec<_> = gas
-            .centers
-            .iter()
-            .map(|&c| t.insert(c, 0.5).unwrap())
-            .collect();
+        let (mut t, keys) = growing_with(p, &gas);
         t.maintain();
         let side = t.bounds().extent().x;
         t.update(keys[7], Vec3::splat(1e7), 0.5).unwrap();
@@ -454,12 +455,7 @@ fn one_outlier_does_not_inflate_the_region() {
 fn a_drifting_world_keeps_its_overflow_bounded() {
     for p in BOTH {
         let mut gas = gas_at(Vec3::ZERO, 6400, 5);
-        let mut t = Octree::growing(p);
-        let keys: Vec<_> = gas
-            .centers
-            .iter()
-            .map(|&c| t.insert(c, 0.5).unwrap())
-            .collect();
+        let (mut t, keys) = growing_with(p, &gas);
         let steps = 200;
         for s in 0..steps {
             gas.step(1.0 / 60.0);
@@ -491,12 +487,7 @@ fn a_drifting_world_keeps_its_overflow_bounded() {
 fn an_unchanged_world_is_audited_by_its_sample() {
     for p in BOTH {
         let gas = gas_at(Vec3::ZERO, 2000, 6);
-        let mut t = Octree::growing(p);
-        let keys: Vec<_> = gas
-            .centers
-            .iter()
-            .map(|&c| t.insert(c, 0.5).unwrap())
-            .collect();
+        let (mut t, keys) = growing_with(p, &gas);
         t.maintain();
         // The audits at calls 16, 48, 112, 240 and 496 after the re-root.
         for _ in 0..500 {
@@ -523,12 +514,7 @@ fn an_unchanged_world_is_audited_by_its_sample() {
 fn an_audit_refits_the_cells_to_shrunk_spheres() {
     for p in BOTH {
         let gas = gas_at(Vec3::ZERO, 2000, 6);
-        let mut t = Octree::growing(p);
-        let keys: Vec<_> = gas
-            .centers
-            .iter()
-            .map(|&c| t.insert(c, 0.5).unwrap())
-            .collect();
+        let (mut t, keys) = growing_with(p, &gas);
         t.maintain();
         let before = t.lattice.typical_cell(0.5);
         for (&k, &c) in keys.iter().zip(&gas.centers) {
