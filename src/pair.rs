@@ -72,13 +72,26 @@ pub fn sort_dedup(pairs: &mut Vec<Pair>) {
 /// One merge pass: walk both lists in order; a pair smaller than the other list's head exists
 /// only on its own side, equal heads exist on both and advance together. O(|prev| + |cur|).
 pub fn diff<T: Ord + Copy>(prev: &[T], cur: &[T], added: &mut Vec<T>, removed: &mut Vec<T>) {
+    diff_mapped(prev, |&p| p, cur, added, removed);
+}
+
+/// [`diff`] of `prev` read through `map`, which keeps its order: `prev` mapped must be
+/// sorted and deduplicated.
+pub(crate) fn diff_mapped<P, T: Ord + Copy>(
+    prev: &[P],
+    map: impl Fn(&P) -> T,
+    cur: &[T],
+    added: &mut Vec<T>,
+    removed: &mut Vec<T>,
+) {
     added.clear();
     removed.clear();
     let (mut i, mut j) = (0, 0);
     while i < prev.len() && j < cur.len() {
-        match prev[i].cmp(&cur[j]) {
+        let p = map(&prev[i]);
+        match p.cmp(&cur[j]) {
             core::cmp::Ordering::Less => {
-                removed.push(prev[i]);
+                removed.push(p);
                 i += 1;
             }
             core::cmp::Ordering::Greater => {
@@ -91,7 +104,7 @@ pub fn diff<T: Ord + Copy>(prev: &[T], cur: &[T], added: &mut Vec<T>, removed: &
             }
         }
     }
-    removed.extend_from_slice(&prev[i..]);
+    removed.extend(prev[i..].iter().map(map));
     added.extend_from_slice(&cur[j..]);
 }
 

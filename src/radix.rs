@@ -190,14 +190,19 @@ fn sort_planned<const B: usize, const P: usize>(
 }
 
 /// Writes to `splitters` the first keys of parts `1..parts` of a cut of the key range into
-/// `parts` parts (fewer where keys repeat), increasing: the quantiles of `sorted`, a sorted
-/// list like the one about to be sorted, of at least `parts` keys.
+/// `parts` parts (fewer where keys repeat), increasing: the quantiles of `sorted` read
+/// through `key`, a sorted list like the one about to be sorted, of at least `parts` keys.
 #[cfg(feature = "parallel")]
-pub(crate) fn split_points(sorted: &[u64], parts: usize, splitters: &mut Vec<u64>) {
+pub(crate) fn split_points<T>(
+    sorted: &[T],
+    key: impl Fn(&T) -> u64,
+    parts: usize,
+    splitters: &mut Vec<u64>,
+) {
     debug_assert!(sorted.len() >= parts || parts == 1);
     splitters.clear();
     for p in 1..parts {
-        let k = sorted[sorted.len() * p / parts];
+        let k = key(&sorted[sorted.len() * p / parts]);
         if splitters.last().is_none_or(|&last| last < k) {
             splitters.push(k);
         }
@@ -654,7 +659,7 @@ mod tests {
                     if by.len() < parts {
                         continue;
                     }
-                    split_points(by, parts, &mut splitters);
+                    split_points(by, |&k| k, parts, &mut splitters);
                     let np = splitters.len() + 1;
                     let mut buckets = vec![vec![Vec::new(); np]; producers];
                     for &k in &all {

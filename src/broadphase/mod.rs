@@ -223,10 +223,8 @@ pub struct BroadPhase {
     rev: slack::Gapped<u64>,
     /// The incremental pass's list patches.
     patch: slack::Patch,
-    /// This step's pairs and the previous step's, packed, sorted.
-    packed: Vec<u64>,
-    prev_packed: Vec<u64>,
-    /// Scratch of the passes: new candidates, sort buffer, events.
+    /// Scratch of the passes: new candidates or pairs (a full pass's sorted pairs until they
+    /// replace the key pairs), sort buffer, events.
     fresh: Vec<u64>,
     sort_buf: Vec<u64>,
     added_packed: Vec<u64>,
@@ -310,8 +308,6 @@ impl BroadPhase {
             cand: slack::Gapped::default(),
             rev: slack::Gapped::default(),
             patch: slack::Patch::default(),
-            packed: Vec::new(),
-            prev_packed: Vec::new(),
             fresh: Vec::new(),
             sort_buf: Vec::new(),
             added_packed: Vec::new(),
@@ -381,8 +377,6 @@ impl BroadPhase {
             + v(
                 self.cand.capacity()
                     + self.rev.capacity()
-                    + self.packed.capacity()
-                    + self.prev_packed.capacity()
                     + self.fresh.capacity()
                     + self.sort_buf.capacity()
                     + self.added_packed.capacity()

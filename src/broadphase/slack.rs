@@ -27,9 +27,9 @@
 //! The same pass keeps the lists exact in place: the candidates (minus those of escaped or
 //! removed proxies, plus the escaped proxies' new ones), their reverse index and the key pair
 //! list are patched by position ([`Gapped::patch`]) with the few pairs that started or stopped
-//! overlapping, which are the step's `added` and `removed`. The packed pair list, which the
-//! candidates marked overlapping and the key pairs both hold, is not kept in this regime: a
-//! full pass rebuilds it from the key pairs when it needs the previous step's.
+//! overlapping, which are the step's `added` and `removed`. No packed pair list is kept beside
+//! them: the key pairs are read packed (see [`super::step::pack_pair`]) where the packed order
+//! is needed, here and in a full pass's diff.
 
 use super::BroadPhase;
 use super::step::{HIT, unpack};
@@ -413,8 +413,7 @@ impl BroadPhase {
             .patch(&p.cand_gone, &p.cand_at, &p.cand_new, &mut p.scratch);
 
         // The key pairs: the changed pairs' places in the old list, which is in the packed
-        // pairs' order. The packed pair list is not kept in this regime (see
-        // [`BroadPhase::packed_from_pairs`]).
+        // pairs' order.
         let pairs = &self.pairs;
         let at = |k: u64| pairs.partition_point(|q| super::step::pack_pair(q) < k) as u32;
         p.pairs_gone.extend(removed.iter().map(|&k| at(k)));

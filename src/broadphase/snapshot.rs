@@ -345,11 +345,6 @@ impl Snapshot {
                 bp.place(s as u32);
             }
         }
-        bp.packed = self
-            .pairs
-            .iter()
-            .map(|&(lo, hi)| step::pack(lo, hi))
-            .collect();
         let st = &bp.store;
         let pairs = &self.pairs;
         bp.pairs.refill(pairs.len(), step::null_pair(), |list| {

@@ -169,11 +169,15 @@ pub(super) fn pack(a: u32, b: u32) -> u64 {
     (u64::from(lo) << 32) | u64::from(hi)
 }
 
-/// The packed pair of a key pair (both keys live, or quarantined since their removal): the
-/// key pairs are sorted as their packed pairs are.
+/// The packed pair of a key pair (both keys live, or quarantined since their removal), the
+/// inverse of [`key_pair`]: the key pairs are sorted as their packed pairs are. The pair is
+/// canonical (`a < b`, so `a`'s slot is the smaller), which spares [`pack`]'s ordering on the
+/// hot reads of the pair list.
 #[inline]
 pub(super) fn pack_pair(p: &Pair) -> u64 {
-    pack(crate::pair::slot(p.a), crate::pair::slot(p.b))
+    let (a, b) = (crate::pair::slot(p.a), crate::pair::slot(p.b));
+    debug_assert!(a < b, "a key pair is canonical");
+    (u64::from(a) << 32) | u64::from(b)
 }
 
 #[inline]
@@ -324,8 +328,6 @@ impl BroadPhase {
     fn keep_headroom(&mut self) {
         self.cand.ahead();
         ahead(&mut self.fresh);
-        ahead(&mut self.packed);
-        ahead(&mut self.prev_packed);
         self.pairs.ahead();
         let n = self.store.len();
         if self.cached {
@@ -333,19 +335,13 @@ impl BroadPhase {
             ahead(&mut self.pending);
             self.patch.keep_headroom(n / PATCH_FLOOR);
         }
-        // A full pass finds every pair (or candidate) into `fresh`, sorts it, and rotates it
-        // with `packed` and `prev_packed`; the incremental steps fill `fresh` only with the
-        // escaped proxies' new candidates and patch the key pairs in place (`packed` is
-        // rebuilt from them when a full pass follows). All four stay ready
-        // for the largest list a full pass can make, grown as `ahead` grows a list: to half
-        // again that length once within a quarter of it.
-        let most = self.cand.len().max(self.packed.len());
-        for v in [
-            &mut self.fresh,
-            &mut self.sort_buf,
-            &mut self.packed,
-            &mut self.prev_packed,
-        ] {
+        // A full pass finds every pair (or candidate) into `fresh` and sorts it there with
+        // `sort_buf`, diffs the key pairs against it and refills them from it; the incremental
+        // steps fill `fresh` only with the escaped proxies' new candidates and patch the key
+        // pairs in place. Both stay ready for the largest list a full pass can make, grown as
+        // `ahead` grows a list: to half again that length once within a quarter of it.
+        let most = self.cand.len().max(self.pairs.len());
+        for v in [&mut self.fresh, &mut self.sort_buf] {
             if v.capacity() < most + most / 4 {
                 grow_to(v, most + most / 2);
             }
@@ -372,13 +368,11 @@ impl BroadPhase {
         }
     }
 
-    /// [`BroadPhase::full`] with its split phases in `tasks` tasks each (1: serial).
+    /// [`BroadPhase::full`] with its split phases in `tasks` tasks each (1: serial). The
+    /// previous step's pairs are the key pairs, read packed (see [`pack_pair`]) until the new
+    /// sorted list in `fresh` replaces them.
     #[inline(always)]
     fn full_in(&mut self, fat: bool, tasks: usize) {
-        if self.cached {
-            self.packed_from_pairs();
-        }
-        core::mem::swap(&mut self.prev_packed, &mut self.packed);
         if self.cached || fat {
             for s in 0..self.store.slots() as u32 {
                 if self.store.kind[s as usize] != Kind::Free {
@@ -397,26 +391,28 @@ impl BroadPhase {
                 sort_u64(&mut self.fresh, &mut self.sort_buf, layout);
             }
         }
-        self.packed.clear();
         if fat {
-            let (exact, fresh, packed) = (&self.store.exact, &self.fresh, &mut self.packed);
-            self.cand.refill(fresh.len(), 0, |cand| {
-                for &c in fresh {
+            // The candidates are copied out, and `fresh` keeps those whose exact boxes
+            // overlap, in place and in order: the new pair list.
+            let (exact, fresh) = (&self.store.exact, &mut self.fresh);
+            let tested = fresh.len();
+            self.cand.refill(tested, 0, |cand| {
+                let mut hits = 0;
+                for i in 0..fresh.len() {
+                    let c = fresh[i];
                     let (a, b) = unpack(c);
                     let hit = exact[a].overlaps(&exact[b]);
                     cand.push(c | if hit { HIT } else { 0 });
-                    if hit {
-                        packed.push(c);
-                    }
+                    fresh[hits] = c;
+                    hits += usize::from(hit);
                 }
+                fresh.truncate(hits);
             });
-            self.stats.candidates_tested = self.fresh.len();
+            self.stats.candidates_tested = tested;
             let n = self.store.len().max(1) as f64;
             self.costs.cand_per_proxy = self.cand.len() as f64 / n;
             self.cached = true;
-            self.anchor_all();
         } else {
-            core::mem::swap(&mut self.packed, &mut self.fresh);
             self.cand.clear();
             self.rev.clear();
             self.cached = false;
@@ -425,18 +421,15 @@ impl BroadPhase {
         }
         match tasks {
             #[cfg(feature = "parallel")]
-            2.. if self.packed.len() >= 2 * MIN_PART_PAIRS => {
-                self.emit_par(tasks.min(self.packed.len() / MIN_PART_PAIRS));
+            2.. if self.fresh.len() >= 2 * MIN_PART_PAIRS => {
+                self.emit_par(tasks.min(self.fresh.len() / MIN_PART_PAIRS));
             }
             _ => self.emit(),
         }
-    }
-
-    /// The packed pair list of the key pairs: the incremental regime patches only the key
-    /// pairs, and a full pass that follows it diffs against the packed ones.
-    pub(super) fn packed_from_pairs(&mut self) {
-        self.packed.clear();
-        self.packed.extend(self.pairs.iter().map(pack_pair));
+        if fat {
+            // Its scratch is `fresh`, free again now that the pairs are refilled.
+            self.anchor_all();
+        }
     }
 
     /// How many tasks each split phase of a full pass hands to rayon's current pool: 1 (the
@@ -499,8 +492,8 @@ impl BroadPhase {
     #[cfg(feature = "parallel")]
     fn sorted_pairs_par(&mut self, tasks: usize, layout: PairBits) {
         let par = &mut self.par;
-        let parts = tasks.min(self.prev_packed.len() / MIN_PART_PAIRS).max(1);
-        radix::split_points(&self.prev_packed, parts, &mut par.splitters);
+        let parts = tasks.min(self.pairs.len() / MIN_PART_PAIRS).max(1);
+        radix::split_points(&self.pairs, pack_pair, parts, &mut par.splitters);
         let parts = par.splitters.len() + 1;
         let producers = 2 * tasks + 1;
         if par.found.len() < producers {
@@ -598,7 +591,7 @@ impl BroadPhase {
     #[cfg(feature = "parallel")]
     fn emit_par(&mut self, parts: usize) {
         use rayon::prelude::*;
-        let (prev, cur, par) = (&self.prev_packed, &self.packed, &mut self.par);
+        let (prev, cur, par) = (&*self.pairs, &self.fresh, &mut self.par);
         par.cur_at.clear();
         par.prev_at.clear();
         for p in 0..parts {
@@ -607,7 +600,7 @@ impl BroadPhase {
             par.prev_at.push(if p == 0 {
                 0
             } else {
-                prev.partition_point(|&x| x < cur[at])
+                prev.partition_point(|x| pack_pair(x) < cur[at])
             });
         }
         par.cur_at.push(cur.len());
@@ -620,8 +613,9 @@ impl BroadPhase {
             .par_iter_mut()
             .enumerate()
             .for_each(|(p, [added, removed])| {
-                crate::pair::diff(
+                crate::pair::diff_mapped(
                     &prev[prev_at[p]..prev_at[p + 1]],
+                    pack_pair,
                     &cur[cur_at[p]..cur_at[p + 1]],
                     added,
                     removed,
@@ -637,9 +631,9 @@ impl BroadPhase {
         }
         let store = &self.store;
         let to_pair = |&p: &u64| key_pair(store, p);
-        let packed = &self.packed;
-        self.pairs.refill(packed.len(), null_pair(), |pairs| {
-            pairs.par_extend(packed.par_iter().map(to_pair));
+        let fresh = &self.fresh;
+        self.pairs.refill(fresh.len(), null_pair(), |pairs| {
+            pairs.par_extend(fresh.par_iter().map(to_pair));
         });
         self.added.clear();
         self.added
@@ -649,19 +643,21 @@ impl BroadPhase {
             .par_extend(self.removed_packed.par_iter().map(to_pair));
     }
 
-    /// `added` / `removed` from the packed lists, and the three key lists.
+    /// `added` / `removed` from the previous step's key pairs (read packed) and this step's
+    /// sorted packed pairs in `fresh`, then the three key lists.
     fn emit(&mut self) {
-        crate::pair::diff(
-            &self.prev_packed,
-            &self.packed,
+        crate::pair::diff_mapped(
+            &self.pairs,
+            pack_pair,
+            &self.fresh,
             &mut self.added_packed,
             &mut self.removed_packed,
         );
         let store = &self.store;
         let to_pair = |&p: &u64| key_pair(store, p);
-        let packed = &self.packed;
-        self.pairs.refill(packed.len(), null_pair(), |pairs| {
-            pairs.extend(packed.iter().map(to_pair));
+        let fresh = &self.fresh;
+        self.pairs.refill(fresh.len(), null_pair(), |pairs| {
+            pairs.extend(fresh.iter().map(to_pair));
         });
         self.added.clear();
         self.added.extend(self.added_packed.iter().map(to_pair));

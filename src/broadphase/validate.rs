@@ -98,19 +98,26 @@ impl BroadPhase {
         if self.cached && self.movers.is_empty() && self.removals == 0 {
             self.validate_candidates();
         }
-        // The incremental regime keeps only the key pairs (see `slack`).
-        if self.cached {
-            return;
-        }
-        let keys: Vec<Pair> = self
-            .packed
+        // The pair list is what the next full pass diffs against, reading it packed: each
+        // pair names the keys its slots hold (live, or quarantined since their removal) in
+        // canonical order, and the packed pairs strictly increase.
+        assert!(
+            self.pairs.iter().all(|p| p.a < p.b),
+            "pair list holds a pair out of order"
+        );
+        let packed: Vec<u64> = self.pairs.iter().map(super::step::pack_pair).collect();
+        assert!(
+            packed.windows(2).all(|w| w[0] < w[1]),
+            "pair list not strictly increasing"
+        );
+        let keys: Vec<Pair> = packed
             .iter()
             .map(|&p| Pair {
                 a: st.key((p >> 32) as u32),
                 b: st.key(p as u32),
             })
             .collect();
-        assert_eq!(keys, *self.pairs, "pair list and packed pairs differ");
+        assert_eq!(keys, *self.pairs, "pair list and its slots' keys differ");
     }
 
     /// With no change pending: the candidates are exactly the allowed pairs of overlapping
