@@ -201,6 +201,20 @@ mod tests {
             let c: BTreeSet<_> = lists[1].iter().copied().collect();
             assert_eq!(added, c.difference(&p).copied().collect::<Vec<_>>());
             assert_eq!(removed, p.difference(&c).copied().collect::<Vec<_>>());
+            // The same difference with `prev` read through an order-keeping map (the slot
+            // pairs of these keys, whose versions are all 1).
+            let slots = |q: &Pair| (slot(q.a), slot(q.b));
+            let cur_slots: Vec<_> = lists[1].iter().map(slots).collect();
+            let (mut added_slots, mut removed_slots) = (Vec::new(), Vec::new());
+            diff_mapped(
+                &lists[0],
+                slots,
+                &cur_slots,
+                &mut added_slots,
+                &mut removed_slots,
+            );
+            assert_eq!(added_slots, added.iter().map(slots).collect::<Vec<_>>());
+            assert_eq!(removed_slots, removed.iter().map(slots).collect::<Vec<_>>());
         }
     }
 }
