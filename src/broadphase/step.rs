@@ -379,6 +379,9 @@ impl BroadPhase {
             self.packed_from_pairs();
         }
         core::mem::swap(&mut self.prev_packed, &mut self.packed);
+        if fat && !self.cached {
+            self.fill_exact();
+        }
         if self.cached || fat {
             for s in 0..self.store.slots() as u32 {
                 if self.store.kind[s as usize] != Kind::Free {
