@@ -109,20 +109,25 @@ impl BroadPhase {
         match self.store.shape[s] {
             Shape::Sphere { center, radius } => {
                 let grown = fat::grown_sphere(center, radius, self.config.margin);
-                let motion = self.note_motion(s, &grown.aabb);
-                self.store.exact[s] = grown.aabb;
                 if self.cached {
+                    let old = self.store.exact[s];
+                    let motion = self.note_motion(s, &old, &grown.aabb);
+                    self.store.exact[s] = grown.aabb;
                     self.refresh_fat(slot, &grown.aabb, motion);
                 } else {
+                    // The octree's record holds the exact box it was last applied at.
+                    let old = self.octree.held_box_of(slot);
+                    self.note_motion(s, &old, &grown.aabb);
                     let key = self.store.key(slot);
                     self.octree.update_live(key, center, grown.radius);
                 }
             }
             shape @ Shape::Body { kind, .. } => {
                 let exact = fat::grown(shape, self.config.margin).aabb;
-                let motion = self.note_motion(s, &exact);
-                self.store.exact[s] = exact;
+                let old = self.last_exact(slot);
+                let motion = self.note_motion(s, &old, &exact);
                 if self.cached {
+                    self.store.exact[s] = exact;
                     self.refresh_fat(slot, &exact, motion);
                 } else {
                     let key = self.store.key(slot);
@@ -157,7 +162,8 @@ impl BroadPhase {
             let slot = self.escaped[i];
             let s = slot as usize;
             let new = self.exact_box(&self.store.shape[s]);
-            let motion = self.note_motion(s, &new);
+            let old = self.store.exact[s];
+            let motion = self.note_motion(s, &old, &new);
             self.store.exact[s] = new;
             self.hold_moving(slot, motion);
         }
@@ -192,14 +198,13 @@ impl BroadPhase {
         let st = &mut self.store;
         let shape = &st.shape;
         let fast: usize = st
-            .exact
+            .speed
             .par_chunks_mut(chunk)
-            .zip(st.speed.par_chunks_mut(chunk))
             .zip(st.stamp.par_chunks_mut(chunk))
             .zip(st.flags.par_chunks_mut(chunk))
             .zip(records.par_chunks_mut(chunk))
             .enumerate()
-            .map(|(c, ((((exact, speed), stamp), flags), records))| {
+            .map(|(c, (((speed, stamp), flags), records))| {
                 let (mut fast, mut placer) = (0, placer);
                 // The records end at the highest sphere id: a chunk's later slots (and the
                 // chunks after the records) hold no sphere.
@@ -212,8 +217,9 @@ impl BroadPhase {
                         continue;
                     }
                     let grown = fat::grown_sphere(center, radius, margin);
-                    let (v, f) = fat::motion(&exact[i], &grown.aabb, stamp[i], now);
-                    (exact[i], speed[i], stamp[i]) = (grown.aabb, v, now);
+                    // Outside the incremental regime the sphere's record holds its exact box.
+                    let (v, f) = fat::motion(&records[i].simd_box(), &grown.aabb, stamp[i], now);
+                    (speed[i], stamp[i]) = (v, now);
                     fast += usize::from(f);
                     let at = placer.placement_of(center, grown.radius);
                     if records[i].store_in_place(&placer, center, grown.radius, &at) {

@@ -85,12 +85,12 @@ pub(super) fn outgrows_min_margin(speed: f32, size: f32) -> bool {
 }
 
 impl BroadPhase {
-    /// Records how far slot `s` moved per step since its last update (its new exact box is
-    /// `exact`), for its fat margin and the pass estimate, and returns that motion (see
-    /// [`displacement`]).
+    /// Records how far slot `s` moved per step since its last update (from the exact box it
+    /// was last applied at, `old`, to its new one, `exact`), for its fat margin and the pass
+    /// estimate, and returns that motion (see [`displacement`]).
     #[inline]
-    pub(super) fn note_motion(&mut self, s: usize, exact: &SimdBox) -> Vec3A {
-        let d = displacement(&self.store.exact[s], exact, self.store.stamp[s], self.now);
+    pub(super) fn note_motion(&mut self, s: usize, old: &SimdBox, exact: &SimdBox) -> Vec3A {
+        let d = displacement(old, exact, self.store.stamp[s], self.now);
         let speed = d.abs().max_element();
         self.store.speed[s] = speed;
         self.fast_movers += usize::from(outgrows_min_margin(speed, exact.extent().max_element()));
@@ -167,6 +167,42 @@ impl BroadPhase {
         grown(*shape, self.config.margin).aabb
     }
 
+    /// What the structure of the applied `slot` holds outside the incremental regime: its
+    /// shape [`grown`] by `Config::margin`, whose box is the exact one.
+    #[inline]
+    pub(super) fn exact_shape(&self, slot: u32) -> Held {
+        grown(self.store.shape[slot as usize], self.config.margin)
+    }
+
+    /// The exact box the applied `slot` was last applied at: in the incremental regime the
+    /// store's, outside it the one its structure holds (the same box, kept once).
+    #[inline]
+    pub(super) fn last_exact(&self, slot: u32) -> SimdBox {
+        let s = slot as usize;
+        if self.cached {
+            return self.store.exact[s];
+        }
+        match self.store.shape[s] {
+            Shape::Sphere { .. } => self.octree.held_box_of(slot),
+            Shape::Body { kind, .. } => {
+                let held = self.bvh(kind).held_box(self.store.key(slot));
+                debug_assert!(held.is_some(), "a live body missing from its BVH");
+                held.unwrap_or(SimdBox::EMPTY)
+            }
+        }
+    }
+
+    /// Fills the exact box of every live slot, on entering the incremental regime (outside it
+    /// the store does not keep them); every slot is applied.
+    pub(super) fn fill_exact(&mut self) {
+        self.store.grow_incremental();
+        for s in 0..self.store.slots() {
+            if self.store.kind[s] != super::store::Kind::Free {
+                self.store.exact[s] = self.exact_box(&self.store.shape[s]);
+            }
+        }
+    }
+
     /// What `slot`'s structure should hold: its exact box, or with `fat` one grown by a
     /// margin sized by the slot's speed. A sphere is held as a sphere of the same centre and
     /// a larger radius, whose box contains the exact one (rounding is monotone).
@@ -180,10 +216,11 @@ impl BroadPhase {
     #[inline]
     pub(super) fn held_shape(&self, slot: u32, fat: bool, motion: Vec3A) -> Held {
         let s = slot as usize;
+        if !fat {
+            return self.exact_shape(slot);
+        }
         let exact = self.store.exact[s];
-        let margin = if !fat {
-            0.0
-        } else if self.config.skin > 0.0 {
+        let margin = if self.config.skin > 0.0 {
             self.config.skin
         } else {
             let resting = self.now.wrapping_sub(self.store.stamp[s]) > 1;
@@ -198,7 +235,7 @@ impl BroadPhase {
             }
             margin(speed, size) * j
         };
-        // The exact shape, [`grown`] by the fat margin.
+        // The exact shape, [`grown`] by the fat margin (the exact box is the one last applied).
         let exact_shape = match self.store.shape[s] {
             Shape::Sphere { center, radius } => Shape::Sphere {
                 center,
@@ -316,4 +353,78 @@ pub(super) fn grown_sphere(center: Vec3, radius: f32, margin: f32) -> Held {
 #[inline]
 fn grown_radius(radius: f32, margin: f32) -> f32 {
     (radius + margin).min(f32::MAX)
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::broadphase::{BodyKind, BroadPhase, Config, Passes};
+    use crate::{Aabb, Vec3};
+
+    /// A world stepped by the full pass only keeps no exact boxes in the store (its structures
+    /// hold them), yet measures each proxy's motion from the box it was last applied at.
+    #[test]
+    fn the_full_pass_keeps_no_exact_boxes_and_still_measures_motion() {
+        let mut bp = BroadPhase::new(Config {
+            passes: Passes::Full,
+            ..Config::default()
+        });
+        let sphere = bp.insert_sphere(Vec3::ZERO, 0.5).unwrap();
+        let body = bp
+            .insert_body(
+                Aabb::new(Vec3::splat(3.0), Vec3::splat(4.0)),
+                BodyKind::Dynamic,
+            )
+            .unwrap();
+        bp.step();
+        for step in 1..6 {
+            // Steps of 0.25 and 0.5 m along x and y: exact in `f32`.
+            let d = step as f32;
+            bp.update_sphere(sphere, Vec3::new(0.25 * d, 0.0, 0.0), 0.5)
+                .unwrap();
+            let o = Vec3::new(3.0, 3.0 + 0.5 * d, 3.0);
+            bp.update_body(body, Aabb::new(o, o + Vec3::ONE)).unwrap();
+            bp.step();
+            bp.validate();
+            assert_eq!(bp.store.exact.capacity(), 0);
+            let slot = |k| crate::pair::slot(k) as usize;
+            assert_eq!(bp.store.speed[slot(sphere)], 0.25, "step {step}");
+            assert_eq!(bp.store.speed[slot(body)], 0.5, "step {step}");
+        }
+    }
+
+    /// Entering the incremental regime fills every exact box from the shapes, also after the
+    /// full pass ran between two stays in it (`validate` compares each with its shape's).
+    #[test]
+    fn every_entry_into_the_incremental_regime_fills_the_exact_boxes() {
+        let mut bp = BroadPhase::new(Config::default());
+        let keys: Vec<_> = (0..400)
+            .map(|i| {
+                let c = Vec3::new((i % 20) as f32, (i / 20) as f32, 0.0) * 0.9;
+                bp.insert_sphere(c, 0.5).unwrap()
+            })
+            .collect();
+        let mut entries = 0;
+        let mut was_cached = false;
+        for step in 0..40u32 {
+            // At rest for ten steps, then everyone far away and back for ten.
+            let jump = (step / 10) % 2 == 1;
+            for (i, &k) in keys.iter().enumerate() {
+                let c = Vec3::new((i % 20) as f32, (i / 20) as f32, 0.0) * 0.9;
+                let off = if jump {
+                    Vec3::splat(if step % 2 == 0 { 50.0 } else { 0.0 })
+                } else {
+                    Vec3::ZERO
+                };
+                bp.update_sphere(k, c + off, 0.5).unwrap();
+            }
+            bp.step();
+            bp.validate();
+            entries += usize::from(bp.cached && !was_cached);
+            was_cached = bp.cached;
+        }
+        assert!(
+            entries >= 2,
+            "entered the incremental regime {entries} times"
+        );
+    }
 }

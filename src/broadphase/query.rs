@@ -134,9 +134,15 @@ impl BroadPhase {
             return ControlFlow::Continue(());
         }
         let q = SimdBox::new(aabb);
+        // Outside the incremental regime the structures hold the exact boxes, which their
+        // walks have tested; inside it they hold fat ones.
+        let cached = self.cached;
         let mut test = |k: ProxyKey| {
             let s = crate::pair::slot(k) as usize;
-            if !self.is_stale(s) && self.store.exact[s].overlaps(&q) && self.passes(filter, k, s) {
+            if !self.is_stale(s)
+                && (!cached || self.store.exact[s].overlaps(&q))
+                && self.passes(filter, k, s)
+            {
                 f(k)
             } else {
                 ControlFlow::Continue(())

@@ -264,7 +264,6 @@ impl Snapshot {
         st.kind.reserve_exact(n);
         st.flags.reserve_exact(n);
         st.shape.reserve_exact(n);
-        st.exact.reserve_exact(n);
         st.groups.reserve_exact(n);
         st.speed.reserve_exact(n);
         st.stamp.reserve_exact(n);
@@ -323,14 +322,12 @@ impl Snapshot {
                 live += 1;
             }
             bp.any_groups |= groups != CollisionGroups::ALL;
-            let exact = bp.exact_box(&shape);
             let st = &mut bp.store;
             st.version.push(version);
             st.kind.push(kind);
             st.flags
                 .push(if kind == Kind::Free { flag::GONE } else { 0 });
             st.shape.push(shape);
-            st.exact.push(exact);
             st.groups.push(groups);
             st.speed.push(0.0);
             st.stamp.push(self.now);

@@ -373,6 +373,9 @@ impl BroadPhase {
     /// sorted list in `fresh` replaces them.
     #[inline(always)]
     fn full_in(&mut self, fat: bool, tasks: usize) {
+        if fat && !self.cached {
+            self.fill_exact();
+        }
         if self.cached || fat {
             for s in 0..self.store.slots() as u32 {
                 if self.store.kind[s as usize] != Kind::Free {

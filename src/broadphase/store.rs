@@ -60,7 +60,11 @@ pub(super) struct Store {
     pub(super) flags: Vec<u8>,
     /// The shape as the user gave it. 28 bytes per slot.
     pub(super) shape: Vec<Shape>,
-    /// The box pairs are computed on: the shape's box grown by `Config::margin`. 32 bytes.
+    /// While the incremental pass runs: the box pairs are computed on, the shape's box grown by
+    /// `Config::margin` (for a stale slot, the last applied one). Outside that regime the
+    /// structures hold exactly these boxes, so they are not kept twice: the array is filled
+    /// on entering the regime and left alone outside it (allocated with `held`, see
+    /// [`Store::set_held`]). 32 bytes.
     pub(super) exact: Vec<SimdBox>,
     /// The box its structure (octree or BVH) holds for it while the incremental pass runs: a
     /// fat box around the exact one (outside that regime the structure holds the exact box and
@@ -147,7 +151,6 @@ impl Store {
                 self.kind.push(Kind::Free);
                 self.flags.push(0);
                 self.shape.push(shape);
-                self.exact.push(exact);
                 self.groups.push(CollisionGroups::default());
                 self.speed.push(0.0);
                 self.stamp.push(step);
@@ -159,9 +162,10 @@ impl Store {
         self.kind[s] = kind;
         self.flags[s] = 0;
         self.shape[s] = shape;
-        self.exact[s] = exact;
-        if let Some(h) = self.held.get_mut(s) {
-            *h = exact;
+        if !self.held.is_empty() {
+            // The incremental regime's arrays, once allocated, cover every slot.
+            self.grow_incremental();
+            (self.exact[s], self.held[s]) = (exact, exact);
         }
         self.groups[s] = CollisionGroups::default();
         self.speed[s] = 0.0;
@@ -177,7 +181,6 @@ impl Store {
         grow_slots(&mut self.kind, len);
         grow_slots(&mut self.flags, len);
         grow_slots(&mut self.shape, len);
-        grow_slots(&mut self.exact, len);
         grow_slots(&mut self.groups, len);
         grow_slots(&mut self.speed, len);
         grow_slots(&mut self.stamp, len);
@@ -193,11 +196,11 @@ impl Store {
         try_grow_to(&mut self.kind, want);
         try_grow_to(&mut self.flags, want);
         try_grow_to(&mut self.shape, want);
-        try_grow_to(&mut self.exact, want);
         try_grow_to(&mut self.groups, want);
         try_grow_to(&mut self.speed, want);
         try_grow_to(&mut self.stamp, want);
         if !self.held.is_empty() {
+            try_grow_to(&mut self.exact, want);
             try_grow_to(&mut self.held, want);
             try_grow_to(&mut self.anchor, want);
             try_grow_to(&mut self.slack, want);
@@ -247,8 +250,8 @@ impl Store {
         self.live = live;
     }
 
-    /// Sets the held box of slot `s`, growing `held`, `anchor`, `slack` and `drift` to every
-    /// slot first: they are filled only once the incremental regime is entered, so a world
+    /// Sets the held box of slot `s`, growing `exact`, `held`, `anchor`, `slack` and `drift`
+    /// to every slot first: they are filled only once the incremental regime is entered, so a world
     /// that never enters it keeps none.
     #[inline]
     pub(super) fn set_held(&mut self, s: usize, b: SimdBox) {
@@ -258,9 +261,10 @@ impl Store {
         self.held[s] = b;
     }
 
-    /// Grows `held`, `anchor`, `slack` and `drift` to every slot.
+    /// Grows `exact`, `held`, `anchor`, `slack` and `drift` to every slot.
     pub(super) fn grow_incremental(&mut self) {
         let n = self.version.len();
+        self.exact.resize(n, SimdBox::EMPTY);
         self.held.resize(n, SimdBox::EMPTY);
         self.anchor.resize(n, SimdBox::EMPTY);
         self.slack.resize(n, 0.0);
@@ -306,28 +310,27 @@ mod tests {
                 st.kind.capacity(),
                 st.flags.capacity(),
                 st.shape.capacity(),
-                st.exact.capacity(),
                 st.groups.capacity(),
                 st.speed.capacity(),
                 st.stamp.capacity(),
             ]
         };
-        assert_eq!(caps(&st), [100; 8]);
+        assert_eq!(caps(&st), [100; 7]);
         let slots: Vec<u32> = (0..100)
             .map(|_| st.alloc(sphere, exact, 0).unwrap())
             .collect();
-        assert_eq!(caps(&st), [100; 8]);
+        assert_eq!(caps(&st), [100; 7]);
         for &s in &slots[..10] {
             st.free(s);
         }
         st.release_quarantine();
         // Ten free slots cover ten of the fifteen asked for.
         st.reserve(15);
-        assert_eq!(caps(&st), [105; 8]);
+        assert_eq!(caps(&st), [105; 7]);
         for _ in 0..15 {
             st.alloc(sphere, exact, 1).unwrap();
         }
-        assert_eq!(caps(&st), [105; 8]);
+        assert_eq!(caps(&st), [105; 7]);
         assert_eq!(st.len(), 105);
     }
 }

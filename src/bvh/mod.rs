@@ -438,6 +438,12 @@ impl Bvh {
         self.ids.get(key).map(|&id| self.boxes[id as usize].aabb())
     }
 
+    /// [`Bvh::aabb`] as the box the tree holds, without the conversion.
+    #[inline]
+    pub(crate) fn held_box(&self, key: ProxyKey) -> Option<SimdBox> {
+        self.ids.get(key).map(|&id| self.boxes[id as usize])
+    }
+
     /// Primitives inserted since the last build.
     fn pending(&self) -> usize {
         self.boxes.len() - self.tree_len

@@ -144,7 +144,7 @@ impl Obj {
 
     /// [`Obj::aabb`] as the passes' SIMD box.
     #[inline]
-    fn simd_box(&self) -> crate::geom::SimdBox {
+    pub(crate) fn simd_box(&self) -> crate::geom::SimdBox {
         crate::geom::SimdBox::from_center_radius(self.center, self.radius)
     }
 }
@@ -500,6 +500,16 @@ impl Octree {
             "update_live of a key not live here"
         );
         self.update_id(crate::pair::slot(key), center, radius);
+    }
+
+    /// The box the live sphere of id `id` is held at (`center ± radius` as last stored).
+    #[inline]
+    pub(crate) fn held_box_of(&self, id: u32) -> crate::geom::SimdBox {
+        debug_assert!(
+            self.objs.get(id as usize).is_some_and(|o| o.node != NONE),
+            "held_box_of an id not live here"
+        );
+        self.objs[id as usize].simd_box()
     }
 
     #[inline(always)]
