@@ -610,10 +610,10 @@ impl BroadPhase {
     pub fn set_groups(&mut self, key: ProxyKey, groups: CollisionGroups) -> Result<(), Error> {
         let slot = self.store.resolve(key).ok_or(Error::UnknownProxy)?;
         let s = slot as usize;
-        if self.store.groups[s] == groups {
+        if self.store.group(s) == groups {
             return Ok(());
         }
-        self.store.groups[s] = groups;
+        self.store.set_group(s, groups);
         self.any_groups |= groups != CollisionGroups::ALL;
         // Its candidates were filtered by the old groups: it finds them again, like a proxy
         // that left its fat box.
@@ -625,7 +625,7 @@ impl BroadPhase {
     #[must_use]
     pub fn groups(&self, key: ProxyKey) -> Option<CollisionGroups> {
         let slot = self.store.resolve(key)?;
-        Some(self.store.groups[slot as usize])
+        Some(self.store.group(slot as usize))
     }
 
     /// Number of live proxies.

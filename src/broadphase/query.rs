@@ -109,7 +109,7 @@ impl BroadPhase {
         filter.exclude != Some(key)
             && filter
                 .groups
-                .is_none_or(|g| g.allows(self.store.groups[slot]))
+                .is_none_or(|g| g.allows(self.store.group(slot)))
             && filter
                 .predicate
                 .is_none_or(|p| p(key, &self.store.shape[slot]))

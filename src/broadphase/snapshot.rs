@@ -197,7 +197,7 @@ impl Snapshot {
     fn of(bp: &BroadPhase) -> Self {
         let st = &bp.store;
         let groups = |s: usize| {
-            let g = st.groups[s];
+            let g = st.group(s);
             (g != CollisionGroups::ALL).then_some(Groups {
                 memberships: g.memberships,
                 filter: g.filter,
@@ -264,11 +264,12 @@ impl Snapshot {
         st.kind.reserve_exact(n);
         st.flags.reserve_exact(n);
         st.shape.reserve_exact(n);
-        st.groups.reserve_exact(n);
         st.speed.reserve_exact(n);
         st.stamp.reserve_exact(n);
         let mut live = 0;
-        for slot in &self.slots {
+        // The slots with groups other than `ALL`, set once every slot is in.
+        let mut grouped = Vec::new();
+        for (s, slot) in self.slots.iter().enumerate() {
             let (version, kind, shape, groups) = match *slot {
                 Slot::Free(version) => {
                     let nothing = Shape::Sphere {
@@ -321,16 +322,21 @@ impl Snapshot {
             if kind != Kind::Free {
                 live += 1;
             }
-            bp.any_groups |= groups != CollisionGroups::ALL;
+            if groups != CollisionGroups::ALL {
+                bp.any_groups = true;
+                grouped.push((s, groups));
+            }
             let st = &mut bp.store;
             st.version.push(version);
             st.kind.push(kind);
             st.flags
                 .push(if kind == Kind::Free { flag::GONE } else { 0 });
             st.shape.push(shape);
-            st.groups.push(groups);
             st.speed.push(0.0);
             st.stamp.push(self.now);
+        }
+        for (s, groups) in grouped {
+            bp.store.set_group(s, groups);
         }
         bp.removals = self.quarantine.len();
         bp.store.set_free_lists(self.free, self.quarantine, live);

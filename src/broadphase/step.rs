@@ -476,7 +476,7 @@ impl BroadPhase {
         let (store, fresh, groups) = (&self.store, &mut self.fresh, self.any_groups);
         let mut push = |a: ProxyKey, b: ProxyKey| {
             let (a, b) = (crate::pair::slot(a), crate::pair::slot(b));
-            if !groups || store.groups[a as usize].allows(store.groups[b as usize]) {
+            if !groups || store.group(a as usize).allows(store.group(b as usize)) {
                 fresh.push(pack(a, b));
             }
         };
@@ -513,7 +513,7 @@ impl BroadPhase {
         let (store, groups, splitters) = (&self.store, self.any_groups, &par.splitters[..]);
         let emit = |found: &mut Vec<Vec<u64>>, a: ProxyKey, b: ProxyKey| {
             let (a, b) = (crate::pair::slot(a), crate::pair::slot(b));
-            if !groups || store.groups[a as usize].allows(store.groups[b as usize]) {
+            if !groups || store.group(a as usize).allows(store.group(b as usize)) {
                 let p = pack(a, b);
                 found[radix::part_of(splitters, p)].push(p);
             }
@@ -575,7 +575,7 @@ impl BroadPhase {
             let held = store.held[es].aabb();
             let mut push = |k: ProxyKey| {
                 let s = crate::pair::slot(k);
-                if s != e && (!groups || store.groups[es].allows(store.groups[s as usize])) {
+                if s != e && (!groups || store.group(es).allows(store.group(s as usize))) {
                     fresh.push(pack(e, s));
                 }
             };

@@ -78,8 +78,10 @@ pub(super) struct Store {
     /// How far its exact box was from its anchor when last measured (metres, rounded up).
     /// 4 bytes.
     pub(super) drift: Vec<f32>,
-    /// Collision groups. 8 bytes.
-    pub(super) groups: Vec<CollisionGroups>,
+    /// Collision groups, [`CollisionGroups::ALL`] where not set. Allocated (for every slot)
+    /// when the first other groups are set, so a world that sets none keeps none: read
+    /// through [`Store::group`]. 8 bytes.
+    groups: Vec<CollisionGroups>,
     /// Distance the box moved per step, as last measured (metres, largest axis): sizes the fat
     /// margin. 4 bytes.
     pub(super) speed: Vec<f32>,
@@ -151,7 +153,9 @@ impl Store {
                 self.kind.push(Kind::Free);
                 self.flags.push(0);
                 self.shape.push(shape);
-                self.groups.push(CollisionGroups::default());
+                if !self.groups.is_empty() {
+                    self.groups.push(CollisionGroups::ALL);
+                }
                 self.speed.push(0.0);
                 self.stamp.push(step);
                 slot
@@ -167,7 +171,9 @@ impl Store {
             self.grow_incremental();
             (self.exact[s], self.held[s]) = (exact, exact);
         }
-        self.groups[s] = CollisionGroups::default();
+        if let Some(g) = self.groups.get_mut(s) {
+            *g = CollisionGroups::ALL;
+        }
         self.speed[s] = 0.0;
         self.stamp[s] = step;
         self.live += 1;
@@ -181,7 +187,9 @@ impl Store {
         grow_slots(&mut self.kind, len);
         grow_slots(&mut self.flags, len);
         grow_slots(&mut self.shape, len);
-        grow_slots(&mut self.groups, len);
+        if !self.groups.is_empty() {
+            grow_slots(&mut self.groups, len);
+        }
         grow_slots(&mut self.speed, len);
         grow_slots(&mut self.stamp, len);
     }
@@ -196,7 +204,9 @@ impl Store {
         try_grow_to(&mut self.kind, want);
         try_grow_to(&mut self.flags, want);
         try_grow_to(&mut self.shape, want);
-        try_grow_to(&mut self.groups, want);
+        if !self.groups.is_empty() {
+            try_grow_to(&mut self.groups, want);
+        }
         try_grow_to(&mut self.speed, want);
         try_grow_to(&mut self.stamp, want);
         if !self.held.is_empty() {
@@ -261,6 +271,24 @@ impl Store {
         self.held[s] = b;
     }
 
+    /// The collision groups of slot `s` ([`CollisionGroups::ALL`] unless set otherwise).
+    #[inline]
+    pub(super) fn group(&self, s: usize) -> CollisionGroups {
+        self.groups.get(s).copied().unwrap_or(CollisionGroups::ALL)
+    }
+
+    /// Sets the collision groups of slot `s`, allocating the groups of every slot the first
+    /// time they are not [`CollisionGroups::ALL`].
+    pub(super) fn set_group(&mut self, s: usize, groups: CollisionGroups) {
+        if self.groups.is_empty() {
+            if groups == CollisionGroups::ALL {
+                return;
+            }
+            self.groups.resize(self.version.len(), CollisionGroups::ALL);
+        }
+        self.groups[s] = groups;
+    }
+
     /// Grows `exact`, `held`, `anchor`, `slack` and `drift` to every slot.
     pub(super) fn grow_incremental(&mut self) {
         let n = self.version.len();
@@ -310,27 +338,62 @@ mod tests {
                 st.kind.capacity(),
                 st.flags.capacity(),
                 st.shape.capacity(),
-                st.groups.capacity(),
                 st.speed.capacity(),
                 st.stamp.capacity(),
             ]
         };
-        assert_eq!(caps(&st), [100; 7]);
+        assert_eq!(caps(&st), [100; 6]);
         let slots: Vec<u32> = (0..100)
             .map(|_| st.alloc(sphere, exact, 0).unwrap())
             .collect();
-        assert_eq!(caps(&st), [100; 7]);
+        assert_eq!(caps(&st), [100; 6]);
         for &s in &slots[..10] {
             st.free(s);
         }
         st.release_quarantine();
         // Ten free slots cover ten of the fifteen asked for.
         st.reserve(15);
-        assert_eq!(caps(&st), [105; 7]);
+        assert_eq!(caps(&st), [105; 6]);
         for _ in 0..15 {
             st.alloc(sphere, exact, 1).unwrap();
         }
-        assert_eq!(caps(&st), [105; 7]);
+        assert_eq!(caps(&st), [105; 6]);
         assert_eq!(st.len(), 105);
+    }
+
+    /// Groups are kept only once some slot's differ from `ALL`: until then every slot reads
+    /// `ALL` and nothing is allocated; afterwards every slot has its entry, a new slot and a
+    /// reused one start at `ALL`.
+    #[test]
+    fn groups_are_allocated_by_the_first_other_than_all() {
+        let sphere = Shape::Sphere {
+            center: Vec3::ZERO,
+            radius: 1.0,
+        };
+        let exact = SimdBox::from_center_radius(Vec3::ZERO, 1.0);
+        let mut st = Store::default();
+        let a = st.alloc(sphere, exact, 0).unwrap();
+        let b = st.alloc(sphere, exact, 0).unwrap();
+        st.set_group(a as usize, CollisionGroups::ALL);
+        assert_eq!(st.groups.capacity(), 0);
+        assert_eq!(st.group(b as usize), CollisionGroups::ALL);
+        let g = CollisionGroups {
+            memberships: 1,
+            filter: 2,
+        };
+        st.set_group(b as usize, g);
+        assert_eq!(st.groups.len(), st.slots());
+        assert_eq!(
+            (st.group(a as usize), st.group(b as usize)),
+            (CollisionGroups::ALL, g)
+        );
+        let c = st.alloc(sphere, exact, 1).unwrap();
+        assert_eq!(st.groups.len(), st.slots());
+        assert_eq!(st.group(c as usize), CollisionGroups::ALL);
+        st.free(b);
+        st.release_quarantine();
+        let reused = st.alloc(sphere, exact, 2).unwrap();
+        assert_eq!(reused, b);
+        assert_eq!(st.group(reused as usize), CollisionGroups::ALL);
     }
 }

@@ -151,7 +151,7 @@ impl BroadPhase {
         sweep::self_pairs::<0>(&boxes, |i, j| {
             let (a, b) = (fat[i].1 as usize, fat[j].1 as usize);
             let both_static = st.kind[a] == Kind::Static && st.kind[b] == Kind::Static;
-            if !both_static && st.groups[a].allows(st.groups[b]) {
+            if !both_static && st.group(a).allows(st.group(b)) {
                 want.push(super::step::pack(a as u32, b as u32));
             }
         });
