@@ -282,9 +282,20 @@ impl Gather<'_> {
     }
 }
 
+/// [`sort_u64`] that leaves the keys in their own buffer (copied back if they end in the
+/// second one), for a second buffer lent by another owner: `scratch` is grown to the keys'
+/// length if it is shorter, and its contents are overwritten.
+pub(crate) fn sort_u64_kept(keys: &mut [u64], scratch: &mut Vec<u64>, layout: PairBits) {
+    let n = keys.len();
+    if n >= 64 && scratch.len() < n {
+        scratch.resize(n, 0);
+    }
+    let m = n.min(scratch.len());
+    sort_slice(keys, &mut scratch[..m], layout);
+}
+
 /// [`sort_u64`] of a slice with a second buffer of the same length: the keys are copied back
 /// if they end in `tmp`.
-#[cfg(feature = "parallel")]
 fn sort_slice(keys: &mut [u64], tmp: &mut [u64], layout: PairBits) {
     if keys.len() < 64 {
         keys.sort_unstable();

@@ -40,7 +40,7 @@ use super::fat::LOOKAHEAD_STEPS;
 use super::*;
 #[cfg(feature = "parallel")]
 use crate::radix;
-use crate::radix::{PairBits, ahead, grow_to, sort_u64};
+use crate::radix::{PairBits, ahead, grow_to, sort_u64_kept};
 
 /// Set on a candidate whose exact boxes overlapped at the last step.
 pub(super) const HIT: u64 = 1 << 63;
@@ -105,7 +105,8 @@ pub(super) struct Parallel {
     found: Vec<Vec<Vec<u64>>>,
     /// The split BVH passes' items and per-task stacks.
     split: crate::bvh::SplitScratch,
-    /// The pair sort's parts' bounds (its second buffer is the serial sort's `sort_buf`).
+    /// The pair sort's parts' bounds (its second buffer is the serial sort's, see
+    /// [`sort_scratch`]).
     sort_bounds: Vec<usize>,
     /// Per part of the event diff: its `added` and `removed`.
     diff: Vec<[Vec<u64>; 2]>,
@@ -341,10 +342,15 @@ impl BroadPhase {
         // pairs in place. Both stay ready for the largest list a full pass can make, grown as
         // `ahead` grows a list: to half again that length once within a quarter of it.
         let most = self.cand.len().max(self.pairs.len());
-        for v in [&mut self.fresh, &mut self.sort_buf] {
-            if v.capacity() < most + most / 4 {
-                grow_to(v, most + most / 2);
-            }
+        if self.fresh.capacity() < most + most / 4 {
+            grow_to(&mut self.fresh, most + most / 2);
+        }
+        // The sort's second buffer may be the octree's, sized exactly for its spheres: it is
+        // kept half again ahead, so that a pair count near the sphere count does not cross
+        // the growth threshold at some later step.
+        let scratch = sort_scratch(&mut self.octree, &mut self.sort_buf);
+        if scratch.capacity() < most + most / 2 {
+            grow_to(scratch, most + most * 3 / 4);
         }
         for v in [&mut self.added_packed, &mut self.removed_packed] {
             grow_to(v, n / 8);
@@ -391,7 +397,8 @@ impl BroadPhase {
             _ => {
                 self.fresh.clear();
                 self.structure_pairs();
-                sort_u64(&mut self.fresh, &mut self.sort_buf, layout);
+                let scratch = sort_scratch(&mut self.octree, &mut self.sort_buf);
+                sort_u64_kept(&mut self.fresh, scratch, layout);
             }
         }
         if fat {
@@ -531,18 +538,18 @@ impl BroadPhase {
                 },
             );
         });
+        let scratch = sort_scratch(&mut self.octree, &mut self.sort_buf);
         radix::sort_parts(
             &par.found[..producers],
             parts,
             &mut self.fresh,
-            &mut self.sort_buf,
+            scratch,
             &mut par.sort_bounds,
             layout,
         );
         for list in par.found[..producers].iter_mut().flatten() {
             ahead(list);
         }
-        ahead(&mut self.sort_buf);
     }
 
     /// The incremental pass (see the module docs and [`super::slack`]): the pair list and the
@@ -551,9 +558,10 @@ impl BroadPhase {
         self.refit(false);
         self.fresh.clear();
         self.query_escaped();
-        sort_u64(
+        let scratch = sort_scratch(&mut self.octree, &mut self.sort_buf);
+        sort_u64_kept(
             &mut self.fresh,
-            &mut self.sort_buf,
+            scratch,
             PairBits::for_slots(self.store.slots()),
         );
         self.fresh.dedup();
@@ -669,6 +677,18 @@ impl BroadPhase {
     }
 }
 
+/// The second buffer of the pair sorts: while the octree holds spheres, its buffer that sits
+/// idle between its passes ([`Octree::idle_buffer`]), so the pair sort and the octree's
+/// walk-order sort share one (sized for the larger); else the broadphase's own, so that a
+/// world of bodies leaves the octree empty.
+pub(super) fn sort_scratch<'a>(octree: &'a mut Octree, own: &'a mut Vec<u64>) -> &'a mut Vec<u64> {
+    if octree.is_empty() {
+        own
+    } else {
+        octree.idle_buffer()
+    }
+}
+
 /// Calls `push(a, b)` for every sphere of `octree` and body of `dynamic` or `statics` whose
 /// held boxes overlap: the smaller side queries the other side's structure.
 fn sphere_body_pairs(
@@ -692,5 +712,59 @@ fn sphere_body_pairs(
             dynamic.query_aabb_unchecked(&aabb, |body| push(sphere, body));
             statics.query_aabb_unchecked(&aabb, |body| push(sphere, body));
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::broadphase::{BodyKind, BroadPhase, Config};
+    use crate::brute::{self, Proxy};
+    use crate::{Aabb, Vec3};
+
+    /// While the octree holds spheres the pair sorts borrow its idle buffer, and the
+    /// broadphase's own second buffer stays unallocated; once the spheres are gone the pairs of
+    /// the bodies are sorted with the broadphase's own. Pairs equal brute force throughout.
+    #[test]
+    fn the_pair_sort_borrows_the_octrees_buffer_while_it_holds_spheres() {
+        let mut bp = BroadPhase::new(Config::default());
+        let at = |i: usize| Vec3::new((i % 30) as f32, ((i / 30) % 30) as f32, (i / 900) as f32);
+        let mut spheres: Vec<_> = (0..2700)
+            .map(|i| (bp.insert_sphere(at(i) * 0.9, 0.5).unwrap(), at(i) * 0.9))
+            .collect();
+        let bodies: Vec<_> = (0..300)
+            .map(|i| {
+                let c = at(i) * 0.9 + Vec3::splat(0.3);
+                let b = Aabb::new(c, c + Vec3::splat(1.0));
+                (bp.insert_body(b, BodyKind::Dynamic).unwrap(), b)
+            })
+            .collect();
+        let expect = |spheres: &[(crate::ProxyKey, Vec3)]| {
+            let mut all: Vec<Proxy> = spheres
+                .iter()
+                .map(|&(k, c)| Proxy::new(k, Aabb::from_center_radius(c, 0.5)))
+                .collect();
+            all.extend(bodies.iter().map(|&(k, b)| Proxy::new(k, b)));
+            brute::pairs(&all)
+        };
+        for step in 0..4 {
+            for (i, (k, c)) in spheres.iter_mut().enumerate() {
+                *c = at(i) * 0.9 + Vec3::splat(0.01 * ((i + step) % 3) as f32);
+                bp.update_sphere(*k, *c, 0.5).unwrap();
+            }
+            bp.step();
+            bp.validate();
+            assert_eq!(bp.pairs(), &expect(&spheres)[..], "step {step}");
+            assert_eq!(bp.sort_buf.capacity(), 0, "step {step}");
+        }
+        for &(k, _) in &spheres {
+            bp.remove(k).unwrap();
+        }
+        spheres.clear();
+        for _ in 0..3 {
+            bp.step();
+            bp.validate();
+            assert_eq!(bp.pairs(), &expect(&spheres)[..]);
+        }
+        assert!(bp.octree().is_empty() && !bp.pairs().is_empty());
     }
 }

@@ -502,6 +502,13 @@ impl Octree {
         self.update_id(crate::pair::slot(key), center, radius);
     }
 
+    /// A buffer of the pair passes that sits idle between them (the walk-order sort's items,
+    /// room for every sphere), lent as scratch: its contents are garbage to both sides. The
+    /// broadphase sorts its pair list with it, so the two sorts share one second buffer.
+    pub(crate) fn idle_buffer(&mut self) -> &mut Vec<u64> {
+        self.passes.walk.idle_items()
+    }
+
     /// The box the live sphere of id `id` is held at (`center ± radius` as last stored).
     #[inline]
     pub(crate) fn held_box_of(&self, id: u32) -> crate::geom::SimdBox {

@@ -147,6 +147,11 @@ impl Scratch {
             counts: &mut self.counts,
         }
     }
+    /// The sort's item buffer, whose contents matter only during a pass.
+    pub(super) fn idle_items(&mut self) -> &mut Vec<u64> {
+        &mut self.items
+    }
+
     /// Heap bytes held (capacities).
     pub(super) fn heap_bytes(&self) -> usize {
         use core::mem::size_of_val;
