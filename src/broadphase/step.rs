@@ -317,6 +317,12 @@ impl BroadPhase {
         }
         self.loud.clear();
         self.movers.clear();
+        if !self.cached {
+            // Outside the incremental regime only inserts and regroups are listed as escaped:
+            // the list gives back the room a burst of inserts (the first step's) left far
+            // above that. Inside it the escapes swing from step to step, and it keeps its room.
+            super::trim(&mut self.escaped, self.store.len() / 8);
+        }
         self.escaped.clear();
         self.removals = 0;
         self.fast_movers = 0;
@@ -766,5 +772,29 @@ mod tests {
             assert_eq!(bp.pairs(), &expect(&spheres)[..]);
         }
         assert!(bp.octree().is_empty() && !bp.pairs().is_empty());
+    }
+
+    /// Outside the incremental regime the escaped list holds only inserts: after the first
+    /// step's burst of them, the next step gives back its room, down to the room kept for an
+    /// eighth of the proxies.
+    #[test]
+    fn the_escaped_list_gives_back_the_first_steps_inserts() {
+        let mut bp = BroadPhase::new(Config {
+            passes: crate::broadphase::Passes::Full,
+            ..Config::default()
+        });
+        let n = 20_000;
+        for i in 0..n {
+            let c = Vec3::new((i % 100) as f32, (i / 100) as f32, 0.0) * 2.0;
+            bp.insert_sphere(c, 0.5).unwrap();
+        }
+        assert!(bp.escaped.capacity() >= n);
+        bp.step();
+        bp.step();
+        assert!(
+            bp.escaped.capacity() <= 2 * (n / 8),
+            "{}",
+            bp.escaped.capacity()
+        );
     }
 }
