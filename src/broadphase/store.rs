@@ -321,15 +321,20 @@ mod tests {
     use super::*;
     use crate::Vec3;
 
-    /// `reserve` sizes every per-slot array to exactly the slots asked for, counting free
-    /// slots as room, and the allocations that fill them do not grow them.
-    #[test]
-    fn reserve_is_exact_and_counts_free_slots() {
+    /// A unit sphere at the origin and its exact box.
+    fn unit_sphere() -> (Shape, SimdBox) {
         let sphere = Shape::Sphere {
             center: Vec3::ZERO,
             radius: 1.0,
         };
-        let exact = SimdBox::from_center_radius(Vec3::ZERO, 1.0);
+        (sphere, SimdBox::from_center_radius(Vec3::ZERO, 1.0))
+    }
+
+    /// `reserve` sizes every per-slot array to exactly the slots asked for, counting free
+    /// slots as room, and the allocations that fill them do not grow them.
+    #[test]
+    fn reserve_is_exact_and_counts_free_slots() {
+        let (sphere, exact) = unit_sphere();
         let mut st = Store::default();
         st.reserve(100);
         let caps = |st: &Store| {
@@ -366,11 +371,7 @@ mod tests {
     /// reused one start at `ALL`.
     #[test]
     fn groups_are_allocated_by_the_first_other_than_all() {
-        let sphere = Shape::Sphere {
-            center: Vec3::ZERO,
-            radius: 1.0,
-        };
-        let exact = SimdBox::from_center_radius(Vec3::ZERO, 1.0);
+        let (sphere, exact) = unit_sphere();
         let mut st = Store::default();
         let a = st.alloc(sphere, exact, 0).unwrap();
         let b = st.alloc(sphere, exact, 0).unwrap();
