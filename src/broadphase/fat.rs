@@ -174,24 +174,6 @@ impl BroadPhase {
         grown(self.store.shape[slot as usize], self.config.margin)
     }
 
-    /// The exact box the applied `slot` was last applied at: in the incremental regime the
-    /// store's, outside it the one its structure holds (the same box, kept once).
-    #[inline]
-    pub(super) fn last_exact(&self, slot: u32) -> SimdBox {
-        let s = slot as usize;
-        if self.cached {
-            return self.store.exact[s];
-        }
-        match self.store.shape[s] {
-            Shape::Sphere { .. } => self.octree.held_box_of(slot),
-            Shape::Body { kind, .. } => {
-                let held = self.bvh(kind).held_box(self.store.key(slot));
-                debug_assert!(held.is_some(), "a live body missing from its BVH");
-                held.unwrap_or(SimdBox::EMPTY)
-            }
-        }
-    }
-
     /// Fills the exact box of every live slot, on entering the incremental regime (outside it
     /// the store does not keep them); every slot is applied.
     pub(super) fn fill_exact(&mut self) {

@@ -443,7 +443,8 @@ impl BroadPhase {
         Ok(self.store.key(slot))
     }
 
-    /// Puts the new live proxy in `slot` (its shape and exact box stored) into its structure
+    /// Puts the new live proxy in `slot` (its shape stored, and its exact box where the store
+    /// keeps them, see [`Store::alloc`]) into its structure
     /// under its key, holding its exact box, or a fat one in the incremental regime, and marks
     /// it for the next step to find its pairs. [`BroadPhase::insert`] and a snapshot's restore
     /// both place proxies here.

@@ -127,7 +127,9 @@ impl Store {
         ))
     }
 
-    /// Takes a slot for a new proxy, or `None` when every slot index is in use.
+    /// Takes a slot for a new proxy, or `None` when every slot index is in use. Its exact box
+    /// `exact` is stored only once the incremental regime's arrays are allocated (see
+    /// [`Store::exact`]); its groups start at [`CollisionGroups::ALL`].
     pub(super) fn alloc(&mut self, shape: Shape, exact: SimdBox, step: u32) -> Option<u32> {
         let kind = match shape {
             Shape::Sphere { .. } => Kind::Sphere,
