@@ -124,17 +124,16 @@ impl BroadPhase {
             }
             shape @ Shape::Body { kind, .. } => {
                 let exact = fat::grown(shape, self.config.margin).aabb;
+                // The store keeps every body's exact box (see `Store::exact`).
+                let old = self.store.exact[s];
+                let motion = self.note_motion(s, &old, &exact);
+                self.store.exact[s] = exact;
                 if self.cached {
-                    let old = self.store.exact[s];
-                    let motion = self.note_motion(s, &old, &exact);
-                    self.store.exact[s] = exact;
                     self.refresh_fat(slot, &exact, motion);
                 } else {
-                    // The leaf held the exact box it was last applied at.
                     let key = self.store.key(slot);
-                    let old = self.tree_mut(kind).update_box_deferred(key, &exact);
-                    debug_assert!(old.is_ok(), "a live body missing from its BVH");
-                    self.note_motion(s, &old.unwrap_or(exact), &exact);
+                    let placed = self.tree_mut(kind).update_box_deferred(key, &exact);
+                    debug_assert!(placed.is_ok(), "a live body missing from its BVH");
                 }
             }
         }

@@ -342,33 +342,42 @@ mod tests {
     use crate::broadphase::{BodyKind, BroadPhase, Config, Passes};
     use crate::{Aabb, Vec3};
 
-    /// A world stepped by the full pass only keeps no exact boxes in the store (its structures
-    /// hold them), yet measures each proxy's motion from the box it was last applied at.
+    /// A world of spheres stepped by the full pass keeps no exact boxes in the store (the
+    /// octree's records hold them), yet measures each sphere's motion from the box it was last
+    /// applied at; the first body makes the store keep exact boxes, and its motion is measured
+    /// from its own.
     #[test]
-    fn the_full_pass_keeps_no_exact_boxes_and_still_measures_motion() {
+    fn the_full_pass_keeps_no_exact_boxes_of_spheres_and_still_measures_motion() {
         let mut bp = BroadPhase::new(Config {
             passes: Passes::Full,
             ..Config::default()
         });
+        let slot = |k| crate::pair::slot(k) as usize;
         let sphere = bp.insert_sphere(Vec3::ZERO, 0.5).unwrap();
+        bp.step();
+        // Steps of 0.25 and 0.5 m along x and y: exact in `f32`.
+        let at = |d: f32| Vec3::new(0.25 * d, 0.0, 0.0);
+        for step in 1..4 {
+            bp.update_sphere(sphere, at(step as f32), 0.5).unwrap();
+            bp.step();
+            bp.validate();
+            assert_eq!(bp.store.exact.capacity(), 0);
+            assert_eq!(bp.store.speed[slot(sphere)], 0.25, "step {step}");
+        }
         let body = bp
             .insert_body(
                 Aabb::new(Vec3::splat(3.0), Vec3::splat(4.0)),
                 BodyKind::Dynamic,
             )
             .unwrap();
+        bp.update_sphere(sphere, at(4.0), 0.5).unwrap();
         bp.step();
-        for step in 1..6 {
-            // Steps of 0.25 and 0.5 m along x and y: exact in `f32`.
-            let d = step as f32;
-            bp.update_sphere(sphere, Vec3::new(0.25 * d, 0.0, 0.0), 0.5)
-                .unwrap();
-            let o = Vec3::new(3.0, 3.0 + 0.5 * d, 3.0);
+        for step in 5..9 {
+            bp.update_sphere(sphere, at(step as f32), 0.5).unwrap();
+            let o = Vec3::new(3.0, 3.0 + 0.5 * (step - 4) as f32, 3.0);
             bp.update_body(body, Aabb::new(o, o + Vec3::ONE)).unwrap();
             bp.step();
             bp.validate();
-            assert_eq!(bp.store.exact.capacity(), 0);
-            let slot = |k| crate::pair::slot(k) as usize;
             assert_eq!(bp.store.speed[slot(sphere)], 0.25, "step {step}");
             assert_eq!(bp.store.speed[slot(body)], 0.5, "step {step}");
         }

@@ -60,11 +60,13 @@ pub(super) struct Store {
     pub(super) flags: Vec<u8>,
     /// The shape as the user gave it. 28 bytes per slot.
     pub(super) shape: Vec<Shape>,
-    /// While the incremental pass runs: the box pairs are computed on, the shape's box grown by
-    /// `Config::margin` (for a stale slot, the last applied one). Outside that regime the
-    /// structures hold exactly these boxes, so they are not kept twice: the array is filled
-    /// on entering the regime and left alone outside it (allocated with `held`, see
-    /// [`Store::set_held`]). 32 bytes.
+    /// The box pairs are computed on, the shape's box grown by `Config::margin` (for a stale
+    /// slot, the last applied one): kept for every body, and for spheres while the
+    /// incremental pass runs. Outside that regime the octree's record holds a sphere's exact
+    /// box, so it is not kept twice; a body's BVH leaf is a random access away from the
+    /// apply's walk, which reads the box it replaces. The array is allocated by the first body
+    /// or the regime's arrays ([`Store::set_held`]), so a world of spheres outside the regime
+    /// keeps none; a sphere's entry is filled on every entry into the regime. 32 bytes.
     pub(super) exact: Vec<SimdBox>,
     /// The box its structure (octree or BVH) holds for it while the incremental pass runs: a
     /// fat box around the exact one (outside that regime the structure holds the exact box and
@@ -128,8 +130,8 @@ impl Store {
     }
 
     /// Takes a slot for a new proxy, or `None` when every slot index is in use. Its exact box
-    /// `exact` is stored only once the incremental regime's arrays are allocated (see
-    /// [`Store::exact`]); its groups start at [`CollisionGroups::ALL`].
+    /// `exact` is stored where [`Store::exact`] says; its groups start at
+    /// [`CollisionGroups::ALL`].
     pub(super) fn alloc(&mut self, shape: Shape, exact: SimdBox, step: u32) -> Option<u32> {
         let kind = match shape {
             Shape::Sphere { .. } => Kind::Sphere,
@@ -171,7 +173,11 @@ impl Store {
         if !self.held.is_empty() {
             // The incremental regime's arrays, once allocated, cover every slot.
             self.grow_incremental();
-            (self.exact[s], self.held[s]) = (exact, exact);
+            self.held[s] = exact;
+        }
+        if kind != Kind::Sphere || !self.exact.is_empty() {
+            self.keep_exact();
+            self.exact[s] = exact;
         }
         if let Some(g) = self.groups.get_mut(s) {
             *g = CollisionGroups::ALL;
@@ -211,8 +217,10 @@ impl Store {
         }
         try_grow_to(&mut self.speed, want);
         try_grow_to(&mut self.stamp, want);
-        if !self.held.is_empty() {
+        if !self.exact.is_empty() {
             try_grow_to(&mut self.exact, want);
+        }
+        if !self.held.is_empty() {
             try_grow_to(&mut self.held, want);
             try_grow_to(&mut self.anchor, want);
             try_grow_to(&mut self.slack, want);
@@ -291,10 +299,17 @@ impl Store {
         self.groups[s] = groups;
     }
 
+    /// Grows `exact` to every slot (see [`Store::exact`]).
+    pub(super) fn keep_exact(&mut self) {
+        let n = self.version.len();
+        grow_slots(&mut self.exact, n);
+        self.exact.resize(n, SimdBox::EMPTY);
+    }
+
     /// Grows `exact`, `held`, `anchor`, `slack` and `drift` to every slot.
     pub(super) fn grow_incremental(&mut self) {
         let n = self.version.len();
-        self.exact.resize(n, SimdBox::EMPTY);
+        self.keep_exact();
         self.held.resize(n, SimdBox::EMPTY);
         self.anchor.resize(n, SimdBox::EMPTY);
         self.slack.resize(n, 0.0);

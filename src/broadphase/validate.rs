@@ -34,7 +34,7 @@ impl BroadPhase {
             if is_stale {
                 stale += 1;
                 assert_ne!(st.flags[s] & flag::MOVED, 0, "slot {s}: stale, not moved");
-            } else if self.cached {
+            } else if self.cached || st.kind[s] != Kind::Sphere {
                 assert_eq!(
                     st.exact[s],
                     self.exact_box(&st.shape[s]),

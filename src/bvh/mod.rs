@@ -336,23 +336,22 @@ impl Bvh {
     /// passes it as is (making an `Aabb` of it and back goes through memory and stalls).
     #[inline]
     pub(crate) fn update_box(&mut self, key: ProxyKey, b: &SimdBox) -> Result<(), Error> {
-        if let (_, Some(leaf)) = self.write_box(key, b)? {
+        if let Some(leaf) = self.write_box(key, b)? {
             self.enlarge_ancestors(leaf, b);
         }
         Ok(())
     }
 
-    /// Writes `key`'s box (and its lane); the box it replaces, and the leaf that holds it if it
-    /// is in the tree yet.
+    /// Writes `key`'s box (and its lane); the leaf that holds it, if it is in the tree yet.
     #[inline]
-    fn write_box(&mut self, key: ProxyKey, b: &SimdBox) -> Result<(SimdBox, Option<u32>), Error> {
+    fn write_box(&mut self, key: ProxyKey, b: &SimdBox) -> Result<Option<u32>, Error> {
         let id = *self.ids.get(key).ok_or(Error::UnknownProxy)? as usize;
-        let old = core::mem::replace(&mut self.boxes[id], *b);
+        self.boxes[id] = *b;
         if id < self.tree_len {
             self.lanes.set(id, b);
-            Ok((old, Some(self.leaf_of[id])))
+            Ok(Some(self.leaf_of[id]))
         } else {
-            Ok((old, None))
+            Ok(None)
         }
     }
 
@@ -362,15 +361,9 @@ impl Bvh {
     /// the box, so no query or pair pass may run (the pair passes check it in debug builds).
     /// A caller that refits before its next pass (a full pass) pays no walk up at all, and one
     /// that does not enlarges each grown leaf's ancestors once, however many of its boxes moved.
-    /// Returns the box it replaced. Inlined into the apply's walk, which calls it per body.
-    #[inline(always)]
-    pub(crate) fn update_box_deferred(
-        &mut self,
-        key: ProxyKey,
-        b: &SimdBox,
-    ) -> Result<SimdBox, Error> {
-        let (replaced, leaf_index) = self.write_box(key, b)?;
-        if let Some(leaf_index) = leaf_index {
+    #[inline]
+    pub(crate) fn update_box_deferred(&mut self, key: ProxyKey, b: &SimdBox) -> Result<(), Error> {
+        if let Some(leaf_index) = self.write_box(key, b)? {
             let leaf = &mut self.nodes[leaf_index as usize];
             let old = leaf.bounds();
             if !old.contains(b) {
@@ -378,7 +371,7 @@ impl Bvh {
                 self.deferred.push(leaf_index);
             }
         }
-        Ok(replaced)
+        Ok(())
     }
 
     /// True if [`Bvh::update_box_deferred`] grew leaves whose ancestors are not enlarged yet.
