@@ -35,7 +35,7 @@ use super::BroadPhase;
 use super::step::{HIT, unpack};
 use super::store::{Store, flag};
 use crate::geom::SimdBox;
-use crate::radix::{PairBits, sort_bits_by, sort_u64, sort_u64_kept};
+use crate::radix::{PairBits, sort_bits_by, sort_u64};
 use glam::Vec3A;
 
 /// Finding one proxy's candidates through the sorted list and the reverse index (a binary
@@ -239,8 +239,8 @@ impl BroadPhase {
             st.slack[b] = st.slack[b].min(s);
             rev.push(reverse(a, b));
         }
-        let scratch = super::step::sort_scratch(&mut self.octree, &mut self.sort_buf);
-        sort_u64_kept(rev, scratch, PairBits::for_slots(st.slots()));
+        self.sort_fresh();
+        let rev = &self.fresh;
         self.rev
             .refill(rev.len(), 0, |list| list.extend_from_slice(rev));
         self.clear_pending();

@@ -340,12 +340,10 @@ impl Snapshot {
         }
         // Every body's exact box is kept (see `Store::exact`).
         for s in 0..n {
-            if let Shape::Body { .. } = bp.store.shape[s] {
-                if bp.store.kind[s] != Kind::Free {
-                    let exact = bp.exact_box(&bp.store.shape[s]);
-                    bp.store.keep_exact();
-                    bp.store.exact[s] = exact;
-                }
+            if matches!(bp.store.kind[s], Kind::Dynamic | Kind::Static) {
+                let exact = bp.exact_box(&bp.store.shape[s]);
+                bp.store.keep_exact();
+                bp.store.exact[s] = exact;
             }
         }
         bp.removals = self.quarantine.len();

@@ -342,10 +342,10 @@ impl BroadPhase {
             ahead(&mut self.pending);
             self.patch.keep_headroom(n / PATCH_FLOOR);
         }
-        // A full pass finds every pair (or candidate) into `fresh` and sorts it there with
-        // `sort_buf`, diffs the key pairs against it and refills them from it; the incremental
-        // steps fill `fresh` only with the escaped proxies' new candidates and patch the key
-        // pairs in place. Both stay ready for the largest list a full pass can make, grown as
+        // A full pass finds every pair (or candidate) into `fresh` and sorts it there, diffs
+        // the key pairs against it and refills them from it; the incremental steps fill
+        // `fresh` only with the escaped proxies' new candidates and patch the key pairs in
+        // place. `fresh` stays ready for the largest list a full pass can make, grown as
         // `ahead` grows a list: to half again that length once within a quarter of it.
         let most = self.cand.len().max(self.pairs.len());
         if self.fresh.capacity() < most + most / 4 {
@@ -396,15 +396,13 @@ impl BroadPhase {
             }
         }
         self.refit(true);
-        let layout = PairBits::for_slots(self.store.slots());
         match tasks {
             #[cfg(feature = "parallel")]
-            2.. => self.sorted_pairs_par(tasks, layout),
+            2.. => self.sorted_pairs_par(tasks, PairBits::for_slots(self.store.slots())),
             _ => {
                 self.fresh.clear();
                 self.structure_pairs();
-                let scratch = sort_scratch(&mut self.octree, &mut self.sort_buf);
-                sort_u64_kept(&mut self.fresh, scratch, layout);
+                self.sort_fresh();
             }
         }
         if fat {
@@ -564,12 +562,7 @@ impl BroadPhase {
         self.refit(false);
         self.fresh.clear();
         self.query_escaped();
-        let scratch = sort_scratch(&mut self.octree, &mut self.sort_buf);
-        sort_u64_kept(
-            &mut self.fresh,
-            scratch,
-            PairBits::for_slots(self.store.slots()),
-        );
+        self.sort_fresh();
         self.fresh.dedup();
         self.classify();
         self.update_candidates();
@@ -599,6 +592,14 @@ impl BroadPhase {
                 self.statics.query_aabb_unchecked(&held, &mut push);
             }
         }
+    }
+
+    /// Sorts `fresh` (packed pairs) in place, with the pair sorts' second buffer
+    /// ([`sort_scratch`]).
+    pub(super) fn sort_fresh(&mut self) {
+        let layout = PairBits::for_slots(self.store.slots());
+        let scratch = sort_scratch(&mut self.octree, &mut self.sort_buf);
+        sort_u64_kept(&mut self.fresh, scratch, layout);
     }
 
     /// [`BroadPhase::emit`] over rayon's current pool: the current list is cut into `parts`
