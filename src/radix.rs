@@ -1,7 +1,7 @@
 //! The one radix sort: least-significant-digit sorts of `u64` keys by a range of their bits,
 //! stable, reusing caller-owned buffers, and how those buffers grow.
 //!
-//! - [`sort_bits`] / [`sort_bits_by`]: any items by bits `lo..lo + bits` of their key. The
+//! - [`sort_bits_in`] / [`sort_bits_by`]: any items by bits `lo..lo + bits` of their key. The
 //!   octree's walk order sorts `(walk key << 32) | id` by the walk key's bits this way.
 //! - [`sort_u64`] / [`sort_parts`]: packed slot pairs (one slot index in each 32-bit half, see
 //!   `broadphase::step::pack`), the broadphase's pair lists. With `slots` slots each index fits
@@ -382,20 +382,9 @@ fn bits_of(x: u64) -> u32 {
     u64::BITS - x.leading_zeros()
 }
 
-/// Sorts `items` by bits `lo..lo + bits`, stable; `tmp` and `counts` are scratch that keeps
-/// its capacity. Digits every item shares are skipped.
-pub(crate) fn sort_bits(
-    items: &mut Vec<u64>,
-    tmp: &mut Vec<u64>,
-    counts: &mut Vec<u32>,
-    lo: u32,
-    bits: u32,
-) {
-    sort_bits_by(items, tmp, counts, |&x| x, lo, bits);
-}
-
-/// [`sort_bits`] of any items by bits `lo..lo + bits` of `key(item)`: the walk order of trees
-/// too deep for a 32-bit walk key sorts `(walk key, id)` pairs this way.
+/// Sorts `items` by bits `lo..lo + bits` of `key(item)`, stable; `tmp` and `counts` are
+/// scratch that keeps its capacity, and digits every item shares are skipped. The walk order
+/// of trees too deep for a 32-bit walk key sorts `(walk key, id)` pairs this way.
 #[inline]
 pub(crate) fn sort_bits_by<T: Copy + Default>(
     items: &mut Vec<T>,
@@ -411,10 +400,10 @@ pub(crate) fn sort_bits_by<T: Copy + Default>(
     }
 }
 
-/// [`sort_bits`] of a slice with a second buffer of the same length, for a caller sorting
-/// parts of one buffer in place: returns true if the sorted items ended in `tmp` (an odd
-/// number of passes moved them), false if in `items`.
-#[cfg(feature = "parallel")]
+/// [`sort_bits_by`] of `u64` keys in a slice with a second buffer of the same length, for a
+/// caller that keeps its buffers where they are (parts of one buffer, or a lent one): returns
+/// true if the sorted items ended in `tmp` (an odd number of passes moved them), false if in
+/// `items`.
 pub(crate) fn sort_bits_in(
     items: &mut [u64],
     tmp: &mut [u64],

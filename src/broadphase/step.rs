@@ -345,18 +345,17 @@ impl BroadPhase {
         // A full pass finds every pair (or candidate) into `fresh` and sorts it there, diffs
         // the key pairs against it and refills them from it; the incremental steps fill
         // `fresh` only with the escaped proxies' new candidates and patch the key pairs in
-        // place. `fresh` stays ready for the largest list a full pass can make, grown as
-        // `ahead` grows a list: to half again that length once within a quarter of it.
+        // place. `fresh` stays ready for the largest list a full pass can make. It is also the
+        // octree's walk-order sort's second buffer (`Octree::prepare_pass`), and the pair
+        // sort's second buffer may be the octree's walk order: each is sized exactly for the
+        // spheres when they grow, so both are kept half again ahead of the pairs, and a pair
+        // count near the sphere count does not cross the growth threshold at some later step.
         let most = self.cand.len().max(self.pairs.len());
-        if self.fresh.capacity() < most + most / 4 {
-            grow_to(&mut self.fresh, most + most / 2);
-        }
-        // The sort's second buffer may be the octree's, sized exactly for its spheres: it is
-        // kept half again ahead, so that a pair count near the sphere count does not cross
-        // the growth threshold at some later step.
         let scratch = sort_scratch(&mut self.octree, &mut self.sort_buf);
-        if scratch.capacity() < most + most / 2 {
-            grow_to(scratch, most + most * 3 / 4);
+        for v in [&mut self.fresh, scratch] {
+            if v.capacity() < most + most / 2 {
+                grow_to(v, most + most * 3 / 4);
+            }
         }
         for v in [&mut self.added_packed, &mut self.removed_packed] {
             grow_to(v, n / 8);
@@ -484,6 +483,8 @@ impl BroadPhase {
     /// Appends to `fresh` every pair of held boxes that overlap (never static × static) and
     /// whose groups allow it, packed, each once, unsorted.
     fn structure_pairs(&mut self) {
+        // The octree's walk-order sort borrows `fresh`, which holds nothing until the pass.
+        self.octree.prepare_pass(&mut self.fresh);
         let (store, fresh, groups) = (&self.store, &mut self.fresh, self.any_groups);
         let mut push = |a: ProxyKey, b: ProxyKey| {
             let (a, b) = (crate::pair::slot(a), crate::pair::slot(b));
@@ -505,6 +506,9 @@ impl BroadPhase {
     /// own task. `fresh` ends as the serial path leaves it.
     #[cfg(feature = "parallel")]
     fn sorted_pairs_par(&mut self, tasks: usize, layout: PairBits) {
+        // The octree's walk-order sort borrows `fresh`, which holds nothing until the sort
+        // of the pairs found fills it.
+        self.octree.prepare_pass_par(&mut self.fresh, tasks);
         let par = &mut self.par;
         let parts = tasks.min(self.pairs.len() / MIN_PART_PAIRS).max(1);
         radix::split_points(&self.pairs, pack_pair, parts, &mut par.splitters);
@@ -729,8 +733,10 @@ mod tests {
     use crate::{Aabb, Vec3};
 
     /// While the octree holds spheres the pair sorts borrow its idle buffer, and the
-    /// broadphase's own second buffer stays unallocated; once the spheres are gone the pairs of
-    /// the bodies are sorted with the broadphase's own. Pairs equal brute force throughout.
+    /// broadphase's own second buffer stays unallocated; the octree's walk-order sort borrows
+    /// `fresh` in turn, so the octree keeps no second buffer of its own. Once the spheres are
+    /// gone the pairs of the bodies are sorted with the broadphase's own. Pairs equal brute
+    /// force throughout.
     #[test]
     fn the_pair_sort_borrows_the_octrees_buffer_while_it_holds_spheres() {
         let mut bp = BroadPhase::new(Config::default());
@@ -762,6 +768,7 @@ mod tests {
             bp.validate();
             assert_eq!(bp.pairs(), &expect(&spheres)[..], "step {step}");
             assert_eq!(bp.sort_buf.capacity(), 0, "step {step}");
+            assert_eq!(bp.octree.own_sort_buffer(), 0, "step {step}");
         }
         for &(k, _) in &spheres {
             bp.remove(k).unwrap();

@@ -41,9 +41,9 @@
 //! region do not meet each other in one sweep.
 
 use super::cell::Cell;
-use super::placement::LooseKey;
+use super::placement::{LooseKey, walk_key_bits};
 use super::strict::Parts;
-use super::walk::{self, Hot, SHORT_CROSS, SHORT_SELF, Sweeps, Tester, Walk, runs};
+use super::walk::{self, Hot, Keys, Run, SHORT_CROSS, SHORT_SELF, Sweeps, Tester, Walk, runs};
 use super::{MAX_DEPTH, Octree, PassCost};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
@@ -67,14 +67,59 @@ const NEAR_CAP: usize = STRETCHES * NEAR_RANGE + NEAR_RANGE;
 /// The least room of the list of a crowded run's neighbours, in spheres (4 KB).
 const DENSE_FLOOR: usize = 1024;
 
+/// A node's key in the lists of a pass's runs: `u32` while every walk key fits in 32 bits
+/// (every depth below [`MAX_DEPTH`]), which halves the list the neighbour seeks scan, else
+/// `u64`.
+trait RunKey: Copy + Send + Sync + 'static {
+    /// The sentinel that ends the list: above every key, and every key a seek looks for.
+    const END: Self;
+    fn from_key(key: u64) -> Self;
+    fn get(self) -> u64;
+    /// The scratch's list of this width.
+    fn list(s: &mut Scratch) -> &mut Vec<Self>;
+}
+
+impl RunKey for u32 {
+    const END: u32 = u32::MAX;
+    #[inline]
+    fn from_key(key: u64) -> u32 {
+        debug_assert!(key < u64::from(u32::MAX));
+        key as u32
+    }
+    #[inline]
+    fn get(self) -> u64 {
+        u64::from(self)
+    }
+    fn list(s: &mut Scratch) -> &mut Vec<u32> {
+        &mut s.run_key32
+    }
+}
+
+impl RunKey for u64 {
+    const END: u64 = u64::MAX;
+    #[inline]
+    fn from_key(key: u64) -> u64 {
+        key
+    }
+    #[inline]
+    fn get(self) -> u64 {
+        self
+    }
+    fn list(s: &mut Scratch) -> &mut Vec<u64> {
+        &mut s.run_key64
+    }
+}
+
 /// Buffers of the loose pair pass, reused by every pass; they never shrink.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Scratch {
-    /// The occupied nodes of a pass, in key order: node `k` has key `run_key[k]` and the sorted
-    /// spheres `run_start[k]..run_start[k + 1]`; a sentinel ends both (key `u64::MAX`, start
-    /// the sphere count). `run_slot[k]` is its slot in the node storage, filled only when some
+    /// The occupied nodes of a pass, in key order: node `k` has key `run_key[k]` (in
+    /// `run_key32` or `run_key64`, see [`RunKey`]) and the sorted spheres
+    /// `run_start[k]..run_start[k + 1]`; a sentinel ends both (key [`RunKey::END`], start the
+    /// sphere count). `run_slot[k]` is its slot in the node storage, filled only when some
     /// level below it is occupied.
-    run_key: Vec<u64>,
+    run_key32: Vec<u32>,
+    run_key64: Vec<u64>,
     run_start: Vec<u32>,
     run_slot: Vec<u32>,
     /// By node slot ([`super::nodes::Nodes::slot`]): the node's run `[start, end)` during a
@@ -103,10 +148,12 @@ struct Chunk {
 }
 
 /// The state of one loose pass over the sorted spheres.
-struct Pass<'a, F> {
+struct Pass<'a, F, K> {
     tree: &'a Octree,
-    hot: &'a [Hot],
-    run_key: &'a [u64],
+    /// The walk order: boxes, and the sorted list whose low halves are the ids.
+    boxes: &'a [SimdBox],
+    ids: &'a [u64],
+    run_key: &'a [K],
     run_start: &'a [u32],
     run_of: &'a [[u32; 2]],
     t: Tester<'a, F>,
@@ -134,10 +181,12 @@ impl Octree {
         emit: impl FnMut(ProxyKey, ProxyKey),
     ) -> PassCost {
         let Some(Walk {
-            hot,
-            node_key,
+            keys,
+            ids,
+            boxes,
             t,
             sweeps,
+            ..
         }) = self.begin_pass(ws, emit)
         else {
             return PassCost::default();
@@ -146,9 +195,34 @@ impl Octree {
         // Only a pass with cross-level pairs needs the runs by node slot.
         let d = self.lattice.depth as usize;
         let cross = (0..=d).any(|l| deeper[l] && self.per_level[l] > 0);
-        s.index_runs(self, node_key, cross);
+        let (tests, visited) = if walk_key_bits(self.lattice.depth) <= 32 {
+            self.loose_runs::<u32, _>(s, keys, (boxes, ids), t, sweeps, cross, &deeper)
+        } else {
+            self.loose_runs::<u64, _>(s, keys, (boxes, ids), t, sweeps, cross, &deeper)
+        };
+        s.clear_runs(cross);
+        PassCost {
+            tests,
+            nodes_visited: visited,
+        }
+    }
+
+    /// The serial pass over the runs of `keys`, their keys listed as `K`: the tests and nodes
+    /// visited.
+    #[allow(clippy::too_many_arguments)]
+    fn loose_runs<K: RunKey, F: FnMut(ProxyKey, ProxyKey)>(
+        &self,
+        s: &mut Scratch,
+        keys: Keys<'_>,
+        (boxes, ids): (&[SimdBox], &[u64]),
+        t: Tester<'_, F>,
+        sweeps: &mut Sweeps,
+        cross: bool,
+        deeper: &[bool; MAX_DEPTH as usize + 1],
+    ) -> (u64, u32) {
+        s.index_runs::<K>(self, keys, cross);
+        let mut run_key = core::mem::take(K::list(s));
         let Scratch {
-            run_key,
             run_start,
             run_of,
             dense,
@@ -158,8 +232,9 @@ impl Octree {
         let runs = run_key.len() - 1;
         let mut pass = Pass {
             tree: self,
-            hot,
-            run_key,
+            boxes,
+            ids,
+            run_key: &run_key,
             run_start,
             run_of,
             t,
@@ -174,15 +249,12 @@ impl Octree {
         };
         let mut visited = runs as u32;
         for r in 0..runs {
-            visited += pass.node(r, &deeper);
+            visited += pass.node(r, deeper);
         }
         let tests = pass.t.tests;
         drop(pass);
-        s.clear_runs(cross);
-        PassCost {
-            tests,
-            nodes_visited: visited,
-        }
+        core::mem::swap(K::list(s), &mut run_key);
+        (tests, visited)
     }
 
     /// [`Octree::loose_pairs`] split over rayon's current pool: the walk-order sort in up to
@@ -202,29 +274,64 @@ impl Octree {
         S: Send,
         E: Fn(&mut S, ProxyKey, ProxyKey) + Sync,
     {
-        use rayon::prelude::*;
         let k = out.len();
-        if self.objs.is_empty() || k == 0 {
+        if self.live == 0 || k == 0 {
+            ws.ready = false;
             return PassCost::default();
         }
-        self.sort_into_walk_order_par(ws, k);
-        let hot = &ws.hot[..];
+        if !core::mem::take(&mut ws.ready) {
+            let mut tmp = core::mem::take(&mut ws.tmp);
+            self.sort_into_walk_order_par(ws, &mut tmp, k);
+            tmp.clear();
+            ws.tmp = tmp;
+        }
+        let ws = &*ws;
+        let (boxes, ids) = (&ws.boxes[..], &ws.items[..]);
         let deeper = self.occupied_below();
         let d = self.lattice.depth as usize;
         let cross = (0..=d).any(|l| deeper[l] && self.per_level[l] > 0);
-        s.index_runs_par(self, &ws.node_key, cross, k);
         if s.chunks.len() < k {
             s.chunks.resize_with(k, Chunk::default);
         }
+        let cost = if walk_key_bits(self.lattice.depth) <= 32 {
+            self.loose_chunks::<u32, S, E>(s, ws.keys(), (boxes, ids), out, emit, cross, &deeper)
+        } else {
+            self.loose_chunks::<u64, S, E>(s, ws.keys(), (boxes, ids), out, emit, cross, &deeper)
+        };
+        s.clear_runs(cross);
+        cost
+    }
+
+    /// The chunks of [`Octree::loose_pairs_chunked`] over the runs of `keys`, their keys
+    /// listed as `K`.
+    #[cfg(feature = "parallel")]
+    #[allow(clippy::too_many_arguments)]
+    fn loose_chunks<K: RunKey, S, E>(
+        &self,
+        s: &mut Scratch,
+        keys: Keys<'_>,
+        (boxes, ids): (&[SimdBox], &[u64]),
+        out: &mut [S],
+        emit: &E,
+        cross: bool,
+        deeper: &[bool; MAX_DEPTH as usize + 1],
+    ) -> PassCost
+    where
+        S: Send,
+        E: Fn(&mut S, ProxyKey, ProxyKey) + Sync,
+    {
+        use rayon::prelude::*;
+        let k = out.len();
+        s.index_runs_par::<K>(self, keys, cross, k);
+        let run_key = core::mem::take(K::list(s));
         let Scratch {
-            run_key,
             run_start,
             run_of,
             chunks,
             chunk_runs,
             ..
         } = &mut *s;
-        let (run_key, run_start, run_of) = (&run_key[..], &run_start[..], &run_of[..]);
+        let (run_start, run_of) = (&run_start[..], &run_of[..]);
         let first_run = |c: usize| chunk_runs[c] as usize;
         let cost = chunks[..k]
             .par_iter_mut()
@@ -239,8 +346,9 @@ impl Octree {
                 } = chunk;
                 let mut pass = Pass {
                     tree: self,
-                    hot,
-                    run_key,
+                    boxes,
+                    ids,
+                    run_key: &run_key,
                     run_start,
                     run_of,
                     t: Tester {
@@ -262,7 +370,7 @@ impl Octree {
                 }
                 let mut visited = (hi - lo) as u32;
                 for r in lo..hi {
-                    visited += pass.node(r, &deeper);
+                    visited += pass.node(r, deeper);
                 }
                 PassCost {
                     tests: pass.t.tests,
@@ -273,7 +381,7 @@ impl Octree {
                 tests: a.tests + b.tests,
                 nodes_visited: a.nodes_visited + b.nodes_visited,
             });
-        s.clear_runs(cross);
+        *K::list(s) = run_key;
         cost
     }
 
@@ -292,30 +400,38 @@ impl Octree {
 impl Scratch {
     /// Heap bytes held (capacities).
     pub(super) fn heap_bytes(&self) -> usize {
-        (self.run_key.capacity()) * 8
-            + (self.run_start.capacity() + self.run_slot.capacity() + self.dense.capacity()) * 4
+        self.run_key64.capacity() * 8
+            + (self.run_key32.capacity()
+                + self.run_start.capacity()
+                + self.run_slot.capacity()
+                + self.dense.capacity())
+                * 4
             + self.run_of.capacity() * 8
             + self.parts.heap_bytes()
     }
 
-    /// Lists the runs of `node_key` (and, for a pass with cross-level pairs, records each in
+    /// Lists the runs of `keys` (and, for a pass with cross-level pairs, records each in
     /// `run_of` by its node's slot), with the sentinel.
-    fn index_runs(&mut self, tree: &Octree, node_key: &[u64], cross: bool) {
+    fn index_runs<K: RunKey>(&mut self, tree: &Octree, keys: Keys<'_>, cross: bool) {
         let heads = tree.nodes.head_len();
         if cross && self.run_of.len() < heads {
             self.run_of.resize(heads, [0, 0]);
         }
         // Sized before they fill (`room_for`), not grown by doubling as they fill.
-        let count = node_key.windows(2).filter(|w| w[0] != w[1]).count() + 1;
-        room_for(&mut self.run_key, count + 1);
+        let count = (1..keys.len())
+            .filter(|&i| keys.get(i) != keys.get(i - 1))
+            .count()
+            + 1;
+        let mut run_key = core::mem::take(K::list(self));
+        room_for(&mut run_key, count + 1);
         room_for(&mut self.run_start, count + 1);
         if cross {
             room_for(&mut self.run_slot, count);
         }
-        self.run_key.clear();
+        run_key.clear();
         self.run_start.clear();
         self.run_slot.clear();
-        for (key, i, j) in runs(node_key) {
+        for (key, i, j) in runs(keys) {
             if cross {
                 let (level, xyz) = LooseKey(key).cell(tree.lattice.depth);
                 let slot = tree
@@ -325,11 +441,12 @@ impl Scratch {
                 self.run_of[slot] = [i as u32, j as u32];
                 self.run_slot.push(slot as u32);
             }
-            self.run_key.push(key);
+            run_key.push(K::from_key(key));
             self.run_start.push(i as u32);
         }
-        self.run_key.push(u64::MAX);
-        self.run_start.push(node_key.len() as u32);
+        run_key.push(K::END);
+        self.run_start.push(keys.len() as u32);
+        *K::list(self) = run_key;
     }
 
     /// [`Scratch::index_runs`] over rayon's current pool: chunk `c` of `k` lists the runs that
@@ -337,7 +454,7 @@ impl Scratch {
     /// lists, after a first pass counted them; `chunk_runs` gets each chunk's first run and
     /// the run count last.
     #[cfg(feature = "parallel")]
-    fn index_runs_par(&mut self, tree: &Octree, node_key: &[u64], cross: bool, k: usize) {
+    fn index_runs_par<K: RunKey>(&mut self, tree: &Octree, keys: Keys<'_>, cross: bool, k: usize) {
         use rayon::prelude::*;
         let heads = tree.nodes.head_len();
         if cross && self.run_of.len() < heads {
@@ -345,7 +462,7 @@ impl Scratch {
         }
         let job = Runs {
             tree,
-            node_key,
+            keys,
             k,
             cross,
         };
@@ -359,23 +476,25 @@ impl Scratch {
         }
         self.chunk_runs.push(sum);
         let runs = sum as usize;
-        room_for(&mut self.run_key, runs + 1);
+        let mut run_key = core::mem::take(K::list(self));
+        room_for(&mut run_key, runs + 1);
         room_for(&mut self.run_start, runs + 1);
         if cross {
             room_for(&mut self.run_slot, runs);
         }
-        self.run_key.resize(runs + 1, 0);
+        run_key.resize(runs + 1, K::END);
         self.run_start.resize(runs + 1, 0);
         self.run_slot.resize(if cross { runs } else { 0 }, 0);
         job.fill(
             0..k,
             &self.chunk_runs,
-            &mut self.run_key[..runs],
+            &mut run_key[..runs],
             &mut self.run_start[..runs],
             &mut self.run_slot,
         );
-        self.run_key[runs] = u64::MAX;
-        self.run_start[runs] = node_key.len() as u32;
+        run_key[runs] = K::END;
+        *K::list(self) = run_key;
+        self.run_start[runs] = keys.len() as u32;
         if cross {
             for (r, &slot) in self.run_slot.iter().enumerate() {
                 self.run_of[slot as usize] = [self.run_start[r], self.run_start[r + 1]];
@@ -397,7 +516,7 @@ impl Scratch {
 #[cfg(feature = "parallel")]
 struct Runs<'a> {
     tree: &'a Octree,
-    node_key: &'a [u64],
+    keys: Keys<'a>,
     k: usize,
     cross: bool,
 }
@@ -406,14 +525,14 @@ struct Runs<'a> {
 impl Runs<'_> {
     /// The sphere positions of chunk `c`.
     fn positions(&self, c: usize) -> core::ops::Range<usize> {
-        let n = self.node_key.len();
+        let n = self.keys.len();
         n * c / self.k..n * (c + 1) / self.k
     }
 
     /// True if a run starts at position `i`.
     #[inline]
     fn starts(&self, i: usize) -> bool {
-        i == 0 || self.node_key[i] != self.node_key[i - 1]
+        i == 0 || self.keys.get(i) != self.keys.get(i - 1)
     }
 
     /// The runs that start in chunk `c`.
@@ -423,11 +542,11 @@ impl Runs<'_> {
 
     /// Lists the runs of chunks `chunks` (whose first runs `first` gives, relative to the
     /// lists' stretches passed), halving the chunks between two tasks until one is left.
-    fn fill(
+    fn fill<K: RunKey>(
         &self,
         chunks: core::ops::Range<usize>,
         first: &[u32],
-        run_key: &mut [u64],
+        run_key: &mut [K],
         run_start: &mut [u32],
         run_slot: &mut [u32],
     ) {
@@ -448,8 +567,8 @@ impl Runs<'_> {
             if !self.starts(i) {
                 continue;
             }
-            let key = self.node_key[i];
-            run_key[r] = key;
+            let key = self.keys.get(i);
+            run_key[r] = K::from_key(key);
             run_start[r] = i as u32;
             if self.cross {
                 let (level, xyz) = LooseKey(key).cell(self.tree.lattice.depth);
@@ -464,20 +583,20 @@ impl Runs<'_> {
     }
 }
 
-/// Tests every sphere of `own` against the spheres `hot[k]` for `k` in `listed`.
+/// Tests every sphere of `own` against the spheres at the walk positions `listed` of `boxes`
+/// and `ids`.
 #[inline]
 fn test_listed<F: FnMut(ProxyKey, ProxyKey)>(
     t: &mut Tester<'_, F>,
-    own: &[Hot],
-    hot: &[Hot],
+    own: Run<'_>,
+    (boxes, ids): (&[SimdBox], &[u64]),
     listed: &[u32],
 ) {
     t.tests += (own.len() * listed.len()) as u64;
-    for a in own {
+    for (i, a) in own.boxes.iter().enumerate() {
         for &b in listed {
-            let b = &hot[b as usize];
-            if a.overlaps(b) {
-                t.emit(a, b);
+            if a.overlaps(&boxes[b as usize]) {
+                t.emit_ids(own.ids[i] as u32, ids[b as usize] as u32);
             }
         }
     }
@@ -486,27 +605,33 @@ fn test_listed<F: FnMut(ProxyKey, ProxyKey)>(
 /// Moves `p` to the first run whose key is at least `target`; `target` never exceeds the
 /// sentinel. The first two steps are branch-free: most calls move by 0, 1 or 2.
 #[inline]
-fn seek(keys: &[u64], p: &mut usize, target: u64) {
-    *p += usize::from(keys[*p] < target);
-    *p += usize::from(keys[*p] < target);
-    while keys[*p] < target {
+fn seek<K: RunKey>(keys: &[K], p: &mut usize, target: u64) {
+    *p += usize::from(keys[*p].get() < target);
+    *p += usize::from(keys[*p].get() < target);
+    while keys[*p].get() < target {
         *p += 1;
     }
 }
 
-impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
+impl<'a, F: FnMut(ProxyKey, ProxyKey), K: RunKey> Pass<'a, F, K> {
+    /// Walk positions `lo..hi`.
+    #[inline]
+    fn run(&self, lo: usize, hi: usize) -> Run<'a> {
+        Run::of(self.boxes, self.ids, lo, hi)
+    }
+
     /// Points the forward rows' seek pointers at or before where the first seeks of a pass
     /// that starts at run `r` will stop (the pointers only move forward): the first run at
     /// or after the lowest key a forward row of `r`'s cell can have, one below the row's
     /// offset added to `r`'s key. Later runs look for larger keys.
     #[cfg(feature = "parallel")]
     fn start_at(&mut self, r: usize) {
-        let key = self.run_key[r];
+        let key = self.run_key[r].get();
         let (level, _) = LooseKey(key).cell(self.tree.lattice.depth);
         for (k, [dy, dz]) in ROWS.into_iter().enumerate() {
             let off = LooseKey::offset(level, [0, dy, dz]);
             let low = key.wrapping_add(off).saturating_sub(1).max(key);
-            let at = self.run_key.partition_point(|&x| x < low);
+            let at = self.run_key.partition_point(|&x| x.get() < low);
             (self.first[k], self.past[k]) = (at, at);
         }
     }
@@ -516,14 +641,25 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
     /// visited.
     #[inline]
     fn node(&mut self, r: usize, deeper: &[bool; MAX_DEPTH as usize + 1]) -> u32 {
-        let (hot, run_start) = (self.hot, self.run_start);
-        let key = LooseKey(self.run_key[r]);
-        let own = &hot[run_start[r] as usize..run_start[r + 1] as usize];
+        let run_start = self.run_start;
+        let key = LooseKey(self.run_key[r].get());
+        let (lo, hi) = (run_start[r] as usize, run_start[r + 1] as usize);
+        let own = self.run(lo, hi);
         let (level, xyz) = key.cell(self.tree.lattice.depth);
         if level == 0 && own.len() > SHORT_SELF {
-            let bits = self.tree.lattice.bits;
+            // The root's spheres, with the cell ranges and ids the subdivision copies.
+            let lattice = &self.tree.lattice;
+            let copies = own.boxes.iter().zip(own.ids).map(|(b, &x)| {
+                let aabb = b.aabb();
+                Hot {
+                    bx: *b,
+                    qmin: lattice.quantize(aabb.min),
+                    qmax: lattice.quantize(aabb.max),
+                    id: x as u32,
+                }
+            });
             self.parts
-                .own_pairs(&mut self.t, own, [0; 3], bits, self.sweeps);
+                .own_pairs_of(&mut self.t, copies, [0; 3], lattice.bits, self.sweeps);
         } else if own.len() > 1 {
             self.t.within(own, self.sweeps);
         }
@@ -537,7 +673,9 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
             0
         } else if level == 0 {
             // One descent per root sphere, each pruned by its own range.
-            own.chunks(1).map(|one| self.descend(0, xyz, one)).sum()
+            (lo..hi)
+                .map(|i| self.descend(0, xyz, self.run(i, i + 1)))
+                .sum()
         } else {
             self.descend(level, xyz, own)
         }
@@ -563,7 +701,7 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
         }
         let (run_key, run_start) = (self.run_key, self.run_start);
         let runs = run_key.len() - 1;
-        let next = usize::from(x + 1 < side && run_key[r + 1] == key.0 + 1);
+        let next = usize::from(x + 1 < side && run_key[r + 1].get() == key.0 + 1);
         let mut stretches = [[0u32; 2]; STRETCHES];
         stretches[0] = [run_start[r + 1], run_start[(r + 1 + next).min(runs)]];
         let (back, ahead) = (u64::from(x > 0), 1 + u64::from(x + 1 < side));
@@ -591,8 +729,7 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
     /// first, with no branch on their lengths, and each own sphere is tested against the list
     /// in one loop; long stretches are tested on their own.
     #[inline]
-    fn near_few(&mut self, own: &[Hot], stretches: &[[u32; 2]; STRETCHES]) {
-        let hot = self.hot;
+    fn near_few(&mut self, own: Run<'_>, stretches: &[[u32; 2]; STRETCHES]) {
         let mut len = 0;
         for &[lo, hi] in stretches {
             let count = hi.saturating_sub(lo) as usize;
@@ -602,11 +739,11 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
                 }
                 len += count;
             } else {
-                self.t
-                    .between(own, &hot[lo as usize..hi as usize], self.sweeps);
+                let other = self.run(lo as usize, hi as usize);
+                self.t.between(own, other, self.sweeps);
             }
         }
-        test_listed(&mut self.t, own, hot, &self.near[..len]);
+        test_listed(&mut self.t, own, (self.boxes, self.ids), &self.near[..len]);
     }
 
     /// The forward pairs of a run of many spheres (a crowded level): the stretches' spheres
@@ -614,9 +751,9 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
     /// that the test's outcome keeps; only they meet every own sphere. Stretches long enough to
     /// sweep are swept instead.
     #[inline(never)]
-    fn near_many(&mut self, own: &[Hot], stretches: &[[u32; 2]; STRETCHES]) {
-        let hot = self.hot;
-        let union = own.iter().fold(SimdBox::EMPTY, |u, h| u.union(&h.bx));
+    fn near_many(&mut self, own: Run<'_>, stretches: &[[u32; 2]; STRETCHES]) {
+        let boxes = self.boxes;
+        let union = own.boxes.iter().fold(SimdBox::EMPTY, |u, b| u.union(b));
         let total: u32 = stretches
             .iter()
             .map(|&[lo, hi]| hi.saturating_sub(lo))
@@ -630,34 +767,39 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
         let mut len = 0;
         for &[lo, hi] in stretches {
             let count = hi.saturating_sub(lo) as usize;
-            let stretch = &hot[lo as usize..lo as usize + count];
+            let stretch = &boxes[lo as usize..lo as usize + count];
             if own.len() * count > SHORT_CROSS {
-                self.t.between(own, stretch, self.sweeps);
+                let other = self.run(lo as usize, lo as usize + count);
+                self.t.between(own, other, self.sweeps);
                 continue;
             }
             self.t.tests += count as u64;
             for (b, h) in (lo..).zip(stretch) {
                 // `len` counts at most the entries before this one: below `total`.
                 self.dense[len] = b;
-                len += usize::from(h.bx.overlaps(&union));
+                len += usize::from(h.overlaps(&union));
             }
         }
-        test_listed(&mut self.t, own, hot, &self.dense[..len]);
+        test_listed(&mut self.t, own, (boxes, self.ids), &self.dense[..len]);
     }
 
     /// The cross-level pairs of the spheres `own` of the node at cell `xyz` of `level`: every
     /// sphere placed below `level` in the subtrees of the 27 cells around `xyz`, pruned by the
     /// union of `own`'s ranges. Returns the number of nodes visited.
     #[inline(never)]
-    fn descend(&mut self, level: u32, xyz: [u32; 3], own: &[Hot]) -> u32 {
-        let (tree, hot, run_of) = (self.tree, self.hot, self.run_of);
-        let (mut umin, mut umax) = ([u16::MAX; 3], [0u16; 3]);
-        for h in own {
-            for a in 0..3 {
-                umin[a] = umin[a].min(h.qmin[a]);
-                umax[a] = umax[a].max(h.qmax[a]);
-            }
-        }
+    fn descend(&mut self, level: u32, xyz: [u32; 3], own: Run<'_>) -> u32 {
+        let (tree, boxes, ids, run_of) = (self.tree, self.boxes, self.ids, self.run_of);
+        // The union of the own ranges: quantising is monotone, so the range of the union box
+        // is the union of the ranges.
+        let union = own
+            .boxes
+            .iter()
+            .fold(SimdBox::EMPTY, |u, b| u.union(b))
+            .aabb();
+        let (umin, umax) = (
+            tree.lattice.quantize(union.min),
+            tree.lattice.quantize(union.max),
+        );
         let reaches = |c: &Cell| tree.lattice.reaches(c, umin, umax);
         let side = 1i32 << level;
         let mut visited = 0;
@@ -677,8 +819,8 @@ impl<F: FnMut(ProxyKey, ProxyKey)> Pass<'_, F> {
                             visited += 1;
                             let [a, b] = run_of[slot];
                             if a < b {
-                                self.t
-                                    .between(own, &hot[a as usize..b as usize], self.sweeps);
+                                let other = Run::of(boxes, ids, a as usize, b as usize);
+                                self.t.between(own, other, self.sweeps);
                             }
                         }
                     });

@@ -103,18 +103,15 @@ pub enum Placement {
 /// Per-sphere data, indexed by id: the slot index of the sphere's key, so a caller that
 /// updates its spheres in key order streams through it, and a removal leaves a hole (`node ==
 /// NONE`) instead of moving another sphere. The pair pass reads the sphere (its box is
-/// [`Obj::aabb`], recomputed rather than stored), `qmin`/`qmax` and `walk_key`; queries follow
-/// the node lists ([`Link`]). 36 bytes.
+/// [`Obj::aabb`], recomputed rather than stored) and `walk_key`; queries follow the node lists
+/// ([`Link`]). The cell range placement computes is not kept: the strict pass quantises the
+/// box again, the loose pass only the union of a node's boxes. 24 bytes.
 #[derive(Clone, Copy, Debug)]
 #[repr(C)]
 pub(crate) struct Obj {
     /// The sphere exactly as given. 16 bytes.
     center: Vec3,
     radius: f32,
-    /// The box's corners as integer cell coordinates on the tree's integer lattice (the deepest
-    /// level's cells, or their halves in loose mode), clamped to the lattice. 12 bytes.
-    qmin: [u16; 3],
-    qmax: [u16; 3],
     /// The node the sphere is linked in. 4 bytes.
     node: u32,
     /// The node's walk key (`Lattice::walk_key`), set on every link, in 32 bits: the whole key
@@ -122,15 +119,13 @@ pub(crate) struct Obj {
     /// deeper tree's pass sorts by `Lattice::walk_key` of `node` instead. 4 bytes.
     walk_key: u32,
 }
-const _: () = assert!(core::mem::size_of::<Obj>() == 36);
+const _: () = assert!(core::mem::size_of::<Obj>() == 24);
 
 impl Obj {
     /// An id no sphere holds.
     const HOLE: Obj = Obj {
         center: Vec3::ZERO,
         radius: 0.0,
-        qmin: [0; 3],
-        qmax: [0; 3],
         node: NONE,
         walk_key: 0,
     };
@@ -398,7 +393,6 @@ impl Octree {
                 continue;
             }
             let at = self.lattice.locate(o.center, o.radius);
-            (o.qmin, o.qmax) = (at.qmin, at.qmax);
             self.per_level[level_of(at.node()) as usize] += 1;
             self.overflow += u32::from(at.outside());
             self.link(id, at.node());
@@ -505,6 +499,37 @@ impl Octree {
     /// A buffer of the pair passes that sits idle between them (the walk-order sort's items,
     /// room for every sphere), lent as scratch: its contents are garbage to both sides. The
     /// broadphase sorts its pair list with it, so the two sorts share one second buffer.
+    /// Readies the next pair pass ([`Octree::for_each_pair`]): maintains the region, then sorts
+    /// the spheres into walk order with `tmp` as the sort's second buffer, which the caller
+    /// lends while it holds nothing (the broadphase's pair list, before the pass fills it);
+    /// `tmp` is left empty. The pass must come next, with no change to the tree between.
+    pub(crate) fn prepare_pass(&mut self, tmp: &mut Vec<u64>) {
+        self.maintain();
+        let mut p = core::mem::take(&mut self.passes);
+        self.prepare_walk(&mut p.walk, tmp);
+        self.passes = p;
+    }
+
+    /// [`Octree::prepare_pass`] for [`Octree::for_each_pair_chunked`]: the sort split in up
+    /// to `parts` parts over rayon's current pool.
+    #[cfg(feature = "parallel")]
+    pub(crate) fn prepare_pass_par(&mut self, tmp: &mut Vec<u64>, parts: usize) {
+        self.maintain();
+        let mut p = core::mem::take(&mut self.passes);
+        match self.lattice.placement {
+            Placement::Strict => self.prepare_walk(&mut p.walk, tmp),
+            Placement::Loose => self.prepare_walk_par(&mut p.walk, tmp, parts),
+        }
+        self.passes = p;
+    }
+
+    /// The capacity of the walk-order sort's own second buffer, which a pass prepared with a
+    /// lent one ([`Octree::prepare_pass`]) never grows.
+    #[cfg(test)]
+    pub(crate) fn own_sort_buffer(&self) -> usize {
+        self.passes.walk.tmp.capacity()
+    }
+
     pub(crate) fn idle_buffer(&mut self) -> &mut Vec<u64> {
         self.passes.walk.idle_items()
     }
@@ -537,8 +562,6 @@ impl Octree {
         }
         let o = &mut self.objs[i];
         (o.center, o.radius) = (center, radius);
-        o.qmin = at.qmin;
-        o.qmax = at.qmax;
         if old_node != at.node() {
             self.relink(id, old_node, at.node());
         }
@@ -638,7 +661,9 @@ impl Octree {
     /// boxes overlap), in no particular order and with no particular key order inside a pair.
     /// A growing tree first [maintains](Octree::maintain) its region.
     pub fn for_each_pair(&mut self, f: impl FnMut(ProxyKey, ProxyKey)) {
-        self.maintain();
+        if !self.passes.walk.is_ready() {
+            self.maintain();
+        }
         let mut p = core::mem::take(&mut self.passes);
         self.last_pass = match self.lattice.placement {
             Placement::Strict => self.strict_pairs(&mut p.walk, &mut p.strict, f),
@@ -658,7 +683,9 @@ impl Octree {
         E: Fn(&mut S, ProxyKey, ProxyKey) + Sync,
         A: FnOnce(&Octree) + Send,
     {
-        self.maintain();
+        if !self.passes.walk.is_ready() {
+            self.maintain();
+        }
         let mut p = core::mem::take(&mut self.passes);
         let tree = &*self;
         let pass = || match tree.lattice.placement {
@@ -729,8 +756,6 @@ impl Octree {
             self.versions.resize(i + 1, 0);
         }
         self.objs[i] = Obj {
-            qmin: at.qmin,
-            qmax: at.qmax,
             center,
             radius,
             ..Obj::HOLE
@@ -865,7 +890,6 @@ impl Obj {
             return false;
         }
         (self.center, self.radius) = (center, radius);
-        (self.qmin, self.qmax) = (at.qmin, at.qmax);
         true
     }
 }

@@ -163,11 +163,9 @@ impl Sampled {
 
 /// Scratch a re-root proposal borrows from the pair passes' walk-order buffers (which hold
 /// nothing between passes): one value per live sphere for the median and the quantiles, then
-/// the occupancy count's cell codes, and the radix sort's second buffer and counts.
+/// the occupancy count's cell codes.
 pub(super) struct Lent<'a> {
     pub(super) values: &'a mut Vec<u64>,
-    pub(super) tmp: &'a mut Vec<u64>,
-    pub(super) counts: &'a mut Vec<u32>,
 }
 
 impl Regrow {
@@ -330,7 +328,9 @@ fn doublings(objs: &[Obj], live: usize, origin: Vec3, cell: f32, side: f32, lent
         let q = ((o.center - origin) / cell).clamp(Vec3::ZERO, Vec3::splat(top));
         spread(q.x as u64) | spread(q.y as u64) << 1 | spread(q.z as u64) << 2
     }));
-    crate::radix::sort_bits(codes, lent.tmp, lent.counts, 0, 3 * OCCUPANCY_BITS);
+    // In place: a radix sort's second buffer would be one more per-sphere array kept for a
+    // proposal that runs only when the region may change.
+    codes.sort_unstable();
     let mut doublings = 0;
     while doublings < MAX_DEPTH && cell * (2u32 << doublings) as f32 <= side {
         let shift = 3 * (doublings + 1);

@@ -41,7 +41,7 @@
 
 use super::cell::unmorton;
 use super::placement::StrictKey;
-use super::walk::{self, Hot, SHORT_SELF, Sweeps, Tester, Walk, is_short_cross, runs};
+use super::walk::{self, Hot, Keys, SHORT_SELF, Sweeps, Tester, Walk, is_short_cross, runs};
 use super::{Octree, PassCost};
 use crate::pair::ProxyKey;
 use crate::radix::room_for;
@@ -160,18 +160,19 @@ impl Octree {
         emit: impl FnMut(ProxyKey, ProxyKey),
     ) -> PassCost {
         let Some(Walk {
+            keys,
             hot,
-            node_key,
             mut t,
             sweeps,
+            ..
         }) = self.begin_pass(ws, emit)
         else {
             return PassCost::default();
         };
         let d = self.lattice.depth;
-        s.start(hot, node_key, d, self.objs.len());
+        s.start(hot, keys, d, self.objs.len());
         let mut visited = 0;
-        for (key, i, j) in runs(node_key) {
+        for (key, i, j) in runs(keys) {
             let key = StrictKey(key);
             visited += s.enter(key, d, hot);
             let level = key.level();
@@ -198,7 +199,7 @@ impl Octree {
 impl Scratch {
     /// Readies the buffers for a pass over `hot`: the sweep groups, the octant buffer and a
     /// path holding only the root.
-    fn start(&mut self, hot: &[Hot], node_key: &[u64], depth: u32, ids: usize) {
+    fn start(&mut self, hot: &[Hot], keys: Keys<'_>, depth: u32, ids: usize) {
         room_for(&mut self.group, ids);
         room_for(&mut self.hot_oct, hot.len());
         self.group.resize(ids, 0);
@@ -206,7 +207,8 @@ impl Scratch {
         // the axis-`a` mid plane of its node (`(q ^ q') >> (shift − 1) != 0`, written as
         // `(q ^ q') << 1 >> shift`, and masked off at the deepest level, `shift == 0`, where
         // there is no mid plane), and the group is the lowest set bit, 2 if none.
-        for (h, &key) in hot.iter().zip(node_key) {
+        for (i, h) in hot.iter().enumerate() {
+            let key = keys.get(i);
             let shift = depth - StrictKey(key).level();
             let deeper = u32::from(shift != 0);
             let straddles = (0..3).fold(0u32, |m, a| {
@@ -334,14 +336,26 @@ impl Parts {
             t.tests += sweep::all_pairs(list, |_, a, _, b| t.emit(a, b));
             return;
         }
+        self.own_pairs_of(t, list.iter().copied(), lo, shift, sweeps);
+    }
+
+    /// [`Parts::own_pairs`] of the spheres `list` makes, more than [`SHORT_SELF`] of them.
+    pub(super) fn own_pairs_of<F: FnMut(ProxyKey, ProxyKey)>(
+        &mut self,
+        t: &mut Tester<'_, F>,
+        list: impl Iterator<Item = Hot>,
+        lo: [u32; 3],
+        shift: u32,
+        sweeps: &mut Sweeps,
+    ) {
         self.buf.clear();
-        self.buf.extend_from_slice(list);
+        self.buf.extend(list);
         self.stack.clear();
         self.stack.push(Part {
             lo,
             shift,
             start: 0,
-            end: list.len() as u32,
+            end: self.buf.len() as u32,
         });
         while let Some(p) = self.stack.pop() {
             self.buf.truncate(p.end as usize);

@@ -358,6 +358,49 @@ fn walk_order_pairs_match_brute_force_at_every_depth() {
     }
 }
 
+/// A pass prepared with a lent second buffer finds the pairs of an unprepared one, in both
+/// placements at a narrow and a wide (depth 10) walk key: the lent buffer is left empty and the
+/// tree's own is never grown; a pass nobody prepared sorts with the tree's own. A change after
+/// a pass (and a region's re-root) is seen by the next prepared pass.
+#[test]
+fn a_pass_prepared_with_a_lent_buffer_finds_the_same_pairs() {
+    let mut rng = crate::rng::Rng::new(29);
+    for (depth, p) in [5, MAX_DEPTH]
+        .into_iter()
+        .flat_map(|d| BOTH.map(|p| (d, p)))
+    {
+        let mut t = Octree::with_placement(unit(), depth, p).unwrap();
+        let mut keys = Vec::new();
+        for _ in 0..400 {
+            let c = rng.vec3_in(Vec3::splat(-1.2), Vec3::splat(1.2));
+            keys.push(t.insert(c, rng.range(0.0, 0.08)).unwrap());
+        }
+        let mut lent = Vec::new();
+        for round in 0..3 {
+            t.prepare_pass(&mut lent);
+            assert!(lent.is_empty() && lent.capacity() >= 400, "{p:?} {round}");
+            let prepared = sorted_pairs(&mut t);
+            assert_eq!(t.own_sort_buffer(), 0, "{p:?} depth {depth} round {round}");
+            assert_eq!(prepared, brute::pairs(&proxies(&t)), "{p:?} {round}");
+            for &k in keys.iter().step_by(3) {
+                let c = rng.vec3_in(Vec3::splat(-1.2), Vec3::splat(1.2));
+                t.update(k, c, rng.range(0.0, 0.08)).unwrap();
+            }
+        }
+        assert_eq!(sorted_pairs(&mut t), brute::pairs(&proxies(&t)), "{p:?}");
+        assert!(t.own_sort_buffer() >= 400, "{p:?} depth {depth}");
+        t.validate();
+    }
+    let gas = gas_at(Vec3::splat(3000.0), 3000, 5);
+    for p in BOTH {
+        let (mut t, _) = growing_with(p, &gas);
+        let mut lent = Vec::new();
+        t.prepare_pass(&mut lent);
+        assert_eq!(sorted_pairs(&mut t), brute::pairs(&proxies(&t)), "{p:?}");
+        assert!(t.stats().reroots > 0 && t.own_sort_buffer() == 0, "{p:?}");
+    }
+}
+
 /// `n` gas spheres (r = 0.5, 10 % fill) in a cube centred at `center`.
 fn gas_at(center: Vec3, n: usize, seed: u64) -> Gas {
     let edge = crate::fixtures::scene::cube_edge(n, 0.5, 0.1);

@@ -42,11 +42,6 @@ impl Octree {
             );
             let (c, r) = (o.center, o.radius);
             let at = self.lattice.locate(c, r);
-            assert_eq!(
-                (o.qmin, o.qmax),
-                (at.qmin, at.qmax),
-                "stale cell range at id {id}"
-            );
             self.lattice.check_rule(id, c, r, &at, o.node);
             assert_eq!(
                 o.node,

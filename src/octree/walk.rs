@@ -1,21 +1,28 @@
 //! What both pair passes stand on: the spheres radix-sorted by their node's walk key into
-//! contiguous walk-ordered copies ([`Hot`]), the runs of equal keys (one per occupied node), and
-//! the [`Tester`] that runs and counts the box tests of a pass through the sweep kernel.
+//! contiguous walk-ordered arrays, the runs of equal keys (one per occupied node), and the
+//! [`Tester`] that runs and counts the box tests of a pass through the sweep kernel.
 //!
 //! Order. Every sphere carries its node's walk key (`Lattice::walk_key`). A pass LSD-radix-sorts
-//! `(walk key, id)` (two or three streaming passes; the order of the dense ids is left alone,
-//! so `update` keeps streaming in insertion order) and gathers each sphere's box and cell range
-//! into a contiguous walk-ordered array. A pass then never chases a list: each node is a run of
-//! that array.
+//! `(walk key << 32) | id` (two or three streaming passes; the order of the dense ids is left
+//! alone, so `update` keeps streaming in insertion order) and keeps that sorted list: it is the
+//! walk order's keys and ids at once. It then gathers each sphere's box into a contiguous
+//! walk-ordered array: a loose pass reads only the boxes ([`Run`]), a strict pass copies with
+//! each box its cell range and id ([`Hot`]), which its subdivisions and ancestor copies carry
+//! along. A pass then never chases a list: each node is a run of those arrays.
+//!
+//! The radix sort's second buffer (also the map from ids to walk positions) is needed only
+//! while the order is sorted: the broadphase lends its pair list, idle until the pass fills it
+//! ([`Octree::prepare_pass`](super::Octree)), and a tree used alone keeps its own.
 
+use super::Placement;
 use super::placement::walk_key_bits;
 use super::region::Lent;
 use super::{NONE, Octree};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
 #[cfg(feature = "parallel")]
-use crate::radix::{ahead, sort_bits_in};
-use crate::radix::{room_for, sort_bits, sort_bits_by};
+use crate::radix::ahead;
+use crate::radix::{room_for, sort_bits_by, sort_bits_in};
 use crate::sweep::{self, Ordered};
 use core::borrow::Borrow;
 
@@ -30,7 +37,7 @@ pub(super) const SHORT_CROSS: usize = 1024;
 /// of the other side then costs at most this many tests, less than its share of a sort.
 pub(super) const SHORT_SIDE: usize = 4;
 
-/// A sphere as the passes read it: box, integer cell range and id. 48 bytes.
+/// A sphere as the strict pass reads and copies it: box, integer cell range and id. 48 bytes.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Hot {
     /// `center ± radius`. 32 bytes.
@@ -51,17 +58,67 @@ impl Hot {
         qmax: [0; 3],
         id: 0,
     };
-
-    #[inline]
-    pub(super) fn overlaps(&self, o: &Hot) -> bool {
-        self.bx.overlaps(&o.bx)
-    }
 }
 
 impl Borrow<SimdBox> for Hot {
     #[inline]
     fn borrow(&self) -> &SimdBox {
         &self.bx
+    }
+}
+
+/// A list of spheres a [`Tester`] tests: their boxes, and the id of the `i`-th.
+pub(super) trait Listed<'a>: Copy {
+    type Item: Borrow<SimdBox> + 'a;
+    fn items(self) -> &'a [Self::Item];
+    fn id(self, i: usize) -> u32;
+}
+
+impl<'a> Listed<'a> for &'a [Hot] {
+    type Item = Hot;
+    #[inline]
+    fn items(self) -> &'a [Hot] {
+        self
+    }
+    #[inline]
+    fn id(self, i: usize) -> u32 {
+        self[i].id
+    }
+}
+
+/// A stretch of the walk order as the loose pass reads it: the boxes, and beside them the
+/// sorted `(walk key << 32) | id` whose low half is each sphere's id.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Run<'a> {
+    pub(super) boxes: &'a [SimdBox],
+    pub(super) ids: &'a [u64],
+}
+
+impl<'a> Run<'a> {
+    /// Positions `lo..hi` of the walk order `boxes` / `ids`.
+    #[inline]
+    pub(super) fn of(boxes: &'a [SimdBox], ids: &'a [u64], lo: usize, hi: usize) -> Self {
+        Run {
+            boxes: &boxes[lo..hi],
+            ids: &ids[lo..hi],
+        }
+    }
+
+    #[inline]
+    pub(super) fn len(&self) -> usize {
+        self.boxes.len()
+    }
+}
+
+impl<'a> Listed<'a> for Run<'a> {
+    type Item = SimdBox;
+    #[inline]
+    fn items(self) -> &'a [SimdBox] {
+        self.boxes
+    }
+    #[inline]
+    fn id(self, i: usize) -> u32 {
+        self.ids[i] as u32
     }
 }
 
@@ -75,18 +132,26 @@ pub(super) struct Sweeps {
 /// Buffers of the walk order, reused by every pass; they never shrink.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Scratch {
-    /// `(walk key << 32) | id`, sorted (the radix sort's second buffer is `node_key`, which
-    /// the sorted items are then copied into).
-    items: Vec<u64>,
-    /// `(walk key, id)` for trees too deep for a 32-bit key (depth 10), and the radix sort's
-    /// second buffer for them.
+    /// The walk order: `(walk key << 32) | id`, sorted; for a tree too deep for a 32-bit key
+    /// (depth 10), the id alone, with the key in `wide_key`. Between passes it holds nothing
+    /// anyone reads, and the broadphase's pair sort borrows it ([`Octree::idle_buffer`]).
+    pub(super) items: Vec<u64>,
+    /// The radix sort's second buffer and the map from ids to walk positions, for a pass
+    /// whose caller lent none ([`Octree::prepare_pass`]).
+    pub(super) tmp: Vec<u64>,
+    /// `(walk key, id)` for trees too deep for a 32-bit key, and the radix sort's second
+    /// buffer for them; the walk-ordered keys of such a tree.
     wide: Vec<(u64, u32)>,
     wide_tmp: Vec<(u64, u32)>,
+    wide_key: Vec<u64>,
     counts: Vec<u32>,
-    /// Walk-ordered copies: hot data and walk key of each sphere.
+    /// The walk-ordered boxes of a loose tree.
+    pub(super) boxes: Vec<SimdBox>,
+    /// The walk-ordered copies of a strict tree.
     pub(super) hot: Vec<Hot>,
-    pub(super) node_key: Vec<u64>,
     pub(super) sweeps: Sweeps,
+    /// True from [`Octree::prepare_pass`] to the pass it prepares: the order is sorted.
+    pub(super) ready: bool,
     /// The parallel sort's buffers (see [`Octree::sort_into_walk_order_par`]).
     #[cfg(feature = "parallel")]
     par: ParSort,
@@ -115,7 +180,7 @@ struct ParSort {
 }
 
 /// One part's radix counts (its items and their second buffer are its stretches of
-/// `Scratch::items` and `Scratch::node_key`).
+/// `Scratch::items` and the sort's second buffer).
 #[cfg(feature = "parallel")]
 #[derive(Clone, Debug, Default)]
 struct PartSort {
@@ -138,29 +203,44 @@ impl ParSort {
 }
 
 impl Scratch {
-    /// The buffers a re-root proposal borrows between passes (see [`Lent`]): the sort's
-    /// items, the walk keys as its second buffer, and the counts.
+    /// The buffer a re-root proposal borrows between passes (see [`Lent`]): the walk order's
+    /// list.
     pub(super) fn lend(&mut self) -> Lent<'_> {
         Lent {
             values: &mut self.items,
-            tmp: &mut self.node_key,
-            counts: &mut self.counts,
         }
     }
-    /// The sort's item buffer, whose contents matter only during a pass.
+
+    /// The walk order's list, which holds nothing anyone reads between passes.
     pub(super) fn idle_items(&mut self) -> &mut Vec<u64> {
         &mut self.items
+    }
+
+    /// True from [`Octree::prepare_pass`] to the pass it prepares.
+    pub(super) fn is_ready(&self) -> bool {
+        self.ready
+    }
+
+    /// The walk order's keys.
+    #[cfg(feature = "parallel")]
+    pub(super) fn keys(&self) -> Keys<'_> {
+        Keys {
+            items: &self.items,
+            wide: &self.wide_key,
+        }
     }
 
     /// Heap bytes held (capacities).
     pub(super) fn heap_bytes(&self) -> usize {
         use core::mem::size_of_val;
         let v = |n: usize, one: usize| n * one;
-        v(self.items.capacity(), 8)
-            + v(self.wide.capacity() + self.wide_tmp.capacity(), 16)
+        v(
+            self.items.capacity() + self.tmp.capacity() + self.wide_key.capacity(),
+            8,
+        ) + v(self.wide.capacity() + self.wide_tmp.capacity(), 16)
             + v(self.counts.capacity(), 4)
+            + v(self.boxes.capacity(), 32)
             + v(self.hot.capacity(), size_of_val(&Hot::EMPTY))
-            + v(self.node_key.capacity(), 8)
             + v(self.sweeps.a.capacity() + self.sweeps.b.capacity(), 8)
             + self.par_heap_bytes()
     }
@@ -169,133 +249,223 @@ impl Scratch {
     fn par_heap_bytes(&self) -> usize {
         self.par.heap_bytes()
     }
+
     #[cfg(not(feature = "parallel"))]
     fn par_heap_bytes(&self) -> usize {
         0
     }
 }
 
+/// The walk order's node keys: the high halves of the sorted list, or (a tree too deep for
+/// 32-bit keys) a list of their own.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Keys<'a> {
+    items: &'a [u64],
+    wide: &'a [u64],
+}
+
+impl Keys<'_> {
+    #[inline]
+    pub(super) fn len(&self) -> usize {
+        self.items.len()
+    }
+
+    /// The key of walk position `i`.
+    #[inline]
+    pub(super) fn get(&self, i: usize) -> u64 {
+        if self.wide.is_empty() {
+            self.items[i] >> 32
+        } else {
+            self.wide[i]
+        }
+    }
+}
+
 /// The runs of equal keys of `keys` (sorted): `(key, start, end)` for each, in order.
 #[inline]
-pub(super) fn runs(keys: &[u64]) -> impl Iterator<Item = (u64, usize, usize)> + '_ {
+pub(super) fn runs(keys: Keys<'_>) -> impl Iterator<Item = (u64, usize, usize)> + '_ {
     let mut i = 0;
+    let n = keys.len();
     core::iter::from_fn(move || {
-        let &key = keys.get(i)?;
+        if i == n {
+            return None;
+        }
+        let key = keys.get(i);
         let start = i;
-        i += keys[i..].iter().take_while(|&&k| k == key).count();
+        i += 1;
+        while i < n && keys.get(i) == key {
+            i += 1;
+        }
         Some((key, start, i))
     })
 }
 
-/// A pass's view of the walk order: the sorted spheres and their node keys, the tester that
-/// runs and counts the pass's box tests, and the sweep buffers.
+/// A pass's view of the walk order: its keys and ids (`items`, see [`Scratch`]), the boxes
+/// (loose) or copies (strict), the tester that runs and counts the pass's box tests, and the
+/// sweep buffers.
 pub(super) struct Walk<'a, F> {
+    pub(super) keys: Keys<'a>,
+    pub(super) ids: &'a [u64],
+    pub(super) boxes: &'a [SimdBox],
     pub(super) hot: &'a [Hot],
-    pub(super) node_key: &'a [u64],
     pub(super) t: Tester<'a, F>,
     pub(super) sweeps: &'a mut Sweeps,
 }
 
 /// Runs and counts the box tests of one pass, mapping ids to proxy keys.
 pub(super) struct Tester<'a, F> {
-    /// The tree's key versions by id.
     pub(super) versions: &'a [u32],
     pub(super) tests: u64,
     pub(super) emit: F,
 }
 
-/// True if `a × b` is tested all against all rather than swept.
+/// True if two lists of these lengths are tested all against all (see [`SHORT_CROSS`] and
+/// [`SHORT_SIDE`]).
 #[inline]
 pub(super) fn is_short_cross(a: usize, b: usize) -> bool {
     a * b <= SHORT_CROSS || a.min(b) <= SHORT_SIDE
 }
 
 impl<F: FnMut(ProxyKey, ProxyKey)> Tester<'_, F> {
-    /// Tests one pair and emits it if it overlaps.
+    /// Tests one pair and reports it if the boxes overlap.
     #[inline]
     pub(super) fn test(&mut self, a: &Hot, b: &Hot) {
         self.tests += 1;
-        if a.overlaps(b) {
+        if a.bx.overlaps(&b.bx) {
             self.emit(a, b);
         }
     }
 
-    /// Emits a pair known to overlap.
+    /// Reports an overlapping pair of copies.
     #[inline]
     pub(super) fn emit(&mut self, a: &Hot, b: &Hot) {
+        self.emit_ids(a.id, b.id);
+    }
+
+    /// Reports an overlapping pair by ids.
+    #[inline]
+    pub(super) fn emit_ids(&mut self, a: u32, b: u32) {
         (self.emit)(
-            super::key_at(self.versions, a.id),
-            super::key_at(self.versions, b.id),
+            super::key_at(self.versions, a),
+            super::key_at(self.versions, b),
         );
     }
 
-    /// Every pair within `list`: all against all when short, else a sweep along x.
+    /// Every overlapping pair within `list`.
     #[inline(never)]
-    pub(super) fn within(&mut self, list: &[Hot], sweeps: &mut Sweeps) {
-        if list.len() <= SHORT_SELF {
-            self.tests += sweep::all_pairs(list, |_, a, _, b| self.emit(a, b));
+    pub(super) fn within<'b, L: Listed<'b>>(&mut self, list: L, sweeps: &mut Sweeps) {
+        let items = list.items();
+        if items.len() <= SHORT_SELF {
+            self.tests += sweep::all_pairs(items, |i, _, j, _| {
+                self.emit_ids(list.id(i), list.id(j));
+            });
         } else {
             self.sweep_within(list, &mut sweeps.a);
         }
     }
 
-    /// [`Tester::within`] for long lists.
     #[inline(never)]
-    fn sweep_within(&mut self, list: &[Hot], order: &mut Vec<u64>) {
-        sweep::sort_entries(order, list, 0);
+    fn sweep_within<'b, L: Listed<'b>>(&mut self, list: L, order: &mut Vec<u64>) {
+        let items = list.items();
+        sweep::sort_entries(order, items, 0);
         let sorted = Ordered {
             order,
-            items: list,
+            items,
             axis: 0,
         };
-        self.tests += sweep::self_pairs_of(&sorted, |i, j| self.emit(&list[i], &list[j]));
+        self.tests += sweep::self_pairs_of(&sorted, |i, j| self.emit_ids(list.id(i), list.id(j)));
     }
 
-    /// Every pair across the disjoint lists `a` and `b`: all against all when small, else a
-    /// merged sweep along x.
+    /// Every overlapping pair across `a` and `b`.
     #[inline(never)]
-    pub(super) fn between(&mut self, a: &[Hot], b: &[Hot], sweeps: &mut Sweeps) {
-        if is_short_cross(a.len(), b.len()) {
-            self.tests += sweep::all_cross(a, b, |_, x, _, y| self.emit(x, y));
+    pub(super) fn between<'b, A: Listed<'b>, B: Listed<'b>>(
+        &mut self,
+        a: A,
+        b: B,
+        sweeps: &mut Sweeps,
+    ) {
+        let (ia, ib) = (a.items(), b.items());
+        if is_short_cross(ia.len(), ib.len()) {
+            self.tests += sweep::all_cross(ia, ib, |i, _, j, _| {
+                self.emit_ids(a.id(i), b.id(j));
+            });
         } else {
-            sweep::sort_entries(&mut sweeps.a, a, 0);
+            sweep::sort_entries(&mut sweeps.a, ia, 0);
             self.sweep_sorted(a, b, 0, sweeps);
         }
     }
 
-    /// Every pair across the spheres of `a` listed in `sweeps.a` (sorted along `axis` by
-    /// [`sweep::sort_entries`] or [`sweep::sort_entries_where`]) and all of `b`, by a merged
-    /// sweep along `axis`.
+    /// The pairs across `a`, whose entries `sweeps.a` lists sorted along `axis`, and `b`.
     #[inline(never)]
-    pub(super) fn sweep_sorted(&mut self, a: &[Hot], b: &[Hot], axis: usize, sweeps: &mut Sweeps) {
-        sweep::sort_entries(&mut sweeps.b, b, axis);
+    pub(super) fn sweep_sorted<'b, A: Listed<'b>, B: Listed<'b>>(
+        &mut self,
+        a: A,
+        b: B,
+        axis: usize,
+        sweeps: &mut Sweeps,
+    ) {
+        let (ia, ib) = (a.items(), b.items());
+        sweep::sort_entries(&mut sweeps.b, ib, axis);
         let (sa, sb) = (
             Ordered {
                 order: &sweeps.a,
-                items: a,
+                items: ia,
                 axis,
             },
             Ordered {
                 order: &sweeps.b,
-                items: b,
+                items: ib,
                 axis,
             },
         );
-        self.tests += sweep::cross_pairs_of(&sa, &sb, |i, j| self.emit(&a[i], &b[j]));
+        self.tests += sweep::cross_pairs_of(&sa, &sb, |i, j| self.emit_ids(a.id(i), b.id(j)));
     }
 }
 
 impl Octree {
-    /// Sorts the spheres into walk order in `s` and returns a pass's view of it, with a tester
-    /// that hands the overlapping pairs to `emit`; `None` for an empty tree.
+    /// Sorts the spheres into walk order for the next pass, with `tmp` as the sort's second
+    /// buffer (left empty, its capacity grown to the sphere and id counts if short): the
+    /// broadphase lends its pair list, which holds nothing until the pass fills it. The pass
+    /// must follow with no change to the tree in between.
+    pub(super) fn prepare_walk(&self, s: &mut Scratch, tmp: &mut Vec<u64>) {
+        if self.live > 0 {
+            self.sort_into_walk_order(s, tmp);
+            tmp.clear();
+            s.ready = true;
+        }
+    }
+
+    /// [`Octree::prepare_walk`] split over rayon's current pool in up to `parts` parts.
+    #[cfg(feature = "parallel")]
+    pub(super) fn prepare_walk_par(&self, s: &mut Scratch, tmp: &mut Vec<u64>, parts: usize) {
+        if self.live > 0 {
+            self.sort_into_walk_order_par(s, tmp, parts);
+            tmp.clear();
+            s.ready = true;
+        }
+    }
+
+    /// The walk order of a pass, sorted now unless [`Octree::prepare_walk`] just did; `None`
+    /// if the tree is empty.
     pub(super) fn begin_pass<'a, F>(&'a self, s: &'a mut Scratch, emit: F) -> Option<Walk<'a, F>> {
-        if self.objs.is_empty() {
+        if self.live == 0 {
+            s.ready = false;
             return None;
         }
-        self.sort_into_walk_order(s);
+        if !core::mem::take(&mut s.ready) {
+            let mut tmp = core::mem::take(&mut s.tmp);
+            self.sort_into_walk_order(s, &mut tmp);
+            tmp.clear();
+            s.tmp = tmp;
+        }
         Some(Walk {
+            keys: Keys {
+                items: &s.items,
+                wide: &s.wide_key,
+            },
+            ids: &s.items,
+            boxes: &s.boxes,
             hot: &s.hot,
-            node_key: &s.node_key,
             t: Tester {
                 versions: &self.versions,
                 tests: 0,
@@ -305,27 +475,19 @@ impl Octree {
         })
     }
 
-    /// Sorts the spheres by walk key and fills the walk-ordered arrays of `s`: box, cell
-    /// range and id, and walk key.
-    fn sort_into_walk_order(&self, s: &mut Scratch) {
-        let Scratch {
-            items,
-            wide,
-            wide_tmp,
-            counts,
-            hot,
-            node_key,
-            ..
-        } = s;
+    /// Sorts the spheres by walk key and fills the walk order of `s`: the sorted list (keys
+    /// and ids) and the boxes (loose) or copies (strict), with `tmp` as the second buffer.
+    fn sort_into_walk_order(&self, s: &mut Scratch, tmp: &mut Vec<u64>) {
         let key_bits = walk_key_bits(self.lattice.depth);
         // Every buffer sized by the sphere count grows by `room_for`, not by doubling.
         let n = self.live;
-        // `node_key` first maps ids to walk positions (see `scatter`).
-        room_for(node_key, self.objs.len());
-        room_for(hot, n);
+        // `tmp` maps ids to walk positions last (see `scatter`).
+        room_for(tmp, self.objs.len().max(n));
+        let items = &mut s.items;
+        room_for(items, n);
+        items.clear();
         if key_bits <= 32 {
-            room_for(items, n);
-            items.clear();
+            s.wide_key.clear();
             items.extend(
                 self.objs
                     .iter()
@@ -333,9 +495,18 @@ impl Octree {
                     .filter(|(_, o)| o.node != NONE)
                     .map(|(id, o)| (u64::from(o.walk_key) << 32) | id as u64),
             );
-            sort_bits(items, node_key, counts, 32, key_bits);
-            self.scatter(items.iter().map(|&x| (x >> 32, x as u32)), hot, node_key);
+            tmp.resize(n, 0);
+            if sort_bits_in(items, tmp, &mut s.counts, 32, key_bits) {
+                items.copy_from_slice(tmp);
+            }
         } else {
+            let Scratch {
+                wide,
+                wide_tmp,
+                wide_key,
+                counts,
+                ..
+            } = s;
             room_for(wide, n);
             wide.clear();
             wide.extend(
@@ -348,44 +519,57 @@ impl Octree {
             // Ids are unique and listed in increasing order, so the stable sort by walk key
             // alone gives the `(walk key, id)` order.
             sort_bits_by(wide, wide_tmp, counts, |&(key, _)| key, 0, key_bits);
-            self.scatter(wide.iter().copied(), hot, node_key);
+            room_for(wide_key, n);
+            wide_key.clear();
+            wide_key.extend(wide.iter().map(|&(key, _)| key));
+            items.extend(wide.iter().map(|&(_, id)| u64::from(id)));
         }
+        self.scatter(s, tmp);
     }
 
-    /// Fills the walk-ordered copies from the sorted `(walk key, id)` sequence. Each sphere's
-    /// walk position is noted by id first (in `node_key`, free until its keys are written
-    /// last); then one pass reads the spheres in id order, as they lie in memory, and stores
-    /// each at its position: stores to scattered places do not stall the loop the way loads
-    /// from them would.
-    fn scatter(
-        &self,
-        order: impl Iterator<Item = (u64, u32)> + Clone,
-        hot: &mut Vec<Hot>,
-        node_key: &mut Vec<u64>,
-    ) {
+    /// Fills the walk-ordered boxes (or copies) from the sorted list. Each sphere's walk
+    /// position is noted by id first (in `rank`); then one pass reads the spheres in id order,
+    /// as they lie in memory, and stores each at its position: stores to scattered places do
+    /// not stall the loop the way loads from them would.
+    fn scatter(&self, s: &mut Scratch, rank: &mut Vec<u64>) {
         let n = self.live;
-        let rank = node_key;
         rank.resize(self.objs.len(), 0);
-        for (pos, (_, id)) in order.clone().enumerate() {
-            rank[id as usize] = pos as u64;
+        for (pos, &x) in s.items.iter().enumerate() {
+            rank[x as u32 as usize] = pos as u64;
         }
         // `rank` maps the live ids onto `0..n`: every entry below is overwritten, so the
         // buffers only change length when the sphere count does.
-        hot.resize(n, Hot::EMPTY);
-        for (id, (o, &pos)) in self.objs.iter().zip(rank.iter()).enumerate() {
-            if o.node == NONE {
-                continue;
+        let live = self.objs.iter().zip(rank.iter()).enumerate();
+        let live = live.filter(|(_, (o, _))| o.node != NONE);
+        match self.lattice.placement {
+            Placement::Loose => {
+                room_for(&mut s.boxes, n);
+                s.boxes.resize(n, SimdBox::EMPTY);
+                for (_, (o, &pos)) in live {
+                    s.boxes[pos as usize] = o.simd_box();
+                }
             }
-            hot[pos as usize] = Hot {
-                bx: o.simd_box(),
-                qmin: o.qmin,
-                qmax: o.qmax,
-                id: id as u32,
-            };
+            Placement::Strict => {
+                room_for(&mut s.hot, n);
+                s.hot.resize(n, Hot::EMPTY);
+                for (id, (o, &pos)) in live {
+                    s.hot[pos as usize] = self.hot_of(o, id as u32);
+                }
+            }
         }
-        let node_key = rank;
-        node_key.clear();
-        node_key.extend(order.map(|(key, _)| key));
+    }
+
+    /// The strict pass's copy of the sphere `o` of id `id`: its cell range is quantised from
+    /// the box it is placed by, as placement quantised it.
+    #[inline]
+    fn hot_of(&self, o: &super::Obj, id: u32) -> Hot {
+        let aabb = o.aabb();
+        Hot {
+            bx: o.simd_box(),
+            qmin: self.lattice.quantize(aabb.min),
+            qmax: self.lattice.quantize(aabb.max),
+            id,
+        }
     }
 }
 
@@ -404,21 +588,24 @@ impl Octree {
     /// into at most `parts` ranges of about equal sphere counts (quantiles of a sample), each
     /// a run of the walk order, and each range is gathered, sorted and copied out by its own
     /// task. Keys and ids are unique together, so the walk order is the serial sort's, whatever
-    /// the cut. Trees too deep for 32-bit keys, or too small for two parts, sort serially.
-    pub(super) fn sort_into_walk_order_par(&self, s: &mut Scratch, parts: usize) {
+    /// the cut. Trees too deep for 32-bit keys, too small for two parts, or strict (whose pass
+    /// is serial) sort serially.
+    pub(super) fn sort_into_walk_order_par(
+        &self,
+        s: &mut Scratch,
+        tmp: &mut Vec<u64>,
+        parts: usize,
+    ) {
         use rayon::prelude::*;
         let key_bits = walk_key_bits(self.lattice.depth);
         let parts = parts.min(MAX_PARTS).min(self.live / MIN_PART_SPHERES);
-        if key_bits > 32 || parts < 2 {
-            self.sort_into_walk_order(s);
+        if key_bits > 32 || parts < 2 || self.lattice.placement == Placement::Strict {
+            self.sort_into_walk_order(s, tmp);
             return;
         }
+        s.wide_key.clear();
         let Scratch {
-            items,
-            hot,
-            node_key,
-            par,
-            ..
+            items, boxes, par, ..
         } = s;
         let objs = &self.objs;
         let stride = (objs.len() / (parts * SAMPLES_PER_PART)).max(1);
@@ -430,7 +617,7 @@ impl Octree {
                 .map(|o| u64::from(o.walk_key)),
         );
         if par.sample.is_empty() {
-            self.sort_into_walk_order(s);
+            self.sort_into_walk_order(s, tmp);
             return;
         }
         par.sample.sort_unstable();
@@ -480,11 +667,11 @@ impl Octree {
         debug_assert_eq!(par.bounds[np] as usize, n);
         // Grown by `room_for`, as in the serial sort.
         room_for(items, n);
-        room_for(hot, n);
-        room_for(node_key, n);
+        room_for(boxes, n);
+        room_for(tmp, n);
         items.resize(n, 0);
-        hot.resize(n, Hot::EMPTY);
-        node_key.resize(n, 0);
+        boxes.resize(n, SimdBox::EMPTY);
+        tmp.resize(n, 0);
         if par.parts.len() < np {
             par.parts.resize_with(np, PartSort::default);
         }
@@ -494,7 +681,7 @@ impl Octree {
             bounds: &par.bounds,
             key_bits,
         };
-        job.fill(0, &mut par.parts[..np], items, hot, node_key);
+        job.fill(0, &mut par.parts[..np], items, boxes, tmp);
     }
 }
 
@@ -509,30 +696,30 @@ struct Parts<'a> {
 
 #[cfg(feature = "parallel")]
 impl Parts<'_> {
-    /// Fills the walk-ordered copies of parts `first..first + parts.len()`, whose positions
-    /// `items`, `hot` and `node_key` are, halving the parts between two tasks until
-    /// one is left.
+    /// Fills the walk order of parts `first..first + parts.len()`, whose positions `items`,
+    /// `boxes` and the sort's second buffer `tmp` are, halving the parts between two tasks
+    /// until one is left.
     fn fill(
         &self,
         first: usize,
         parts: &mut [PartSort],
         items: &mut [u64],
-        hot: &mut [Hot],
-        node_key: &mut [u64],
+        boxes: &mut [SimdBox],
+        tmp: &mut [u64],
     ) {
         if let [part] = parts {
-            self.fill_one(first, part, items, hot, node_key);
+            self.fill_one(first, part, items, boxes, tmp);
             return;
         }
         let mid = parts.len() / 2;
         let at = (self.bounds[first + mid] - self.bounds[first]) as usize;
         let (pa, pb) = parts.split_at_mut(mid);
         let (ia, ib) = items.split_at_mut(at);
-        let (ha, hb) = hot.split_at_mut(at);
-        let (na, nb) = node_key.split_at_mut(at);
+        let (ba, bb) = boxes.split_at_mut(at);
+        let (ta, tb) = tmp.split_at_mut(at);
         rayon::join(
-            || self.fill(first, pa, ia, ha, na),
-            || self.fill(first + mid, pb, ib, hb, nb),
+            || self.fill(first, pa, ia, ba, ta),
+            || self.fill(first + mid, pb, ib, bb, tb),
         );
     }
 
@@ -546,8 +733,8 @@ impl Parts<'_> {
         p: usize,
         part: &mut PartSort,
         items: &mut [u64],
-        hot: &mut [Hot],
-        node_key: &mut [u64],
+        boxes: &mut [SimdBox],
+        tmp: &mut [u64],
     ) {
         let np = self.bounds.len() - 1;
         let mut at = 0;
@@ -555,22 +742,15 @@ impl Parts<'_> {
             items[at..at + listed.len()].copy_from_slice(listed);
             at += listed.len();
         }
-        debug_assert_eq!(at, hot.len());
-        // `node_key` is the sort's second buffer: the sorted items end in one of the two, and
-        // each is read at the position its walk key is then stored at.
-        let in_tmp = sort_bits_in(items, node_key, &mut part.counts, 32, self.key_bits);
+        debug_assert_eq!(at, boxes.len());
+        // The sorted items end in one of the two buffers; each is stored back into `items`
+        // as its box is gathered.
+        let in_tmp = sort_bits_in(items, tmp, &mut part.counts, 32, self.key_bits);
         let tree = self.tree;
-        for j in 0..hot.len() {
-            let x = if in_tmp { node_key[j] } else { items[j] };
-            let id = x as u32 as usize;
-            let o = &tree.objs[id];
-            node_key[j] = x >> 32;
-            hot[j] = Hot {
-                bx: o.simd_box(),
-                qmin: o.qmin,
-                qmax: o.qmax,
-                id: id as u32,
-            };
+        for j in 0..boxes.len() {
+            let x = if in_tmp { tmp[j] } else { items[j] };
+            items[j] = x;
+            boxes[j] = tree.objs[x as u32 as usize].simd_box();
         }
     }
 }
@@ -590,16 +770,34 @@ mod tests {
             .collect();
         let mut want = items.clone();
         want.sort_by_key(|x| x >> 32);
-        let (mut tmp, mut counts) = (Vec::new(), Vec::new());
-        sort_bits(&mut items, &mut tmp, &mut counts, 32, 22);
+        let (mut tmp, mut counts) = (vec![0; items.len()], Vec::new());
+        if sort_bits_in(&mut items, &mut tmp, &mut counts, 32, 22) {
+            items.copy_from_slice(&tmp);
+        }
         assert_eq!(items, want);
     }
 
     #[test]
     fn runs_are_the_stretches_of_equal_keys() {
-        let keys = [1, 1, 3, 4, 4, 4, 9];
-        let got: Vec<_> = runs(&keys).collect();
-        assert_eq!(got, [(1, 0, 2), (3, 2, 3), (4, 3, 6), (9, 6, 7)]);
-        assert_eq!(runs(&[]).count(), 0);
+        // Narrow keys are the high halves of the sorted list; wide ones a list of their own.
+        let keys = [1u64, 1, 3, 4, 4, 4, 9];
+        let want = [(1, 0, 2), (3, 2, 3), (4, 3, 6), (9, 6, 7)];
+        let items: Vec<u64> = keys.iter().zip(10..).map(|(k, id)| k << 32 | id).collect();
+        let narrow = Keys {
+            items: &items,
+            wide: &[],
+        };
+        assert_eq!(runs(narrow).collect::<Vec<_>>(), want);
+        let ids: Vec<u64> = (10..17).collect();
+        let wide = Keys {
+            items: &ids,
+            wide: &keys,
+        };
+        assert_eq!(runs(wide).collect::<Vec<_>>(), want);
+        let empty = Keys {
+            items: &[],
+            wide: &[],
+        };
+        assert_eq!(runs(empty).count(), 0);
     }
 }
