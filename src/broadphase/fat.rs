@@ -53,6 +53,7 @@ fn jitter(slot: u32, now: u32) -> f32 {
 /// The speed (metres per step, largest axis) of a box that moved from `old` to `new` since
 /// step `stamp`, at step `now`; and whether that outgrows the smallest fat margin
 /// ([`outgrows_min_margin`]).
+#[cfg(feature = "parallel")]
 #[inline(always)]
 pub(super) fn motion(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> (f32, bool) {
     let speed = speed(old, new, stamp, now);

@@ -826,6 +826,7 @@ fn key_at(versions: &[u32], id: u32) -> ProxyKey {
 }
 
 /// The batched update split over tasks.
+#[cfg(feature = "parallel")]
 impl Octree {
     /// The tree's placement (read-only) beside its spheres' records by id (a slot's id is its
     /// key's slot; the records end at the highest id ever held), for a batched update split
@@ -844,12 +845,14 @@ impl Octree {
 
 /// Places spheres in a tree whose records are lent out ([`Octree::split_for_update`]); each
 /// task places with its own copy (which notes the last radius's level).
+#[cfg(feature = "parallel")]
 #[derive(Clone, Copy)]
 pub(crate) struct Placer<'a> {
     lattice: &'a Lattice,
     memo: placement::LevelMemo,
 }
 
+#[cfg(feature = "parallel")]
 impl Placer<'_> {
     /// Where a sphere at `center`, `radius` goes in the tree as it is now.
     #[inline(always)]
@@ -859,13 +862,16 @@ impl Placer<'_> {
 }
 
 /// A sphere's placement from [`Placer::placement_of`], for [`Record::store_in_place`].
+#[cfg(feature = "parallel")]
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Placed(placement::Located);
 
 /// A sphere's record in the tree (opaque outside it), lent out by
 /// [`Octree::split_for_update`].
+#[cfg(feature = "parallel")]
 pub(crate) type Record = Obj;
 
+#[cfg(feature = "parallel")]
 impl Obj {
     /// Stores `center`, `radius` placed at `at` (from `placer`, this record's tree) if the
     /// sphere stays in its node and the update leaves the count of spheres outside the region
