@@ -70,7 +70,7 @@ const DENSE_FLOOR: usize = 1024;
 /// A node's key in the lists of a pass's runs: `u32` while every walk key fits in 32 bits
 /// (every depth below [`MAX_DEPTH`]), which halves the list the neighbour seeks scan, else
 /// `u64`.
-trait RunKey: Copy + Send + Sync + 'static {
+trait RunKey: Copy + Ord + Send + Sync + 'static {
     /// The sentinel that ends the list: above every key, and every key a seek looks for.
     const END: Self;
     fn from_key(key: u64) -> Self;
@@ -603,12 +603,14 @@ fn test_listed<F: FnMut(ProxyKey, ProxyKey)>(
 }
 
 /// Moves `p` to the first run whose key is at least `target`; `target` never exceeds the
-/// sentinel. The first two steps are branch-free: most calls move by 0, 1 or 2.
+/// sentinel. The first two steps are branch-free: most calls move by 0, 1 or 2. The target
+/// is compared in the keys' own width, so that a `u32` key is compared where it lies.
 #[inline]
 fn seek<K: RunKey>(keys: &[K], p: &mut usize, target: u64) {
-    *p += usize::from(keys[*p].get() < target);
-    *p += usize::from(keys[*p].get() < target);
-    while keys[*p].get() < target {
+    let target = K::from_key(target);
+    *p += usize::from(keys[*p] < target);
+    *p += usize::from(keys[*p] < target);
+    while keys[*p] < target {
         *p += 1;
     }
 }
