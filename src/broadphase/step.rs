@@ -484,7 +484,7 @@ impl BroadPhase {
     /// whose groups allow it, packed, each once, unsorted.
     fn structure_pairs(&mut self) {
         // The octree's walk-order sort borrows `fresh`, which holds nothing until the pass.
-        self.octree.prepare_pass(&mut self.fresh);
+        self.octree.prepare_pass(&mut self.fresh, 1);
         let (store, fresh, groups) = (&self.store, &mut self.fresh, self.any_groups);
         let mut push = |a: ProxyKey, b: ProxyKey| {
             let (a, b) = (crate::pair::slot(a), crate::pair::slot(b));
@@ -508,7 +508,7 @@ impl BroadPhase {
     fn sorted_pairs_par(&mut self, tasks: usize, layout: PairBits) {
         // The octree's walk-order sort borrows `fresh`, which holds nothing until the sort
         // of the pairs found fills it.
-        self.octree.prepare_pass_par(&mut self.fresh, tasks);
+        self.octree.prepare_pass(&mut self.fresh, tasks);
         let par = &mut self.par;
         let parts = tasks.min(self.pairs.len() / MIN_PART_PAIRS).max(1);
         radix::split_points(&self.pairs, pack_pair, parts, &mut par.splitters);

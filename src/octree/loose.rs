@@ -275,15 +275,12 @@ impl Octree {
         E: Fn(&mut S, ProxyKey, ProxyKey) + Sync,
     {
         let k = out.len();
-        if self.live == 0 || k == 0 {
+        if k == 0 {
             ws.ready = false;
             return PassCost::default();
         }
-        if !core::mem::take(&mut ws.ready) {
-            let mut tmp = core::mem::take(&mut ws.tmp);
-            self.sort_into_walk_order_par(ws, &mut tmp, k);
-            tmp.clear();
-            ws.tmp = tmp;
+        if !self.ensure_walk(ws, k) {
+            return PassCost::default();
         }
         let ws = &*ws;
         let (boxes, ids) = (&ws.boxes[..], &ws.items[..]);

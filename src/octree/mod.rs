@@ -364,7 +364,7 @@ impl Octree {
     /// The audit's sample of the spheres now (`region::Sampled::of`, with the walk order's
     /// buffer lent as scratch).
     fn audit_sample(&mut self) -> Option<region::Sampled> {
-        region::Sampled::of(&self.objs, self.passes.walk.lend().values)
+        region::Sampled::of(&self.objs, self.passes.walk.idle_items())
     }
 
     /// The region and depth the spheres call for now (`Regrow::propose` over this tree's
@@ -375,7 +375,7 @@ impl Octree {
             self.live,
             self.hint,
             self.lattice.placement,
-            self.passes.walk.lend(),
+            self.passes.walk.idle_items(),
         )
     }
 
@@ -496,30 +496,16 @@ impl Octree {
         self.update_id(crate::pair::slot(key), center, radius);
     }
 
-    /// A buffer of the pair passes that sits idle between them (the walk-order sort's items,
-    /// room for every sphere), lent as scratch: its contents are garbage to both sides. The
-    /// broadphase sorts its pair list with it, so the two sorts share one second buffer.
-    /// Readies the next pair pass ([`Octree::for_each_pair`]): maintains the region, then sorts
-    /// the spheres into walk order with `tmp` as the sort's second buffer, which the caller
-    /// lends while it holds nothing (the broadphase's pair list, before the pass fills it);
-    /// `tmp` is left empty. The pass must come next, with no change to the tree between.
-    pub(crate) fn prepare_pass(&mut self, tmp: &mut Vec<u64>) {
+    /// Readies the next pair pass ([`Octree::for_each_pair`], or with `parts` above 1
+    /// [`Octree::for_each_pair_chunked`], whose sort is then split in up to `parts` parts):
+    /// maintains the region, then sorts the spheres into walk order with `tmp` as the sort's
+    /// second buffer, which the caller lends while it holds nothing (the broadphase's pair list,
+    /// before the pass fills it); `tmp` is left empty. The pass must come next, with no change
+    /// to the tree between.
+    pub(crate) fn prepare_pass(&mut self, tmp: &mut Vec<u64>, parts: usize) {
         self.maintain();
         let mut p = core::mem::take(&mut self.passes);
-        self.prepare_walk(&mut p.walk, tmp);
-        self.passes = p;
-    }
-
-    /// [`Octree::prepare_pass`] for [`Octree::for_each_pair_chunked`]: the sort split in up
-    /// to `parts` parts over rayon's current pool.
-    #[cfg(feature = "parallel")]
-    pub(crate) fn prepare_pass_par(&mut self, tmp: &mut Vec<u64>, parts: usize) {
-        self.maintain();
-        let mut p = core::mem::take(&mut self.passes);
-        match self.lattice.placement {
-            Placement::Strict => self.prepare_walk(&mut p.walk, tmp),
-            Placement::Loose => self.prepare_walk_par(&mut p.walk, tmp, parts),
-        }
+        self.prepare_walk(&mut p.walk, tmp, parts);
         self.passes = p;
     }
 
@@ -530,6 +516,9 @@ impl Octree {
         self.passes.walk.tmp.capacity()
     }
 
+    /// A buffer of the pair passes that sits idle between them (the walk-order sort's items,
+    /// room for every sphere), lent as scratch: its contents are garbage to both sides. The
+    /// broadphase sorts its pair list with it, so the two sorts share one second buffer.
     pub(crate) fn idle_buffer(&mut self) -> &mut Vec<u64> {
         self.passes.walk.idle_items()
     }
@@ -661,7 +650,7 @@ impl Octree {
     /// boxes overlap), in no particular order and with no particular key order inside a pair.
     /// A growing tree first [maintains](Octree::maintain) its region.
     pub fn for_each_pair(&mut self, f: impl FnMut(ProxyKey, ProxyKey)) {
-        if !self.passes.walk.is_ready() {
+        if !self.passes.walk.ready {
             self.maintain();
         }
         let mut p = core::mem::take(&mut self.passes);
@@ -683,7 +672,7 @@ impl Octree {
         E: Fn(&mut S, ProxyKey, ProxyKey) + Sync,
         A: FnOnce(&Octree) + Send,
     {
-        if !self.passes.walk.is_ready() {
+        if !self.passes.walk.ready {
             self.maintain();
         }
         let mut p = core::mem::take(&mut self.passes);

@@ -161,13 +161,6 @@ impl Sampled {
     }
 }
 
-/// Scratch a re-root proposal borrows from the pair passes' walk-order buffers (which hold
-/// nothing between passes): one value per live sphere for the median and the quantiles, then
-/// the occupancy count's cell codes.
-pub(super) struct Lent<'a> {
-    pub(super) values: &'a mut Vec<u64>,
-}
-
 impl Regrow {
     /// Resets the audit clock after a re-root of `live` spheres around `span_center` (`None`:
     /// no region was found, the tree kept its own), whose audit sample is `sampled`.
@@ -216,14 +209,16 @@ impl Regrow {
         live: usize,
         hint: Option<Aabb>,
         placement: Placement,
-        lent: Lent<'_>,
+        scratch: &mut Vec<u64>,
     ) -> Option<Proposal> {
         if live == 0 {
             return None;
         }
-        // Exactly one value per live sphere: the walk order's sort fills the same buffer.
-        crate::radix::grow_to(lent.values, live);
-        let s = &mut *lent.values;
+        // `scratch` is the pair passes' walk-order list, which holds nothing between passes:
+        // one value per live sphere for the median and the quantiles, then the occupancy
+        // count's cell codes. Exactly one per live sphere: the walk order's sort fills it so.
+        crate::radix::grow_to(scratch, live);
+        let s = &mut *scratch;
         let r = median(s, objs.iter().filter(|o| o.node != NONE).map(|o| o.radius));
         let cell = CELL_DIAMETERS * 2.0 * r;
         let mut full = Aabb::EMPTY;
@@ -274,7 +269,7 @@ impl Regrow {
             side / (1u32 << MAX_DEPTH) as f32
         };
         let doublings = if finest > 0.0 && finest.is_finite() && live >= MIN_SPHERES_TO_COARSEN {
-            doublings(objs, live, span.min, finest, side, lent)
+            doublings(objs, live, span.min, finest, side, scratch)
         } else {
             0
         };
@@ -320,9 +315,15 @@ impl Regrow {
 /// offset from it), by sorting their interleaved cell coordinates once: a cell twice as
 /// wide is the code shifted by 3 bits, so each coarser count is one scan of the sorted
 /// codes. O(n); runs only when a region is proposed.
-fn doublings(objs: &[Obj], live: usize, origin: Vec3, cell: f32, side: f32, lent: Lent<'_>) -> u32 {
+fn doublings(
+    objs: &[Obj],
+    live: usize,
+    origin: Vec3,
+    cell: f32,
+    side: f32,
+    codes: &mut Vec<u64>,
+) -> u32 {
     let top = ((1u32 << OCCUPANCY_BITS) - 1) as f32;
-    let codes = lent.values;
     codes.clear();
     codes.extend(objs.iter().filter(|o| o.node != NONE).map(|o| {
         let q = ((o.center - origin) / cell).clamp(Vec3::ZERO, Vec3::splat(top));

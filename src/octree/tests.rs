@@ -377,7 +377,7 @@ fn a_pass_prepared_with_a_lent_buffer_finds_the_same_pairs() {
         }
         let mut lent = Vec::new();
         for round in 0..3 {
-            t.prepare_pass(&mut lent);
+            t.prepare_pass(&mut lent, 1);
             assert!(lent.is_empty() && lent.capacity() >= 400, "{p:?} {round}");
             let prepared = sorted_pairs(&mut t);
             assert_eq!(t.own_sort_buffer(), 0, "{p:?} depth {depth} round {round}");
@@ -395,7 +395,7 @@ fn a_pass_prepared_with_a_lent_buffer_finds_the_same_pairs() {
     for p in BOTH {
         let (mut t, _) = growing_with(p, &gas);
         let mut lent = Vec::new();
-        t.prepare_pass(&mut lent);
+        t.prepare_pass(&mut lent, 1);
         assert_eq!(sorted_pairs(&mut t), brute::pairs(&proxies(&t)), "{p:?}");
         assert!(t.stats().reroots > 0 && t.own_sort_buffer() == 0, "{p:?}");
     }

@@ -16,7 +16,6 @@
 
 use super::Placement;
 use super::placement::walk_key_bits;
-use super::region::Lent;
 use super::{NONE, Octree};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
@@ -203,22 +202,10 @@ impl ParSort {
 }
 
 impl Scratch {
-    /// The buffer a re-root proposal borrows between passes (see [`Lent`]): the walk order's
-    /// list.
-    pub(super) fn lend(&mut self) -> Lent<'_> {
-        Lent {
-            values: &mut self.items,
-        }
-    }
-
-    /// The walk order's list, which holds nothing anyone reads between passes.
+    /// The walk order's list, which holds nothing anyone reads between passes: the
+    /// broadphase's pair sort and a re-root proposal borrow it as scratch.
     pub(super) fn idle_items(&mut self) -> &mut Vec<u64> {
         &mut self.items
-    }
-
-    /// True from [`Octree::prepare_pass`] to the pass it prepares.
-    pub(super) fn is_ready(&self) -> bool {
-        self.ready
     }
 
     /// The walk order's keys.
@@ -426,37 +413,48 @@ impl Octree {
     /// Sorts the spheres into walk order for the next pass, with `tmp` as the sort's second
     /// buffer (left empty, its capacity grown to the sphere and id counts if short): the
     /// broadphase lends its pair list, which holds nothing until the pass fills it. The pass
-    /// must follow with no change to the tree in between.
-    pub(super) fn prepare_walk(&self, s: &mut Scratch, tmp: &mut Vec<u64>) {
+    /// must follow with no change to the tree in between. See [`Octree::sort_walk`] for
+    /// `parts`.
+    pub(super) fn prepare_walk(&self, s: &mut Scratch, tmp: &mut Vec<u64>, parts: usize) {
         if self.live > 0 {
-            self.sort_into_walk_order(s, tmp);
+            self.sort_walk(s, tmp, parts);
             tmp.clear();
             s.ready = true;
         }
     }
 
-    /// [`Octree::prepare_walk`] split over rayon's current pool in up to `parts` parts.
-    #[cfg(feature = "parallel")]
-    pub(super) fn prepare_walk_par(&self, s: &mut Scratch, tmp: &mut Vec<u64>, parts: usize) {
-        if self.live > 0 {
-            self.sort_into_walk_order_par(s, tmp, parts);
-            tmp.clear();
-            s.ready = true;
-        }
-    }
-
-    /// The walk order of a pass, sorted now unless [`Octree::prepare_walk`] just did; `None`
-    /// if the tree is empty.
-    pub(super) fn begin_pass<'a, F>(&'a self, s: &'a mut Scratch, emit: F) -> Option<Walk<'a, F>> {
+    /// Readies the walk order of a pass: sorted now, with the scratch's own second buffer,
+    /// unless [`Octree::prepare_walk`] just did. False if the tree is empty.
+    pub(super) fn ensure_walk(&self, s: &mut Scratch, parts: usize) -> bool {
         if self.live == 0 {
             s.ready = false;
-            return None;
+            return false;
         }
         if !core::mem::take(&mut s.ready) {
             let mut tmp = core::mem::take(&mut s.tmp);
-            self.sort_into_walk_order(s, &mut tmp);
+            self.sort_walk(s, &mut tmp, parts);
             tmp.clear();
             s.tmp = tmp;
+        }
+        true
+    }
+
+    /// Sorts into walk order, in up to `parts` parts over rayon's current pool with the
+    /// feature `parallel` (see [`Octree::sort_into_walk_order_par`]), else serially.
+    fn sort_walk(&self, s: &mut Scratch, tmp: &mut Vec<u64>, parts: usize) {
+        #[cfg(feature = "parallel")]
+        if parts > 1 {
+            self.sort_into_walk_order_par(s, tmp, parts);
+            return;
+        }
+        let _ = parts;
+        self.sort_into_walk_order(s, tmp);
+    }
+
+    /// The walk order of a pass (see [`Octree::ensure_walk`]); `None` if the tree is empty.
+    pub(super) fn begin_pass<'a, F>(&'a self, s: &'a mut Scratch, emit: F) -> Option<Walk<'a, F>> {
+        if !self.ensure_walk(s, 1) {
+            return None;
         }
         Some(Walk {
             keys: Keys {
@@ -743,14 +741,14 @@ impl Parts<'_> {
             at += listed.len();
         }
         debug_assert_eq!(at, boxes.len());
-        // The sorted items end in one of the two buffers; each is stored back into `items`
-        // as its box is gathered.
+        // The sorted items end in one of the two buffers, and in `items` for the pass.
         let in_tmp = sort_bits_in(items, tmp, &mut part.counts, 32, self.key_bits);
-        let tree = self.tree;
-        for j in 0..boxes.len() {
-            let x = if in_tmp { tmp[j] } else { items[j] };
-            items[j] = x;
-            boxes[j] = tree.objs[x as u32 as usize].simd_box();
+        if in_tmp {
+            items.copy_from_slice(tmp);
+        }
+        let objs = &self.tree.objs;
+        for (b, &x) in boxes.iter_mut().zip(items.iter()) {
+            *b = objs[x as u32 as usize].simd_box();
         }
     }
 }
