@@ -292,9 +292,9 @@ fn fat_walk(
 ) -> usize {
     let n = st.slots();
     let (flags, shape) = (&mut st.flags[..n], &st.shape[..n]);
-    let (exact, speed, stamp) = (&mut st.exact[..n], &mut st.speed[..n], &mut st.stamp[..n]);
+    let (exact, stamp) = (&mut st.exact[..n], &mut st.stamp[..n]);
     let (held, anchor) = (&st.held[..n], &mut st.anchor[..n]);
-    let (slk, drift) = (&mut st.slack[..n], &mut st.drift[..n]);
+    let slk = &mut st.slack[..n];
     let mut rest = 0;
     for s in slots {
         let f = flags[s];
@@ -317,17 +317,18 @@ fn fat_walk(
             escaped.push(s as u32);
             continue;
         }
-        let v = fat::speed(&exact[s], &new, stamp[s], now);
-        (exact[s], speed[s], stamp[s]) = (new, v, now);
+        // Its speed is measured when it leaves its fat box (from this box and stamp), the only
+        // time the incremental regime reads it.
+        (exact[s], stamp[s]) = (new, now);
         // Still in its fat box: quiet or loud (see `slack::settle`; nothing is loud yet).
-        let d = slack::drift(&new, &anchor[s]);
-        if slack::quiet(d, slk[s]) {
-            flags[s] = f & !flag::STALE;
-            drift[s] = d;
+        if slack::within(&new, &anchor[s], slk[s])
+            || slack::quiet(slack::drift(&new, &anchor[s]), slk[s])
+        {
+            flags[s] = f & !flag::STALE | flag::DRIFTED;
         } else {
-            flags[s] = f & !flag::STALE | flag::LOUD;
+            flags[s] = f & !(flag::STALE | flag::DRIFTED) | flag::LOUD;
             loud.push(s as u32);
-            (anchor[s], slk[s], drift[s]) = (new, f32::MAX, 0.0);
+            (anchor[s], slk[s]) = (new, f32::MAX);
         }
     }
     rest

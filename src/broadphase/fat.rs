@@ -56,17 +56,11 @@ fn jitter(slot: u32, now: u32) -> f32 {
 #[cfg(feature = "parallel")]
 #[inline(always)]
 pub(super) fn motion(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> (f32, bool) {
-    let speed = speed(old, new, stamp, now);
+    let speed = displacement(old, new, stamp, now).abs().max_element();
     (
         speed,
         outgrows_min_margin(speed, new.extent().max_element()),
     )
-}
-
-/// The speed of [`motion`] alone.
-#[inline(always)]
-pub(super) fn speed(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> f32 {
-    displacement(old, new, stamp, now).abs().max_element()
 }
 
 /// How far the centre of a box that moved from `old` to `new` since step `stamp` moved per

@@ -507,9 +507,27 @@ impl BroadPhase {
             self.check_sphere_update(key, center, radius)
                 .map_err(|error| BatchError { index, error })?;
         }
+        // The same stores as `set_sphere`, with the arrays borrowed once for the batch.
+        let (st, movers) = (&mut self.store, &mut self.movers);
+        let (shape, flags) = (&mut st.shape[..], &mut st.flags[..]);
+        let mut newly_stale = 0;
         for &(key, center, radius) in updates {
-            self.set_sphere(crate::pair::slot(key), center, radius);
+            let s = crate::pair::slot(key) as usize;
+            match &mut shape[s] {
+                Shape::Sphere {
+                    center: c,
+                    radius: r,
+                } => (*c, *r) = (center, radius),
+                other => *other = Shape::Sphere { center, radius },
+            }
+            let old = flags[s];
+            flags[s] = old | flag::MOVED | flag::STALE;
+            newly_stale += usize::from(old & flag::STALE == 0);
+            if old & flag::MOVED == 0 {
+                movers.push(s as u32);
+            }
         }
+        self.stale += newly_stale;
         Ok(())
     }
 

@@ -4,9 +4,11 @@
 //! its slack: for an overlapping pair the smallest of its overlap margins (`b.max − a.min` and
 //! `a.max − b.min` on each axis), for a separated pair its largest gap. Both are
 //! `|min over axes of min(b.max − a.min, a.max − b.min)|` ([`slack`]). Every proxy keeps an
-//! *anchor* (its exact box when its candidates were last tested), its *drift* (how far any face
-//! of its exact box is from the anchor's, [`drift`]) and its *slack* `m` (the least slack of
-//! its candidate pairs, computed from the anchors). A pair whose two proxies have
+//! *anchor* (its exact box when its candidates were last tested) and its *slack* `m` (the least
+//! slack of its candidate pairs, computed from the anchors); its *drift* is how far any face of
+//! its exact box is from the anchor's ([`drift`]). The drift is not stored: a proxy that moved
+//! since it was anchored is flagged `DRIFTED`, and a re-test that lowers its slack computes it
+//! from the two boxes (a proxy not flagged has drift 0). A pair whose two proxies have
 //! `2·drift < m` needs no test: each side moved less than half the pair's slack, so the
 //! status at the anchors, which the candidate records, is the status now.
 //!
@@ -89,6 +91,20 @@ pub(super) fn slack(a: &SimdBox, b: &SimdBox) -> f32 {
 #[inline]
 pub(super) fn quiet(d: f32, m: f32) -> bool {
     d == 0.0 || d + d < m
+}
+
+/// A cheaper sufficient test for `quiet(drift(exact, anchor), m)`: every face moved less than
+/// half of `m` once rounded up, compared per face without reducing to the drift. False where
+/// it cannot tell (a face at infinity, `m` 0), and the caller measures the drift. Exact: the
+/// rounded-up product is monotone, so the largest face's passes iff all do, and `d < m / 2`
+/// is `d + d < m` (halving and doubling are exact, or round a subnormal `m / 2` up by at most
+/// half an ulp, which a float `d` below it cannot reach twice over).
+#[inline]
+pub(super) fn within(exact: &SimdBox, anchor: &SimdBox, m: f32) -> bool {
+    let half = Vec3A::splat(m * 0.5);
+    let lo = ((exact.min - anchor.min).abs() * ROUND_UP).cmplt(half);
+    let hi = ((exact.max - anchor.max).abs() * ROUND_UP).cmplt(half);
+    (lo & hi).all()
 }
 
 /// Scratch of [`BroadPhase::update_candidates`]: the candidates it visits and the list
@@ -227,7 +243,7 @@ impl BroadPhase {
         for s in 0..st.slots() {
             st.anchor[s] = st.exact[s];
             st.slack[s] = f32::MAX;
-            st.drift[s] = 0.0;
+            st.flags[s] &= !flag::DRIFTED;
         }
         // The reverse entries are sorted in `fresh` (the pass is done with it), then copied.
         let rev = &mut self.fresh;
@@ -313,7 +329,7 @@ impl BroadPhase {
 
         let st = &mut self.store;
         let (flags, exact, anchor) = (&mut st.flags, &st.exact, &st.anchor);
-        let (slk, drf) = (&mut st.slack, &mut st.drift);
+        let slk = &mut st.slack;
         let pending = &mut self.pending;
         let (added, removed) = (&mut self.added_packed, &mut self.removed_packed);
         added.clear();
@@ -324,12 +340,17 @@ impl BroadPhase {
             tested += 1;
             let s = slack(&anchor[a], &anchor[b]);
             for q in [a, b] {
-                slk[q] = slk[q].min(s);
-                let d = drf[q];
-                if flags[q] & (flag::LOUD | flag::PENDING) == 0 && !quiet(d, s) {
+                // A quiet side stays quiet while its slack does not drop (it drifted less than
+                // half the old one), or while it has not drifted.
+                if s < slk[q]
+                    && flags[q] & (flag::LOUD | flag::PENDING) == 0
+                    && flags[q] & flag::DRIFTED != 0
+                    && !quiet(drift(&exact[q], &anchor[q]), s)
+                {
                     flags[q] |= flag::PENDING;
                     pending.push(q as u32);
                 }
+                slk[q] = slk[q].min(s);
             }
             exact[a].overlaps(&exact[b])
         };
@@ -430,8 +451,8 @@ impl BroadPhase {
     }
 }
 
-/// Classifies the mover `slot`, whose new exact box still lies in its fat box: quiet (its
-/// drift recorded) while it drifted less than half its slack, else loud.
+/// Classifies the mover `slot`, whose new exact box still lies in its fat box: quiet (flagged
+/// drifted) while it drifted less than half its slack, else loud.
 #[inline]
 pub(super) fn settle(st: &mut Store, loud: &mut Vec<u32>, slot: u32) {
     let s = slot as usize;
@@ -440,7 +461,7 @@ pub(super) fn settle(st: &mut Store, loud: &mut Vec<u32>, slot: u32) {
     }
     let d = drift(&st.exact[s], &st.anchor[s]);
     if quiet(d, st.slack[s]) {
-        st.drift[s] = d;
+        st.flags[s] |= flag::DRIFTED;
     } else {
         make_loud(st, loud, slot);
     }
@@ -460,11 +481,10 @@ fn sort_keys(keys: &mut Vec<u64>, tmp: &mut Vec<u64>, layout: PairBits) {
 #[inline]
 fn make_loud(st: &mut Store, loud: &mut Vec<u32>, slot: u32) {
     let s = slot as usize;
-    st.flags[s] |= flag::LOUD;
+    st.flags[s] = st.flags[s] & !flag::DRIFTED | flag::LOUD;
     loud.push(slot);
     st.anchor[s] = st.exact[s];
     st.slack[s] = f32::MAX;
-    st.drift[s] = 0.0;
 }
 
 /// A stretch of old entries `[start, end)` that moves by `shift` places.
@@ -712,6 +732,52 @@ mod tests {
         let back = boxed([f32::MAX; 3], [f32::MAX; 3]);
         assert_eq!(drift(&far, &back), f32::INFINITY);
         assert!(!quiet(drift(&far, &back), f32::MAX));
+    }
+
+    /// `within` is the quiet test without the drift: whenever it says quiet, the drift measured
+    /// in `f32` is quiet and, in exact arithmetic, every face moved less than half the slack.
+    /// Random boxes and face moves from nothing to past the slack, at slacks from subnormal to
+    /// `f32::MAX`; it must also say quiet often (the walk's fast path), and never at infinity.
+    #[test]
+    fn within_implies_quiet_in_f32_and_in_the_reals() {
+        let mut rng = crate::rng::Rng::new(11);
+        let (mut said, mut cases) = (0, 0);
+        for _ in 0..200_000 {
+            let scale = [1e-40f32, 1e-6, 1.0, 1e3, 1e30][rng.below(5) as usize];
+            let m = match rng.below(8) {
+                0 => 0.0,
+                1 => f32::MAX,
+                _ => rng.next_f32() * scale,
+            };
+            let lo = rng.vec3_in(Vec3::splat(-100.0), Vec3::splat(100.0));
+            let anchor = boxed(lo.into(), (lo + Vec3::splat(rng.range(0.0, 3.0))).into());
+            let mut face = |v: f32| v + (rng.next_f32() - 0.5) * m * rng.range(0.0, 1.5);
+            let exact = SimdBox {
+                min: Vec3A::from(anchor.min.to_array().map(&mut face)),
+                max: Vec3A::from(anchor.max.to_array().map(&mut face)),
+            };
+            cases += 1;
+            if !within(&exact, &anchor, m) {
+                continue;
+            }
+            said += 1;
+            assert!(quiet(drift(&exact, &anchor), m), "{exact:?} {anchor:?} {m}");
+            for (e, a) in [(exact.min, anchor.min), (exact.max, anchor.max)] {
+                for k in 0..3 {
+                    let moved = (f64::from(e[k]) - f64::from(a[k])).abs();
+                    assert!(moved + moved < f64::from(m), "{e} {a} {m}");
+                }
+            }
+        }
+        assert!(
+            said > cases / 10,
+            "the fast test said quiet {said} of {cases} times"
+        );
+        let a = boxed([0.0; 3], [1.0; 3]);
+        let unbounded = boxed([f32::NEG_INFINITY; 3], [f32::INFINITY; 3]);
+        assert!(!within(&unbounded, &unbounded, f32::MAX));
+        assert!(!within(&a, &a, 0.0));
+        assert!(within(&a, &a, f32::MIN_POSITIVE));
     }
 
     /// `patch_in` (from start 0 without room to move, and from other starts with room) against the obvious

@@ -41,6 +41,9 @@ pub(super) mod flag {
     /// box, motion record and its structure's box are still the last step's (see `apply`).
     /// Always set with `MOVED`.
     pub(crate) const STALE: u8 = 32;
+    /// Its exact box may have moved from its anchor since it was anchored: its drift is
+    /// computed from the two when a re-test needs it (see `slack`). Clear: the two are equal.
+    pub(crate) const DRIFTED: u8 = 64;
 }
 
 /// The highest slot index: slots are packed two to a `u64` pair with the top bit spare.
@@ -77,9 +80,6 @@ pub(super) struct Store {
     pub(super) anchor: Vec<SimdBox>,
     /// The least slack of its candidates, from the anchors (metres, rounded down). 4 bytes.
     pub(super) slack: Vec<f32>,
-    /// How far its exact box was from its anchor when last measured (metres, rounded up).
-    /// 4 bytes.
-    pub(super) drift: Vec<f32>,
     /// Collision groups, [`CollisionGroups::ALL`] where not set. Allocated (for every slot)
     /// when the first other groups are set, so a world that sets none keeps none: read
     /// through [`Store::group`]. 8 bytes.
@@ -224,7 +224,6 @@ impl Store {
             try_grow_to(&mut self.held, want);
             try_grow_to(&mut self.anchor, want);
             try_grow_to(&mut self.slack, want);
-            try_grow_to(&mut self.drift, want);
         }
     }
 
@@ -270,8 +269,8 @@ impl Store {
         self.live = live;
     }
 
-    /// Sets the held box of slot `s`, growing `exact`, `held`, `anchor`, `slack` and `drift`
-    /// to every slot first: they are filled only once the incremental regime is entered, so a world
+    /// Sets the held box of slot `s`, growing `exact`, `held`, `anchor` and `slack` to
+    /// every slot first: they are filled only once the incremental regime is entered, so a world
     /// that never enters it keeps none.
     #[inline]
     pub(super) fn set_held(&mut self, s: usize, b: SimdBox) {
@@ -306,14 +305,13 @@ impl Store {
         self.exact.resize(n, SimdBox::EMPTY);
     }
 
-    /// Grows `exact`, `held`, `anchor`, `slack` and `drift` to every slot.
+    /// Grows `exact`, `held`, `anchor` and `slack` to every slot.
     pub(super) fn grow_incremental(&mut self) {
         let n = self.version.len();
         self.keep_exact();
         self.held.resize(n, SimdBox::EMPTY);
         self.anchor.resize(n, SimdBox::EMPTY);
         self.slack.resize(n, 0.0);
-        self.drift.resize(n, 0.0);
     }
 
     /// Heap bytes held (capacity, not length).
@@ -325,7 +323,7 @@ impl Store {
             + cap(self.shape.capacity(), core::mem::size_of::<Shape>())
             + cap(self.exact.capacity(), 32)
             + cap(self.held.capacity() + self.anchor.capacity(), 32)
-            + cap(self.slack.capacity() + self.drift.capacity(), 4)
+            + cap(self.slack.capacity(), 4)
             + cap(self.groups.capacity(), 8)
             + cap(self.speed.capacity(), 4)
             + cap(self.stamp.capacity(), 4)

@@ -1,6 +1,6 @@
 //! The whole-structure invariant check of a [`BroadPhase`].
 
-use super::slack::{distance, slack};
+use super::slack::{distance, drift, slack};
 use super::step::HIT;
 use super::store::{Kind, flag};
 use super::{BodyKind, BroadPhase, Pair, Shape};
@@ -180,18 +180,18 @@ impl BroadPhase {
     }
 
     /// With candidates and no change pending, the slack invariants (see `slack`): each live
-    /// proxy's drift bounds its distance from its anchor and is below half its slack (or it is
-    /// pending); each candidate's slack at the anchors bounds both sides' slack, and unless a
+    /// proxy that moved from its anchor is flagged drifted, and its drift is below half its
+    /// slack (or it is pending); each candidate's slack at the anchors bounds both sides' slack, and unless a
     /// side is pending its recorded status is the status at the anchors.
     fn validate_slack(&self) {
         let st = &self.store;
         let pending = |s: usize| st.flags[s] & flag::PENDING != 0;
         for s in (0..st.slots()).filter(|&s| st.kind[s] != Kind::Free) {
+            let d = drift(&st.exact[s], &st.anchor[s]);
             assert!(
-                distance(&st.exact[s], &st.anchor[s]) <= st.drift[s],
-                "slot {s}: drift below its distance from its anchor"
+                st.flags[s] & flag::DRIFTED != 0 || distance(&st.exact[s], &st.anchor[s]) == 0.0,
+                "slot {s}: moved from its anchor, not flagged drifted"
             );
-            let d = st.drift[s];
             assert!(
                 pending(s) || d == 0.0 || d + d < st.slack[s],
                 "slot {s}: drifted half its slack, not pending"
