@@ -1,5 +1,5 @@
 //! Times one scene step for profiling: `cargo run --release --example profile_step --
-//! --scene gas|clustered|churn|idle --n 100000 --steps 30 --depth D --what octree|broadphase|feed`.
+//! --scene gas|clustered|churn|idle|sparse --n 100000 --steps 30 --depth D --what octree|broadphase|feed`.
 //!
 //! Runs 5 warm-up steps, then `--steps` measured ones, and prints the median ns/object/step,
 //! the pair count of the last step and (for `octree`) the tree's stats. Each step advances the
@@ -8,7 +8,8 @@
 //! (sorted list plus added / removed). `feed` runs the scene's frames (with `churn`'s removes
 //! and inserts) through `scene::Feed` into a `BroadPhase`, as `vs_rapier` does, and times
 //! only `Feed::apply` and `BroadPhase::step`, not the scene's motion (`idle`, `--what feed`
-//! only: the `gas` spheres at rest but for `--moving P` % of them). `batch` times the same
+//! only: the `gas` spheres at rest but for `--moving P` % of them; `sparse`, `--what feed` only:
+//! `gas` spread over 1 km × 40 m × 1 km). `batch` times the same
 //! motion fed four ways, each into a fresh `BroadPhase`: one `update_spheres` batch per step,
 //! one `update_sphere` call per sphere, and `Feed::apply` batched and per object; for each
 //! it prints the median ns/object of the moves alone and of the moves plus `step()` (the
@@ -61,7 +62,7 @@ fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
     while let Some(flag) = flags.next_flag()? {
         match flag.as_str() {
             "--scene" => {
-                let scenes = ["gas", "clustered", "churn", "idle"].map(|s| (s, s));
+                let scenes = ["gas", "clustered", "churn", "idle", "sparse"].map(|s| (s, s));
                 a.scene = flags.choice(&flag, &scenes)?;
             }
             "--n" => a.n = flags.parse(&flag)?,
@@ -90,8 +91,11 @@ fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
             _ => return Err(Stop::unknown(&flag)),
         }
     }
-    if a.scene == "idle" && a.what != "feed" {
-        return Err(Stop::Error("--scene idle: only with --what feed".into()));
+    if (a.scene == "idle" || a.scene == "sparse") && a.what != "feed" {
+        return Err(Stop::Error(format!(
+            "--scene {}: only with --what feed",
+            a.scene
+        )));
     }
     Ok(a)
 }
@@ -169,6 +173,7 @@ fn main() {
             let mut scene: Box<dyn Scene> = match args.scene {
                 "churn" => Box::new(Churn::new(args.n, 1)),
                 "idle" => Box::new(Idle::new(args.n, 1, args.moving)),
+                "sparse" => Box::new(Gas::sparse(args.n, 1)),
                 _ => Box::new(gas.clone()),
             };
             let mut bp = BroadPhase::new(Config {
