@@ -317,12 +317,19 @@ impl BroadPhase {
             }
             p.touched.dedup();
         } else {
-            // In the candidates' order, each once.
+            // In the candidates' order, each once: a mask per 64 candidates, built without a
+            // branch (whether a side is loud is a coin toss when many are), then its bits.
             let flags = &self.store.flags;
-            for (i, &c) in cand.iter().enumerate() {
-                let (a, b) = unpack(c);
-                if (flags[a] | flags[b]) & (flag::LOUD | flag::GONE) != 0 {
-                    p.touched.push(i as u32);
+            for (k, chunk) in cand.chunks(64).enumerate() {
+                let mut bits = 0u64;
+                for (j, &c) in chunk.iter().enumerate() {
+                    let (a, b) = unpack(c);
+                    let hit = (flags[a] | flags[b]) & (flag::LOUD | flag::GONE) != 0;
+                    bits |= u64::from(hit) << j;
+                }
+                while bits != 0 {
+                    p.touched.push((k * 64) as u32 + bits.trailing_zeros());
+                    bits &= bits - 1;
                 }
             }
         }
@@ -357,31 +364,39 @@ impl BroadPhase {
         let fresh = &self.fresh;
         let cand: &mut [u64] = &mut self.cand;
         let mut j = 0;
-        // A new candidate: tested, and inserted where it sorts.
+        // A new candidate: tested, and inserted where it sorts, which the walk over the
+        // touched candidates has narrowed to `cand[lo..hi]` (a search of the whole list would
+        // miss the cache at most of its steps).
         fn insert(
             f: u64,
             cand: &[u64],
+            (lo, hi): (usize, usize),
             p: &mut Patch,
             flags: &mut [u8],
             test: &mut impl FnMut(usize, usize, &mut [u8]) -> bool,
         ) -> bool {
             let (a, b) = unpack(f);
             let hit = test(a, b, flags);
-            p.cand_at
-                .push(cand.partition_point(|&c| c & !HIT < f) as u32);
+            let at = lo + cand[lo..hi].partition_point(|&c| c & !HIT < f);
+            debug_assert_eq!(at, cand.partition_point(|&c| c & !HIT < f));
+            p.cand_at.push(at as u32);
             p.cand_new.push(f | if hit { HIT } else { 0 });
             hit
         }
+        // Past the last touched candidate: a new one left in `fresh` sorts after it (one equal
+        // to it was that candidate found again).
+        let mut lo = 0;
         for t in 0..p.touched.len() {
             let i = p.touched[t] as usize;
             let c = cand[i];
             let key = c & !HIT;
             while j < fresh.len() && fresh[j] < key {
-                if insert(fresh[j], cand, p, flags, &mut test) {
+                if insert(fresh[j], cand, (lo, i), p, flags, &mut test) {
                     added.push(fresh[j]);
                 }
                 j += 1;
             }
+            lo = i + 1;
             let was = c & HIT != 0;
             let (a, b) = unpack(key);
             let hit = if (flags[a] | flags[b]) & (flag::ESCAPED | flag::GONE) != 0 {
@@ -409,7 +424,7 @@ impl BroadPhase {
             }
         }
         for &f in &fresh[j..] {
-            if insert(f, cand, p, flags, &mut test) {
+            if insert(f, cand, (lo, cand.len()), p, flags, &mut test) {
                 added.push(f);
             }
         }
