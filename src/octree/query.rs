@@ -17,6 +17,10 @@ use glam::Vec3;
 /// cells' lists directly; larger ones walk the occupied subtrees.
 const DIRECT_CELLS: u64 = 256;
 
+/// A direct query reads the rows of at most this many cells without a branch per cell (see
+/// `Octree::candidates`).
+const ROW: u32 = 4;
+
 /// A ray is cut into pieces no longer than the deepest occupied level's cells; one longer than
 /// this many pieces walks the occupied subtrees instead.
 const MAX_RAY_PIECES: f32 = 65_536.0;
@@ -118,8 +122,8 @@ impl Octree {
         if cells > DIRECT_CELLS {
             return self.traverse(|cell| self.lattice.reaches(cell, qlo, qhi), visit);
         }
-        let mut list = |node: u32| {
-            let mut i = self.nodes.head(node);
+        let mut list = |head: u32| {
+            let mut i = head;
             while i != NONE {
                 visit(i)?;
                 i = self.next_in_list(i);
@@ -127,17 +131,35 @@ impl Octree {
             ControlFlow::Continue(())
         };
         if self.per_level[0] > 0 {
-            list(0)?;
+            list(self.nodes.head(0))?;
         }
         for level in 1..=self.lattice.depth {
             if self.per_level[level as usize] == 0 {
                 continue;
             }
             let (a, b) = self.lattice.reaching_cells(level, qlo, qhi);
+            let len = (b[0] + 1).saturating_sub(a[0]);
             for z in a[2]..=b[2] {
                 for y in a[1]..=b[1] {
-                    for x in a[0]..=b[0] {
-                        list(Cell::at(level, [x, y, z]).node())?;
+                    if len > ROW {
+                        for x in a[0]..=b[0] {
+                            list(self.nodes.head(Cell::at(level, [x, y, z]).node()))?;
+                        }
+                        continue;
+                    }
+                    // A short row is read with no branch on its length or on which cells
+                    // hold spheres (a coin toss each): the heads of its cells are kept,
+                    // passing over the empty ones, then their lists are read.
+                    let mut heads = [NONE; ROW as usize];
+                    let mut n = 0;
+                    for k in 0..ROW {
+                        let x = a[0] + k.min(len - 1);
+                        let head = self.nodes.head(Cell::at(level, [x, y, z]).node());
+                        heads[n] = head;
+                        n += usize::from(k < len && head != NONE);
+                    }
+                    for &head in &heads[..n] {
+                        list(head)?;
                     }
                 }
             }
