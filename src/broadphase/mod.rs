@@ -219,8 +219,12 @@ pub struct BroadPhase {
     /// last step), sorted.
     cand: slack::Gapped<u64>,
     /// The candidates' reverse index: `(higher slot, lower slot)` of each, sorted, so that a
-    /// proxy's lower partners are found without a scan.
+    /// proxy's lower partners are found without a scan. Kept only while the incremental pass
+    /// finds the loud proxies' candidates through it (see `rev_stale`).
     rev: slack::Gapped<u64>,
+    /// True while `rev` is not the candidates' reverse index: a step that scans the
+    /// candidates instead of looking them up leaves it, and the next lookup builds it again.
+    rev_stale: bool,
     /// The incremental pass's list patches.
     patch: slack::Patch,
     /// Scratch of the passes: new candidates or pairs (a full pass's sorted pairs until they
@@ -307,6 +311,7 @@ impl BroadPhase {
             fast_movers: 0,
             cand: slack::Gapped::default(),
             rev: slack::Gapped::default(),
+            rev_stale: false,
             patch: slack::Patch::default(),
             fresh: Vec::new(),
             sort_buf: Vec::new(),

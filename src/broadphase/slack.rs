@@ -37,7 +37,7 @@ use super::BroadPhase;
 use super::step::{HIT, unpack};
 use super::store::{Store, flag};
 use crate::geom::SimdBox;
-use crate::radix::{PairBits, sort_bits_by, sort_u64};
+use crate::radix::{PairBits, sort_bits_by, sort_u64, sort_u64_kept};
 use glam::Vec3A;
 
 /// Finding one proxy's candidates through the sorted list and the reverse index (a binary
@@ -259,7 +259,24 @@ impl BroadPhase {
         let rev = &self.fresh;
         self.rev
             .refill(rev.len(), 0, |list| list.extend_from_slice(rev));
+        self.rev_stale = false;
         self.clear_pending();
+    }
+
+    /// Builds the reverse index again from the candidates, after steps that left it.
+    fn rebuild_rev(&mut self) {
+        let cand = &self.cand;
+        let layout = PairBits::for_slots(self.store.slots());
+        let scratch = super::step::sort_scratch(&mut self.octree, &mut self.sort_buf);
+        self.rev.refill(cand.len(), 0, |list| {
+            let at = list.len();
+            list.extend(cand.iter().map(|&c| {
+                let (a, b) = unpack(c & !HIT);
+                reverse(a, b)
+            }));
+            sort_u64_kept(&mut list[at..], scratch, layout);
+        });
+        self.rev_stale = false;
     }
 
     /// Forgets the pending marks (the candidates they were about are gone).
@@ -278,11 +295,15 @@ impl BroadPhase {
     /// the pair list and the key pairs in place with the changes, which are this step's
     /// `added` and `removed`. Every other candidate keeps its last outcome untouched.
     pub(super) fn update_candidates(&mut self) {
+        let visits = self.loud.len() + self.store.freed().len();
+        let lookup = visits * CANDIDATES_PER_LOOKUP < self.cand.len();
+        if lookup && self.rev_stale {
+            self.rebuild_rev();
+        }
         let p = &mut self.patch;
         p.clear();
         let (cand, rev) = (&self.cand[..], &self.rev[..]);
-        let visits = self.loud.len() + self.store.freed().len();
-        if visits * CANDIDATES_PER_LOOKUP < cand.len() {
+        if lookup {
             let key_at = |i: usize| cand[i] & !HIT;
             let index_of = |key: u64| cand.partition_point(|&c| c & !HIT < key);
             for &s in self.loud.iter().chain(self.store.freed()) {
@@ -430,22 +451,28 @@ impl BroadPhase {
         }
         self.stats.candidates_tested = tested;
 
-        // The reverse index: a dropped candidate's entry goes, a new one's comes.
-        let rev = &mut self.rev;
-        let layout = PairBits::for_slots(self.store.slots());
-        sort_keys(&mut p.rev_keys, &mut p.keys_tmp, layout);
-        for &e in &p.rev_keys {
-            p.rev_gone.push(rev.partition_point(|&r| r < e) as u32);
+        // The reverse index, kept while the lookups read it: a dropped candidate's entry
+        // goes, a new one's comes. A step that scanned leaves it (moving most of its entries
+        // costs about what rebuilding it does, and many loud proxies scan step after step).
+        if lookup {
+            let rev = &mut self.rev;
+            let layout = PairBits::for_slots(self.store.slots());
+            sort_keys(&mut p.rev_keys, &mut p.keys_tmp, layout);
+            for &e in &p.rev_keys {
+                p.rev_gone.push(rev.partition_point(|&r| r < e) as u32);
+            }
+            for &c in &p.cand_new {
+                let (a, b) = unpack(c & !HIT);
+                p.rev_new.push(reverse(a, b));
+            }
+            sort_keys(&mut p.rev_new, &mut p.keys_tmp, layout);
+            for &e in &p.rev_new {
+                p.rev_at.push(rev.partition_point(|&r| r < e) as u32);
+            }
+            rev.patch(&p.rev_gone, &p.rev_at, &p.rev_new, &mut p.scratch);
+        } else {
+            self.rev_stale = true;
         }
-        for &c in &p.cand_new {
-            let (a, b) = unpack(c & !HIT);
-            p.rev_new.push(reverse(a, b));
-        }
-        sort_keys(&mut p.rev_new, &mut p.keys_tmp, layout);
-        for &e in &p.rev_new {
-            p.rev_at.push(rev.partition_point(|&r| r < e) as u32);
-        }
-        rev.patch(&p.rev_gone, &p.rev_at, &p.rev_new, &mut p.scratch);
         self.cand
             .patch(&p.cand_gone, &p.cand_at, &p.cand_new, &mut p.scratch);
 

@@ -428,6 +428,7 @@ impl BroadPhase {
         } else {
             self.cand.clear();
             self.rev.clear();
+            self.rev_stale = false;
             self.cached = false;
             self.costs.over = false;
             self.clear_pending();
