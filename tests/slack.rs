@@ -317,3 +317,17 @@ fn settled_pile_adaptive_equals_brute_force_every_step() {
 fn settled_pile_full_equals_brute_force_every_step() {
     settled_pile(Passes::Full, 4, 40, 0.1);
 }
+
+/// Steps with many movers scan the candidates for the loud proxies' and leave the reverse
+/// index; steps with few look them up through it, building it again first. Blocks of each,
+/// alternating, stay exact, and `validate` checks the index after every step that kept it.
+#[test]
+fn alternating_many_and_few_movers_stay_exact() {
+    let mut w = World::new(Passes::Incremental, 7);
+    w.check_step("first step");
+    for step in 0..120 {
+        w.still = if (step / 5) % 2 == 0 { 0.1 } else { 0.995 };
+        w.jitter();
+        w.check_step(&format!("alternating step {step}"));
+    }
+}
