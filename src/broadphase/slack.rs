@@ -370,9 +370,10 @@ impl BroadPhase {
             for q in [a, b] {
                 // A quiet side stays quiet while its slack does not drop (it drifted less than
                 // half the old one), or while it has not drifted.
-                if s < slk[q]
-                    && flags[q] & (flag::LOUD | flag::PENDING) == 0
-                    && flags[q] & flag::DRIFTED != 0
+                // The flags first: a side that is quiet and drifted is rare when many are
+                // loud, while a slack below the side's least so far is a coin toss.
+                if flags[q] & (flag::LOUD | flag::PENDING | flag::DRIFTED) == flag::DRIFTED
+                    && s < slk[q]
                     && !quiet(drift(&exact[q], &anchor[q]), s)
                 {
                     flags[q] |= flag::PENDING;
