@@ -16,7 +16,7 @@ pub(super) const LOOKAHEAD_STEPS: f32 = 3.0;
 /// sphere keeps its velocity from one step to the next far more often than it turns, so the
 /// next escape comes about twice as late as from a box of the same size centred where the
 /// proxy is.
-const PREDICT_STEPS: f32 = 6.0;
+pub(super) const PREDICT_STEPS: f32 = 6.0;
 /// The predicted fat box is grown on every side by this many steps of the speed, so that a
 /// proxy that turns does not leave it at once.
 const PREDICT_SIDE_STEPS: f32 = 1.0;

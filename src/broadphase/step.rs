@@ -36,7 +36,7 @@
 //! leaves of the updates' apply (see [`super::apply`]), the refits, the sphere × body queries
 //! (one task), and the incremental pass.
 
-use super::fat::LOOKAHEAD_STEPS;
+use super::fat::{LOOKAHEAD_STEPS, PREDICT_STEPS};
 use super::*;
 #[cfg(feature = "parallel")]
 use crate::radix;
@@ -52,21 +52,29 @@ mod cost {
     pub(super) const FULL: f64 = 110.0;
     /// The full pass, per pair found (its sort and the lists).
     pub(super) const FULL_PAIR: f64 = 20.0;
-    /// Carrying one candidate through the merge without testing it.
-    pub(super) const CARRY: f64 = 1.5;
-    /// Re-testing one candidate's exact boxes (two scattered reads).
-    pub(super) const TEST: f64 = 9.0;
-    /// One escaped proxy: its structure queries, its new candidates' sort and merge.
-    pub(super) const QUERY: f64 = 1200.0;
+    /// Carrying one candidate through the step without testing it: the scan for loud sides
+    /// and the patches that move it.
+    pub(super) const CARRY: f64 = 7.0;
+    /// Re-testing one candidate's exact boxes (scattered reads, a branch per outcome).
+    pub(super) const TEST: f64 = 33.0;
+    /// One escaped proxy: its structure queries, its new fat box and relink, its new
+    /// candidates' sort and merge.
+    pub(super) const QUERY: f64 = 1850.0;
 }
 
 /// The incremental regime is entered when its estimated cost is below this fraction of the
 /// full pass: the margin pays for the rebuild that enters it.
-const ENTER_FRACTION: f64 = 0.5;
+const ENTER_FRACTION: f64 = 0.9;
 /// The incremental regime is left at once, without waiting for a second step over the full
 /// pass's estimate, when a step's estimate is this many times the full pass's: a burst that
 /// large (most proxies escaping) is a world in motion, not a passing spike.
 const LEAVE_AT_ONCE: f64 = 2.0;
+/// Steps after entering the incremental regime in which no estimate leaves it: the entry
+/// gives every proxy a fat box at once, centred (no motion is known yet) with a margin of up
+/// to `2·LOOKAHEAD_STEPS` steps of its speed, so the fast movers leave them within that many
+/// steps, together, in a burst that says nothing of the steps after it; the boxes they get
+/// then are swept along their motion and jittered, and their escapes spread out.
+const ENTRY_BURST_STEPS: u32 = 2 * LOOKAHEAD_STEPS as u32 + 1;
 
 /// A full pass splits over rayon's current pool only with at least this many spheres or
 /// [`PARALLEL_MIN_BODIES`] dynamic bodies (and more than one thread): below this many spheres
@@ -208,20 +216,23 @@ const REFIT_FRACTION: f64 = 0.125;
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Costs {
     /// Candidates per proxy at the last count.
-    cand_per_proxy: f64,
+    cand_per_proxy: Option<f64>,
     /// Of the movers of the last incremental step, the fraction that re-tested their
     /// candidates (see [`super::slack`]).
     loud_per_mover: f64,
     /// The last incremental step's estimate was over the full pass's.
     over: bool,
+    /// The step that last entered the incremental regime.
+    entered: u32,
 }
 
 impl Default for Costs {
     fn default() -> Self {
         Costs {
-            cand_per_proxy: 3.0,
+            cand_per_proxy: None,
             loud_per_mover: 1.0,
             over: false,
+            entered: 0,
         }
     }
 }
@@ -248,16 +259,20 @@ impl BroadPhase {
             let inc = self.incremental_cost(movers as f64, self.escaped.len() as f64);
             let over = inc > full;
             let was_over = core::mem::replace(&mut self.costs.over, over);
-            if over && (was_over || inc > full * LEAVE_AT_ONCE) {
+            let settling = self.now.wrapping_sub(self.costs.entered) <= ENTRY_BURST_STEPS;
+            if over && !settling && (was_over || inc > full * LEAVE_AT_ONCE) {
                 Plan::Full
             } else {
                 Plan::Incremental
             }
         } else {
-            // Margins are `LOOKAHEAD_STEPS` times the speed, times a jitter of 1.5 on average.
-            let escapes = self.fast_movers as f64 / (1.5 * f64::from(LOOKAHEAD_STEPS));
+            // A fast mover's fat box is swept over `PREDICT_STEPS` of its motion, times a
+            // jitter of 1.5 on average: one that keeps its velocity escapes about once in that
+            // many steps.
+            let escapes = self.fast_movers as f64 / (1.5 * f64::from(PREDICT_STEPS));
             let inc = self.incremental_cost(movers as f64, escapes);
             if inc < full * ENTER_FRACTION {
+                self.costs.entered = self.now;
                 Plan::FullFat
             } else {
                 Plan::Full
@@ -267,14 +282,20 @@ impl BroadPhase {
 
     /// The estimated cost of an incremental step with `movers` updated and `escapes` escaped.
     fn incremental_cost(&self, movers: f64, escapes: f64) -> f64 {
+        let n = self.store.len().max(1) as f64;
+        // Before any count, fat boxes are taken to double the pairs.
+        let per_proxy = self
+            .costs
+            .cand_per_proxy
+            .unwrap_or(2.0 * self.pairs.len() as f64 / n);
         let cands = if self.cached {
             self.cand.len() as f64
         } else {
-            self.store.len() as f64 * self.costs.cand_per_proxy
+            n * per_proxy
         };
         let loud = movers * self.costs.loud_per_mover;
         cands * cost::CARRY
-            + (loud * self.costs.cand_per_proxy * 2.0).min(cands) * cost::TEST
+            + (loud * per_proxy * 2.0).min(cands) * cost::TEST
             + escapes * cost::QUERY
     }
 
@@ -423,7 +444,7 @@ impl BroadPhase {
             });
             self.stats.candidates_tested = tested;
             let n = self.store.len().max(1) as f64;
-            self.costs.cand_per_proxy = self.cand.len() as f64 / n;
+            self.costs.cand_per_proxy = Some(self.cand.len() as f64 / n);
             self.cached = true;
         } else {
             self.cand.clear();
