@@ -64,16 +64,22 @@ mod cost {
 
 /// The incremental regime is entered when its estimated cost is below this fraction of the
 /// full pass: the margin pays for the rebuild that enters it.
-const ENTER_FRACTION: f64 = 0.9;
+const ENTER_FRACTION: f64 = 0.8;
 /// The incremental regime is left at once, without waiting for a second step over the full
 /// pass's estimate, when a step's estimate is this many times the full pass's: a burst that
 /// large (most proxies escaping) is a world in motion, not a passing spike.
 const LEAVE_AT_ONCE: f64 = 2.0;
-/// Steps after entering the incremental regime in which no estimate leaves it: the entry
-/// gives every proxy a fat box at once, centred (no motion is known yet) with a margin of up
-/// to `2·LOOKAHEAD_STEPS` steps of its speed, so the fast movers leave them within that many
-/// steps, together, in a burst that says nothing of the steps after it; the boxes they get
-/// then are swept along their motion and jittered, and their escapes spread out.
+/// [`LEAVE_AT_ONCE`] while the regime settles after its entry ([`ENTRY_BURST_STEPS`]): the
+/// entry's burst spreads the fast movers' escapes over a few steps, a world waking up sends
+/// every mover out at once.
+const SETTLING_LEAVE_AT_ONCE: f64 = 4.0;
+/// Steps after entering the incremental regime in which two steps over the full pass's
+/// estimate do not leave it, and one leaves at once only past [`SETTLING_LEAVE_AT_ONCE`]:
+/// the entry gives every proxy a fat box at once, centred (no motion is known yet) with a
+/// margin of up to `2·LOOKAHEAD_STEPS` steps of its speed, so the fast movers leave them
+/// within that many steps, together, in a burst that says nothing of the steps after it; the
+/// boxes they get then are swept along their motion and jittered, and their escapes spread
+/// out.
 const ENTRY_BURST_STEPS: u32 = 2 * LOOKAHEAD_STEPS as u32 + 1;
 
 /// A full pass splits over rayon's current pool only with at least this many spheres or
@@ -260,7 +266,12 @@ impl BroadPhase {
             let over = inc > full;
             let was_over = core::mem::replace(&mut self.costs.over, over);
             let settling = self.now.wrapping_sub(self.costs.entered) <= ENTRY_BURST_STEPS;
-            if over && !settling && (was_over || inc > full * LEAVE_AT_ONCE) {
+            let at_once = if settling {
+                SETTLING_LEAVE_AT_ONCE
+            } else {
+                LEAVE_AT_ONCE
+            };
+            if over && ((was_over && !settling) || inc > full * at_once) {
                 Plan::Full
             } else {
                 Plan::Incremental
