@@ -512,25 +512,14 @@ impl BroadPhase {
             self.check_sphere_update(key, center, radius)
                 .map_err(|error| BatchError { index, error })?;
         }
-        // The same stores as `set_sphere`, with the arrays borrowed once for the batch.
+        // `set_sphere`'s stores, with the arrays borrowed once for the batch.
         let (st, movers) = (&mut self.store, &mut self.movers);
         let (shape, flags) = (&mut st.shape[..], &mut st.flags[..]);
         let mut newly_stale = 0;
         for &(key, center, radius) in updates {
-            let s = crate::pair::slot(key) as usize;
-            match &mut shape[s] {
-                Shape::Sphere {
-                    center: c,
-                    radius: r,
-                } => (*c, *r) = (center, radius),
-                other => *other = Shape::Sphere { center, radius },
-            }
-            let old = flags[s];
-            flags[s] = old | flag::MOVED | flag::STALE;
-            newly_stale += usize::from(old & flag::STALE == 0);
-            if old & flag::MOVED == 0 {
-                movers.push(s as u32);
-            }
+            let slot = crate::pair::slot(key);
+            write_sphere(&mut shape[slot as usize], center, radius);
+            newly_stale += usize::from(mark_stale_in(flags, movers, slot));
         }
         self.stale += newly_stale;
         Ok(())
@@ -574,18 +563,10 @@ impl BroadPhase {
     }
 
     /// Stores a checked update of the live sphere in `slot`: the new shape, written once, and
-    /// the slot marked stale; the next step applies it (see [`apply`]). Centre and radius
-    /// arrive as values and are written field by field: a whole `Shape` built on the stack and
-    /// copied with wide loads stalls on the store forwarding of its narrow stores.
+    /// the slot marked stale; the next step applies it (see [`apply`]).
     #[inline]
     fn set_sphere(&mut self, slot: u32, center: Vec3, radius: f32) {
-        match &mut self.store.shape[slot as usize] {
-            Shape::Sphere {
-                center: c,
-                radius: r,
-            } => (*c, *r) = (center, radius),
-            other => *other = Shape::Sphere { center, radius },
-        }
+        write_sphere(&mut self.store.shape[slot as usize], center, radius);
         self.mark_stale(slot);
     }
 
@@ -601,15 +582,7 @@ impl BroadPhase {
     /// Marks `slot` updated and not yet applied, listing it in `movers` once.
     #[inline]
     fn mark_stale(&mut self, slot: u32) {
-        let f = &mut self.store.flags[slot as usize];
-        let old = *f;
-        *f = old | flag::MOVED | flag::STALE;
-        if old & flag::STALE == 0 {
-            self.stale += 1;
-            if old & flag::MOVED == 0 {
-                self.movers.push(slot);
-            }
-        }
+        self.stale += usize::from(mark_stale_in(&mut self.store.flags, &mut self.movers, slot));
     }
 
     /// Removes a proxy; its pairs are reported in `removed` at the next step.
@@ -769,3 +742,30 @@ const TRIM_FLOOR: usize = 256;
 
 /// The most live proxies: the structures index their entries with `u32`.
 const MAX_PROXIES: usize = (u32::MAX - 2) as usize;
+
+/// Writes a sphere's new centre and radius into its shape. They arrive as values and are
+/// written field by field: a whole `Shape` built on the stack and copied with wide loads
+/// stalls on the store forwarding of its narrow stores.
+#[inline]
+fn write_sphere(shape: &mut Shape, center: Vec3, radius: f32) {
+    match shape {
+        Shape::Sphere {
+            center: c,
+            radius: r,
+        } => (*c, *r) = (center, radius),
+        other => *other = Shape::Sphere { center, radius },
+    }
+}
+
+/// Marks `slot` updated and not yet applied in `flags`, listing it in `movers` once (the
+/// first time it gets `MOVED`, which every stale slot has); true if it was not stale yet.
+#[inline]
+fn mark_stale_in(flags: &mut [u8], movers: &mut Vec<u32>, slot: u32) -> bool {
+    let f = &mut flags[slot as usize];
+    let old = *f;
+    *f = old | flag::MOVED | flag::STALE;
+    if old & flag::MOVED == 0 {
+        movers.push(slot);
+    }
+    old & flag::STALE == 0
+}

@@ -245,25 +245,18 @@ impl BroadPhase {
             st.slack[s] = f32::MAX;
             st.flags[s] &= !flag::DRIFTED;
         }
-        // The reverse entries are sorted in `fresh` (the pass is done with it), then copied.
-        let rev = &mut self.fresh;
-        rev.clear();
         for &c in self.cand.iter() {
             let (a, b) = unpack(c & !HIT);
             let s = slack(&st.exact[a], &st.exact[b]);
             st.slack[a] = st.slack[a].min(s);
             st.slack[b] = st.slack[b].min(s);
-            rev.push(reverse(a, b));
         }
-        self.sort_fresh();
-        let rev = &self.fresh;
-        self.rev
-            .refill(rev.len(), 0, |list| list.extend_from_slice(rev));
-        self.rev_stale = false;
+        self.rebuild_rev();
         self.clear_pending();
     }
 
-    /// Builds the reverse index again from the candidates, after steps that left it.
+    /// Builds the reverse index from the candidates: on entering the regime, and after steps
+    /// that left it.
     fn rebuild_rev(&mut self) {
         let cand = &self.cand;
         let layout = PairBits::for_slots(self.store.slots());
@@ -368,10 +361,10 @@ impl BroadPhase {
             tested += 1;
             let s = slack(&anchor[a], &anchor[b]);
             for q in [a, b] {
-                // A quiet side stays quiet while its slack does not drop (it drifted less than
-                // half the old one), or while it has not drifted.
-                // The flags first: a side that is quiet and drifted is rare when many are
-                // loud, while a slack below the side's least so far is a coin toss.
+                // A quiet side stays quiet while it has not drifted, or while its slack does
+                // not drop (it drifted less than half the old one). The flags are read first:
+                // a quiet, drifted side is rare when many are loud, while a slack below the
+                // side's least so far is a coin toss.
                 if flags[q] & (flag::LOUD | flag::PENDING | flag::DRIFTED) == flag::DRIFTED
                     && s < slk[q]
                     && !quiet(drift(&exact[q], &anchor[q]), s)
@@ -405,8 +398,8 @@ impl BroadPhase {
             p.cand_new.push(f | if hit { HIT } else { 0 });
             hit
         }
-        // Past the last touched candidate: a new one left in `fresh` sorts after it (one equal
-        // to it was that candidate found again).
+        // Where the next new candidate can sort from: past the last touched candidate (one
+        // equal to it was that candidate found again).
         let mut lo = 0;
         for t in 0..p.touched.len() {
             let i = p.touched[t] as usize;
