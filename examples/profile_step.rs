@@ -20,23 +20,24 @@
 use broadleaf::fixtures::cli::{self, Flags, Stop};
 use broadleaf::fixtures::scene::{Churn, DT, Feed, Frame, Gas, Idle, Scene};
 use broadleaf::octree::{MAX_DEPTH, Octree, Placement};
-use broadleaf::{BroadPhase, Config, Pair, ProxyKey, Vec3};
+use broadleaf::{BroadPhase, Config, Pair, Passes, ProxyKey, Vec3};
 use std::hint::black_box;
 use std::time::Instant;
 
 const WARMUP: usize = 5;
 
 const USAGE: &str = "\
-usage: profile_step [--scene gas|clustered|churn|idle] [--n N] [--steps S] [--depth D]
+usage: profile_step [--scene gas|clustered|churn|idle|sparse] [--n N] [--steps S] [--depth D]
                     [--what octree|broadphase|feed|batch] [--placement strict|loose]
-                    [--moving P]
+                    [--moving P] [--passes adaptive|full|incremental]
   --scene S      the scene (default gas; idle only with --what feed)
   --n N          spheres (default 100000)
   --steps S      measured steps after 5 warm-up ones (default 30)
   --depth D      the octree's depth (default: depth_for / depth_for_loose of the scene)
   --what W       what to time (default octree; see the file's docs)
   --placement P  the octree's placement (default: Config::default()'s)
-  --moving P     idle: the percentage of spheres that move (default 10)";
+  --moving P     idle: the percentage of spheres that move (default 10)
+  --passes P     feed: `Config::passes` (default adaptive)";
 
 struct Args {
     scene: &'static str,
@@ -46,6 +47,7 @@ struct Args {
     what: &'static str,
     placement: Placement,
     moving: f64,
+    passes: Passes,
 }
 
 fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
@@ -57,6 +59,7 @@ fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
         what: "octree",
         placement: Config::default().octree_placement,
         moving: 10.0,
+        passes: Passes::Adaptive,
     };
     let mut flags = Flags::new(argv);
     while let Some(flag) = flags.next_flag()? {
@@ -87,6 +90,14 @@ fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
             "--placement" => {
                 let placements = [("strict", Placement::Strict), ("loose", Placement::Loose)];
                 a.placement = flags.choice(&flag, &placements)?;
+            }
+            "--passes" => {
+                let passes = [
+                    ("adaptive", Passes::Adaptive),
+                    ("full", Passes::Full),
+                    ("incremental", Passes::Incremental),
+                ];
+                a.passes = flags.choice(&flag, &passes)?;
             }
             _ => return Err(Stop::unknown(&flag)),
         }
@@ -178,6 +189,7 @@ fn main() {
             };
             let mut bp = BroadPhase::new(Config {
                 octree_placement: args.placement,
+                passes: args.passes,
                 ..Config::default()
             });
             let (mut feed, mut spawns, mut frame) =
@@ -202,6 +214,7 @@ fn main() {
                 bp.len(),
                 bp.stats()
             );
+            stats = Some(bp.octree().stats());
         }
         _ => {
             for way in [Way::Batch, Way::PerCall, Way::FeedBatch, Way::FeedPerCall] {
