@@ -456,3 +456,55 @@ fn a_world_waking_up_runs_the_full_pass_at_once() {
     want.sort();
     assert_eq!(bp.pairs(), &want[..]);
 }
+
+/// A sparse world in motion (every sphere moving at gas speed in a wide flat box, about one
+/// pair per hundred spheres): an escape's queries find next to nothing there, so the
+/// incremental pass is the cheaper one even with every proxy moving, and the default runs it
+/// once it has entered, with pairs, events and `validate()` equal to the model every step.
+#[test]
+fn a_sparse_world_in_motion_runs_the_incremental_pass() {
+    let mut rng = Rng::new(31);
+    let mut bp = BroadPhase::new(Config::default());
+    let mut model = Model::new(0.0);
+    model.quadratic = false;
+    let half = Vec3::new(160.0, 20.0, 160.0);
+    let mut movers: Vec<(ProxyKey, Vec3)> = (0..10_000)
+        .map(|_| {
+            let c = rng.vec3_in(-half, half);
+            let key = model.insert(
+                &mut bp,
+                ModelShape::Sphere {
+                    center: c,
+                    radius: 0.5,
+                },
+            );
+            let v = rng.offset(1.0);
+            (key, v * (5.0 / 60.0 / v.length().max(1e-3)))
+        })
+        .collect();
+    let mut passes = Vec::new();
+    let mut pairs = 0;
+    for step in 0..40 {
+        for (key, v) in &mut movers {
+            let c = model.shapes[key].center();
+            for axis in 0..3 {
+                if (c[axis] + v[axis]).abs() > half[axis] {
+                    v[axis] = -v[axis];
+                }
+            }
+            let moved = model.shapes[key].moved(*v);
+            model.update(&mut bp, *key, moved);
+        }
+        pairs += model
+            .check_step(&mut bp, &format!("step {step}"))
+            .pairs
+            .len();
+        passes.push(bp.stats().pass);
+    }
+    assert!(pairs > 40 * 20, "too few pairs to test: {pairs}");
+    let incremental = passes.iter().filter(|&&p| p == Pass::Incremental).count();
+    assert!(
+        incremental >= 30,
+        "{incremental} incremental steps: {passes:?}"
+    );
+}

@@ -57,9 +57,20 @@ mod cost {
     pub(super) const CARRY: f64 = 7.0;
     /// Re-testing one candidate's exact boxes (scattered reads, a branch per outcome).
     pub(super) const TEST: f64 = 33.0;
-    /// One escaped proxy: its structure queries, its new fat box and relink, its new
-    /// candidates' sort and merge.
+    /// One escaped proxy in a world of about [`DENSE_CANDIDATES`] candidates per proxy or
+    /// more: its structure queries, its new fat box and relink, its new candidates' sort and
+    /// merge.
     pub(super) const QUERY: f64 = 1850.0;
+    /// One escaped proxy in a world of no candidates (its queries find nothing to sort or
+    /// merge, and visit few neighbours); between the two, in proportion to the candidates.
+    pub(super) const QUERY_SPARSE: f64 = 400.0;
+    /// Candidates per proxy at which an escape costs [`QUERY`] (the `idle` scene's).
+    pub(super) const DENSE_CANDIDATES: f64 = 1.2;
+
+    /// One escaped proxy in a world of `per_proxy` candidates per proxy.
+    pub(super) fn query(per_proxy: f64) -> f64 {
+        QUERY_SPARSE + (QUERY - QUERY_SPARSE) * (per_proxy / DENSE_CANDIDATES).min(1.0)
+    }
 }
 
 /// The incremental regime is entered when its estimated cost is below this fraction of the
@@ -307,7 +318,7 @@ impl BroadPhase {
         let loud = movers * self.costs.loud_per_mover;
         cands * cost::CARRY
             + (loud * per_proxy * 2.0).min(cands) * cost::TEST
-            + escapes * cost::QUERY
+            + escapes * cost::query(per_proxy)
     }
 
     /// Runs `plan`, then clears the step's marks.
