@@ -508,3 +508,41 @@ fn a_sparse_world_in_motion_runs_the_incremental_pass() {
         "{incremental} incremental steps: {passes:?}"
     );
 }
+
+/// A dense world's first steps run the full pass: before any pass has listed the pairs, an
+/// escape is priced as a dense world's, so an empty pair list does not pass the world off as
+/// sparse and make it enter (and soon leave) the incremental regime.
+#[test]
+fn a_dense_world_in_motion_runs_the_full_pass_from_its_first_step() {
+    let mut rng = Rng::new(37);
+    let mut bp = BroadPhase::new(Config::default());
+    let mut model = Model::new(0.0);
+    model.quadratic = false;
+    // 8 000 spheres of radius 0.5 at about 10 % volume fraction, like `gas`.
+    let half = Vec3::splat(16.0);
+    let movers: Vec<(ProxyKey, Vec3)> = (0..8000)
+        .map(|_| {
+            let center = rng.vec3_in(-half, half);
+            let key = model.insert(
+                &mut bp,
+                ModelShape::Sphere {
+                    center,
+                    radius: 0.5,
+                },
+            );
+            (key, rng.offset(5.0 / 60.0))
+        })
+        .collect();
+    for step in 0..10 {
+        for (key, v) in &movers {
+            let moved = model.shapes[key].moved(*v);
+            model.update(&mut bp, *key, moved);
+        }
+        let want = model.check_step(&mut bp, &format!("step {step}"));
+        assert!(
+            want.pairs.len() > 4000,
+            "step {step}: too few pairs to test"
+        );
+        assert_eq!(bp.stats().pass, Pass::Full, "step {step}: {:?}", bp.stats());
+    }
+}

@@ -241,6 +241,9 @@ pub(super) struct Costs {
     over: bool,
     /// The step that last entered the incremental regime.
     entered: u32,
+    /// Some pass has listed the pairs since this broadphase was made or restored: until one
+    /// has, the pairs say nothing of how many candidates an escape will find.
+    pairs_seen: bool,
 }
 
 impl Default for Costs {
@@ -250,6 +253,7 @@ impl Default for Costs {
             loud_per_mover: 1.0,
             over: false,
             entered: 0,
+            pairs_seen: false,
         }
     }
 }
@@ -316,9 +320,16 @@ impl BroadPhase {
             n * per_proxy
         };
         let loud = movers * self.costs.loud_per_mover;
+        // Before any pass an escape is priced as a dense world's: the first step of a gas
+        // has no pairs yet.
+        let density = if self.costs.pairs_seen {
+            per_proxy
+        } else {
+            cost::DENSE_CANDIDATES
+        };
         cands * cost::CARRY
             + (loud * per_proxy * 2.0).min(cands) * cost::TEST
-            + escapes * cost::query(per_proxy)
+            + escapes * cost::query(density)
     }
 
     /// Runs `plan`, then clears the step's marks.
@@ -345,6 +356,7 @@ impl BroadPhase {
             Plan::FullFat => self.full(true),
             Plan::Incremental => self.incremental(),
         }
+        self.costs.pairs_seen |= !matches!(plan, Plan::Unchanged);
         self.stats.pairs = self.pairs.len();
         self.stats.octree_per_level = self.octree.stats().per_level;
         let (d, st) = (self.dynamic.refit_stats(), self.statics.refit_stats());
