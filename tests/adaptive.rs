@@ -546,3 +546,64 @@ fn a_dense_world_in_motion_runs_the_full_pass_from_its_first_step() {
         assert_eq!(bp.stats().pass, Pass::Full, "step {step}: {:?}", bp.stats());
     }
 }
+
+/// A sparse world that gathers into a dense cluster leaves the incremental regime: its
+/// escapes are priced by the candidates it has now, not by the few it had when it entered.
+/// 10k spheres in a wide flat box, every one moving at gas speed (the incremental pass), then
+/// a tenth of them a step teleported into a cube at about 10 % volume fraction, where they go
+/// on moving: once they are all there the full pass is the cheaper, and runs.
+#[test]
+fn a_sparse_world_gathering_into_a_cluster_leaves_the_incremental_regime() {
+    let mut rng = Rng::new(41);
+    let mut bp = BroadPhase::new(Config::default());
+    let mut model = Model::new(0.0);
+    model.quadratic = false;
+    let (wide, dense) = (Vec3::new(160.0, 20.0, 160.0), Vec3::splat(18.0));
+    let mut movers: Vec<(ProxyKey, Vec3, Vec3)> = (0..10_000)
+        .map(|_| {
+            let c = rng.vec3_in(-wide, wide);
+            let key = model.insert(
+                &mut bp,
+                ModelShape::Sphere {
+                    center: c,
+                    radius: 0.5,
+                },
+            );
+            let v = rng.offset(1.0);
+            (key, v * (5.0 / 60.0 / v.length().max(1e-3)), wide)
+        })
+        .collect();
+    let mut passes = Vec::new();
+    for step in 0..60 {
+        if (20..30).contains(&step) {
+            for (key, _, half) in movers.iter_mut().skip(step - 20).step_by(10) {
+                let to = rng.vec3_in(-dense, dense);
+                let moved = model.shapes[key].teleported(to);
+                model.update(&mut bp, *key, moved);
+                *half = dense;
+            }
+        }
+        for (key, v, half) in &mut movers {
+            let c = model.shapes[key].center();
+            for axis in 0..3 {
+                if (c[axis] + v[axis]).abs() > half[axis] {
+                    v[axis] = -v[axis];
+                }
+            }
+            let moved = model.shapes[key].moved(*v);
+            model.update(&mut bp, *key, moved);
+        }
+        model.check_step(&mut bp, &format!("step {step}"));
+        passes.push(bp.stats().pass);
+    }
+    let sparse = passes[5..20]
+        .iter()
+        .filter(|&&p| p == Pass::Incremental)
+        .count();
+    assert!(
+        sparse >= 10,
+        "{sparse} incremental steps while sparse: {passes:?}"
+    );
+    let full = passes[45..].iter().filter(|&&p| p == Pass::Full).count();
+    assert!(full >= 10, "{full} full passes once dense: {passes:?}");
+}
