@@ -43,14 +43,7 @@ fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
             "--frames" => a.frames = flags.value(&flag)?,
             "--n" => a.n = flags.parse(&flag)?,
             "--steps" => a.steps = flags.parse(&flag)?,
-            "--passes" => {
-                let passes = [
-                    ("adaptive", Passes::Adaptive),
-                    ("full", Passes::Full),
-                    ("incremental", Passes::Incremental),
-                ];
-                a.passes = flags.choice(&flag, &passes)?;
-            }
+            "--passes" => a.passes = flags.choice(&flag, &cli::PASSES)?,
             _ => return Err(Stop::unknown(&flag)),
         }
     }

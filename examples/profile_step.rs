@@ -91,14 +91,7 @@ fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
                 let placements = [("strict", Placement::Strict), ("loose", Placement::Loose)];
                 a.placement = flags.choice(&flag, &placements)?;
             }
-            "--passes" => {
-                let passes = [
-                    ("adaptive", Passes::Adaptive),
-                    ("full", Passes::Full),
-                    ("incremental", Passes::Incremental),
-                ];
-                a.passes = flags.choice(&flag, &passes)?;
-            }
+            "--passes" => a.passes = flags.choice(&flag, &cli::PASSES)?,
             _ => return Err(Stop::unknown(&flag)),
         }
     }

@@ -189,14 +189,7 @@ fn parse_args(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
                 args.sizes = value.split(',').map(number).collect::<Result<_, _>>()?;
             }
             "--plot" => args.plot = Some(flags.value(&flag)?),
-            "--passes" => {
-                let passes = [
-                    ("adaptive", Passes::Adaptive),
-                    ("full", Passes::Full),
-                    ("incremental", Passes::Incremental),
-                ];
-                args.passes = flags.choice(&flag, &passes)?;
-            }
+            "--passes" => args.passes = flags.choice(&flag, &cli::PASSES)?,
             "--skin" => args.skin = flags.parse(&flag)?,
             "--placement" => {
                 let placements = [("strict", Placement::Strict), ("loose", Placement::Loose)];

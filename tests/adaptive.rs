@@ -457,6 +457,57 @@ fn a_world_waking_up_runs_the_full_pass_at_once() {
     assert_eq!(bp.pairs(), &want[..]);
 }
 
+/// A sphere moving at gas speed (5 m/s at 60 steps a second) inside the box `±half`.
+struct Mover {
+    key: ProxyKey,
+    velocity: Vec3,
+    half: Vec3,
+}
+
+/// The sparse worlds' spheres: `n` of radius 0.5 spread over the box `±half`, each with a
+/// random direction.
+fn spread_movers(
+    rng: &mut Rng,
+    model: &mut Model,
+    bp: &mut BroadPhase,
+    n: usize,
+    half: Vec3,
+) -> Vec<Mover> {
+    (0..n)
+        .map(|_| {
+            let center = rng.vec3_in(-half, half);
+            let key = model.insert(
+                bp,
+                ModelShape::Sphere {
+                    center,
+                    radius: 0.5,
+                },
+            );
+            let v = rng.offset(1.0);
+            let velocity = v * (5.0 / 60.0 / v.length().max(1e-3));
+            Mover {
+                key,
+                velocity,
+                half,
+            }
+        })
+        .collect()
+}
+
+/// Moves every mover by its velocity, bouncing off the faces of its box.
+fn move_all(model: &mut Model, bp: &mut BroadPhase, movers: &mut [Mover]) {
+    for m in movers {
+        let c = model.shapes[&m.key].center();
+        for axis in 0..3 {
+            if (c[axis] + m.velocity[axis]).abs() > m.half[axis] {
+                m.velocity[axis] = -m.velocity[axis];
+            }
+        }
+        let moved = model.shapes[&m.key].moved(m.velocity);
+        model.update(bp, m.key, moved);
+    }
+}
+
 /// A sparse world in motion (every sphere moving at gas speed in a wide flat box, about one
 /// pair per hundred spheres): an escape's queries find next to nothing there, so the
 /// incremental pass is the cheaper one even with every proxy moving, and the default runs it
@@ -468,33 +519,11 @@ fn a_sparse_world_in_motion_runs_the_incremental_pass() {
     let mut model = Model::new(0.0);
     model.quadratic = false;
     let half = Vec3::new(160.0, 20.0, 160.0);
-    let mut movers: Vec<(ProxyKey, Vec3)> = (0..10_000)
-        .map(|_| {
-            let c = rng.vec3_in(-half, half);
-            let key = model.insert(
-                &mut bp,
-                ModelShape::Sphere {
-                    center: c,
-                    radius: 0.5,
-                },
-            );
-            let v = rng.offset(1.0);
-            (key, v * (5.0 / 60.0 / v.length().max(1e-3)))
-        })
-        .collect();
+    let mut movers = spread_movers(&mut rng, &mut model, &mut bp, 10_000, half);
     let mut passes = Vec::new();
     let mut pairs = 0;
     for step in 0..40 {
-        for (key, v) in &mut movers {
-            let c = model.shapes[key].center();
-            for axis in 0..3 {
-                if (c[axis] + v[axis]).abs() > half[axis] {
-                    v[axis] = -v[axis];
-                }
-            }
-            let moved = model.shapes[key].moved(*v);
-            model.update(&mut bp, *key, moved);
-        }
+        move_all(&mut model, &mut bp, &mut movers);
         pairs += model
             .check_step(&mut bp, &format!("step {step}"))
             .pairs
@@ -559,40 +588,18 @@ fn a_sparse_world_gathering_into_a_cluster_leaves_the_incremental_regime() {
     let mut model = Model::new(0.0);
     model.quadratic = false;
     let (wide, dense) = (Vec3::new(160.0, 20.0, 160.0), Vec3::splat(18.0));
-    let mut movers: Vec<(ProxyKey, Vec3, Vec3)> = (0..10_000)
-        .map(|_| {
-            let c = rng.vec3_in(-wide, wide);
-            let key = model.insert(
-                &mut bp,
-                ModelShape::Sphere {
-                    center: c,
-                    radius: 0.5,
-                },
-            );
-            let v = rng.offset(1.0);
-            (key, v * (5.0 / 60.0 / v.length().max(1e-3)), wide)
-        })
-        .collect();
+    let mut movers = spread_movers(&mut rng, &mut model, &mut bp, 10_000, wide);
     let mut passes = Vec::new();
     for step in 0..60 {
         if (20..30).contains(&step) {
-            for (key, _, half) in movers.iter_mut().skip(step - 20).step_by(10) {
+            for m in movers.iter_mut().skip(step - 20).step_by(10) {
                 let to = rng.vec3_in(-dense, dense);
-                let moved = model.shapes[key].teleported(to);
-                model.update(&mut bp, *key, moved);
-                *half = dense;
+                let moved = model.shapes[&m.key].teleported(to);
+                model.update(&mut bp, m.key, moved);
+                m.half = dense;
             }
         }
-        for (key, v, half) in &mut movers {
-            let c = model.shapes[key].center();
-            for axis in 0..3 {
-                if (c[axis] + v[axis]).abs() > half[axis] {
-                    v[axis] = -v[axis];
-                }
-            }
-            let moved = model.shapes[key].moved(*v);
-            model.update(&mut bp, *key, moved);
-        }
+        move_all(&mut model, &mut bp, &mut movers);
         model.check_step(&mut bp, &format!("step {step}"));
         passes.push(bp.stats().pass);
     }
