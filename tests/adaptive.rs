@@ -464,7 +464,7 @@ struct Mover {
     half: Vec3,
 }
 
-/// The sparse worlds' spheres: `n` of radius 0.5 spread over the box `±half`, each with a
+/// `n` spheres of radius 0.5 spread over the box `±half`, each moving at gas speed in a
 /// random direction.
 fn spread_movers(
     rng: &mut Rng,
@@ -547,26 +547,10 @@ fn a_dense_world_in_motion_runs_the_full_pass_from_its_first_step() {
     let mut bp = BroadPhase::new(Config::default());
     let mut model = Model::new(0.0);
     model.quadratic = false;
-    // 8 000 spheres of radius 0.5 at about 10 % volume fraction, like `gas`.
-    let half = Vec3::splat(16.0);
-    let movers: Vec<(ProxyKey, Vec3)> = (0..8000)
-        .map(|_| {
-            let center = rng.vec3_in(-half, half);
-            let key = model.insert(
-                &mut bp,
-                ModelShape::Sphere {
-                    center,
-                    radius: 0.5,
-                },
-            );
-            (key, rng.offset(5.0 / 60.0))
-        })
-        .collect();
+    // 8 000 spheres at about 10 % volume fraction, like `gas`.
+    let mut movers = spread_movers(&mut rng, &mut model, &mut bp, 8000, Vec3::splat(16.0));
     for step in 0..10 {
-        for (key, v) in &movers {
-            let moved = model.shapes[key].moved(*v);
-            model.update(&mut bp, *key, moved);
-        }
+        move_all(&mut model, &mut bp, &mut movers);
         let want = model.check_step(&mut bp, &format!("step {step}"));
         assert!(
             want.pairs.len() > 4000,
@@ -576,8 +560,9 @@ fn a_dense_world_in_motion_runs_the_full_pass_from_its_first_step() {
     }
 }
 
-/// A sparse world that gathers into a dense cluster leaves the incremental regime: its
-/// escapes are priced by the candidates it has now, not by the few it had when it entered.
+/// A sparse world that gathers into a dense cluster leaves the incremental regime: an
+/// escape's price follows the candidates per proxy, so the dense world's escapes are not
+/// priced as the sparse world's were.
 /// 10k spheres in a wide flat box, every one moving at gas speed (the incremental pass), then
 /// a tenth of them a step teleported into a cube at about 10 % volume fraction, where they go
 /// on moving: once they are all there the full pass is the cheaper, and runs.
