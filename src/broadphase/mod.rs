@@ -225,6 +225,9 @@ pub struct BroadPhase {
     /// True while `rev` is not the candidates' reverse index: a step that scans the
     /// candidates instead of looking them up leaves it, and the next lookup builds it again.
     rev_stale: bool,
+    /// Where each proxy's candidates were last found in `cand` and `rev`: the lookups start
+    /// there.
+    hints: slack::Hints,
     /// The incremental pass's list patches.
     patch: slack::Patch,
     /// Scratch of the passes: new candidates or pairs (a full pass's sorted pairs until they
@@ -312,6 +315,7 @@ impl BroadPhase {
             cand: slack::Gapped::default(),
             rev: slack::Gapped::default(),
             rev_stale: false,
+            hints: slack::Hints::default(),
             patch: slack::Patch::default(),
             fresh: Vec::new(),
             sort_buf: Vec::new(),
@@ -379,6 +383,7 @@ impl BroadPhase {
                 4,
             )
             + self.patch.heap_bytes()
+            + self.hints.heap_bytes()
             + v(
                 self.cand.capacity()
                     + self.rev.capacity()

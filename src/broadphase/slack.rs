@@ -107,6 +107,79 @@ pub(super) fn within(exact: &SimdBox, anchor: &SimdBox, m: f32) -> bool {
     (lo & hi).all()
 }
 
+/// Where each proxy's candidates were last found, by slot: the index in `cand` of its first
+/// candidate (the first with it as the lower side) and the index in `rev` of its first
+/// reverse entry. The lists move a few entries per step (the patches), so a lookup that
+/// starts at its hint and gallops outward ([`seek`]) reads a cache line or two near it,
+/// where a binary search over the whole list misses the cache at most of its last steps.
+/// Any value is only slower, never wrong: the hints are exact after a rebuild of their list
+/// and refreshed for every proxy looked up.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Hints {
+    cand: Vec<u32>,
+    rev: Vec<u32>,
+}
+
+impl Hints {
+    pub(super) fn heap_bytes(&self) -> usize {
+        (self.cand.capacity() + self.rev.capacity()) * 4
+    }
+}
+
+/// Sets `hint[a]` to the index of `a`'s first entry in `list` (sorted by the high half `a`
+/// of its entries without the `HIT` bit) for every `a` listed, after `hint` is grown to
+/// `slots` entries.
+fn hint_firsts(hint: &mut Vec<u32>, slots: usize, list: &[u64]) {
+    if hint.len() < slots {
+        hint.resize(slots, 0);
+    }
+    let mut last = u64::MAX;
+    for (i, &e) in list.iter().enumerate() {
+        let a = (e & !HIT) >> 32;
+        if a != last {
+            hint[a as usize] = i as u32;
+            last = a;
+        }
+    }
+}
+
+/// `list.partition_point(below)` (`below` true on a prefix of `list`), found by galloping
+/// outward from `hint`: O(log d) probes for an answer `d` entries away, the first of them
+/// next to each other.
+#[inline]
+fn seek(list: &[u64], hint: usize, below: impl Fn(u64) -> bool) -> usize {
+    let n = list.len();
+    let h = hint.min(n);
+    if h < n && below(list[h]) {
+        // The answer is past `h`: `below` holds up to `lo − 1`.
+        let (mut lo, mut step) = (h + 1, 1);
+        loop {
+            let probe = lo + step - 1;
+            if probe >= n {
+                return lo + list[lo..].partition_point(|&e| below(e));
+            }
+            if !below(list[probe]) {
+                return lo + list[lo..probe].partition_point(|&e| below(e));
+            }
+            lo = probe + 1;
+            step *= 2;
+        }
+    }
+    // The answer is at most `h`: `below` fails from `hi` on.
+    let (mut hi, mut step) = (h, 1);
+    loop {
+        if hi < step {
+            return list[..hi].partition_point(|&e| below(e));
+        }
+        let probe = hi - step;
+        if below(list[probe]) {
+            return probe + 1 + list[probe + 1..hi].partition_point(|&e| below(e));
+        }
+        hi = probe;
+        step *= 2;
+    }
+}
+
 /// Scratch of [`BroadPhase::update_candidates`]: the candidates it visits and the list
 /// patches it collects. Reused by every step; never shrinks.
 #[derive(Clone, Debug, Default)]
@@ -251,6 +324,7 @@ impl BroadPhase {
             st.slack[a] = st.slack[a].min(s);
             st.slack[b] = st.slack[b].min(s);
         }
+        hint_firsts(&mut self.hints.cand, st.slots(), &self.cand);
         self.rebuild_rev();
         self.clear_pending();
     }
@@ -270,6 +344,7 @@ impl BroadPhase {
             sort_u64_kept(&mut list[at..], scratch, layout);
         });
         self.rev_stale = false;
+        hint_firsts(&mut self.hints.rev, self.store.slots(), &self.rev);
     }
 
     /// Forgets the pending marks (the candidates they were about are gone).
@@ -298,18 +373,34 @@ impl BroadPhase {
         let (cand, rev) = (&self.cand[..], &self.rev[..]);
         if lookup {
             let key_at = |i: usize| cand[i] & !HIT;
-            let index_of = |key: u64| cand.partition_point(|&c| c & !HIT < key);
+            let hints = &mut self.hints;
+            // A proxy inserted since the hints were last set has none yet (any start is
+            // exact).
+            let slots = self.store.slots();
+            for h in [&mut hints.cand, &mut hints.rev] {
+                if h.len() < slots {
+                    h.resize(slots, 0);
+                }
+            }
             for &s in self.loud.iter().chain(self.store.freed()) {
                 let first = u64::from(s) << 32;
-                let mut i = index_of(first);
+                let hint = hints.cand[s as usize] as usize;
+                let mut i = seek(cand, hint, |c| c & !HIT < first);
+                debug_assert_eq!(i, cand.partition_point(|&c| c & !HIT < first));
+                hints.cand[s as usize] = i as u32;
                 while i < cand.len() && key_at(i) >> 32 == u64::from(s) {
                     p.touched.push(i as u32);
                     i += 1;
                 }
-                let mut r = rev.partition_point(|&e| e < first);
+                let hint = hints.rev[s as usize] as usize;
+                let mut r = seek(rev, hint, |e| e < first);
+                debug_assert_eq!(r, rev.partition_point(|&e| e < first));
+                hints.rev[s as usize] = r as u32;
                 while r < rev.len() && rev[r] >> 32 == u64::from(s) {
                     let key = (rev[r] << 32) | u64::from(s);
-                    let i = index_of(key);
+                    // The lower side's candidates start at its hint; this one is among them.
+                    let hint = hints.cand[(rev[r] & 0xffff_ffff) as usize] as usize;
+                    let i = seek(cand, hint, |c| c & !HIT < key);
                     debug_assert_eq!(key_at(i), key, "reverse index");
                     p.touched.push(i as u32);
                     r += 1;
@@ -814,6 +905,27 @@ mod tests {
         assert!(!within(&unbounded, &unbounded, f32::MAX));
         assert!(!within(&a, &a, 0.0));
         assert!(within(&a, &a, f32::MIN_POSITIVE));
+    }
+
+    /// `seek` from any hint, in or out of range, is `partition_point`, on sorted lists with
+    /// repeats, at every split point including both ends.
+    #[test]
+    fn seek_from_any_hint_is_the_partition_point() {
+        let mut rng = crate::rng::Rng::new(5);
+        for _ in 0..2000 {
+            let n = rng.below(70) as usize;
+            let mut list: Vec<u64> = (0..n).map(|_| u64::from(rng.below(40))).collect();
+            list.sort_unstable();
+            for key in 0..42u64 {
+                let want = list.partition_point(|&e| e < key);
+                let hint = rng.below(n as u32 + 5) as usize;
+                assert_eq!(
+                    seek(&list, hint, |e| e < key),
+                    want,
+                    "{list:?} {key} {hint}"
+                );
+            }
+        }
     }
 
     /// `patch_in` (from start 0 without room to move, and from other starts with room) against the obvious
