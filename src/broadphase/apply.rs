@@ -11,10 +11,12 @@
 //! - its exact box (the shape grown by `Config::margin`) and its motion since it was last
 //!   applied (for its fat margin and the pass estimate: a key updated several times between
 //!   two steps counts one move, from where it was applied last to its last shape);
-//! - its place in its structure: outside the incremental regime the exact box (the octree
-//!   relinks a sphere whose node changed; a BVH leaf is written and grown, and once every
-//!   slot is applied each grown leaf's ancestors are enlarged in one walk up, however many of
-//!   its bodies moved), inside it the fat box it still lies in, or a new one.
+//! - its place in its structure: outside the incremental regime the exact box (a sphere
+//!   that changes node gets its node at once and its node lists later: the pass that
+//!   follows relinks the moved spheres beside its walk-order sort, on another thread when
+//!   the sort is split, see `Octree::update_live_deferred`; a BVH leaf is written and grown,
+//!   and once every slot is applied each grown leaf's ancestors are enlarged in one walk up,
+//!   however many of its bodies moved), inside it the fat box it still lies in, or a new one.
 //!
 //! Slot order makes the pass stream through every per-slot array and the octree's records,
 //! whatever order the caller updated in (a churn's reused keys come in none).
@@ -119,7 +121,9 @@ impl BroadPhase {
                     let old = self.octree.held_box_of(slot);
                     self.note_motion(s, &old, &grown.aabb);
                     let key = self.store.key(slot);
-                    self.octree.update_live(key, center, grown.radius);
+                    // The lists catch up in the pass that follows (see the octree's
+                    // `update_live_deferred`).
+                    self.octree.update_live_deferred(key, center, grown.radius);
                 }
             }
             shape @ Shape::Body { kind, .. } => {
@@ -175,11 +179,12 @@ impl BroadPhase {
     /// incremental regime, with more than one thread and at least `PARALLEL_MIN_SPHERES`
     /// spheres, at least one slot in [`DENSE_FRACTION`] stale; false (nothing done) otherwise.
     /// Each task takes a range of slots and, for its stale spheres, computes the exact box, the
-    /// motion and the octree placement, and stores the sphere in its octree record when it
-    /// stays in its node (a move touches nothing else of the tree then); one walk in slot order
-    /// then applies what is left: the spheres that change node or enter or leave the region
-    /// (relinked), and the bodies. Every slot's outcome depends only on its own shape, so the
-    /// result is the serial walk's at any thread count.
+    /// motion and the octree placement, and stores the sphere in its octree record, noting
+    /// the spheres that change node for the pass to relink (`Record::store_placed`); one walk
+    /// in slot order then applies what is left, if anything: the spheres that enter or leave
+    /// the region or the root, and the bodies. Every slot's outcome depends only on its own
+    /// shape and the relinks come in slot order, so the result is the serial walk's at any
+    /// thread count.
     #[cfg(feature = "parallel")]
     fn apply_par(&mut self) -> bool {
         use super::store::Kind;
@@ -194,19 +199,25 @@ impl BroadPhase {
             return false;
         }
         let chunk = slots.div_ceil(threads * TASKS_PER_THREAD).max(1);
+        let tasks = slots.div_ceil(chunk);
+        let moves = &mut self.par.moves;
+        if moves.len() < tasks {
+            moves.resize_with(tasks, Default::default);
+        }
         let (margin, now) = (self.config.margin, self.now);
         let (placer, records) = self.octree.split_for_update();
         let st = &mut self.store;
         let shape = &st.shape;
-        let fast: usize = st
+        let (fast, done) = st
             .speed
             .par_chunks_mut(chunk)
             .zip(st.stamp.par_chunks_mut(chunk))
             .zip(st.flags.par_chunks_mut(chunk))
             .zip(records.par_chunks_mut(chunk))
+            .zip(moves[..tasks].par_iter_mut())
             .enumerate()
-            .map(|(c, (((speed, stamp), flags), records))| {
-                let (mut fast, mut placer) = (0, placer);
+            .map(|(c, ((((speed, stamp), flags), records), moves))| {
+                let (mut fast, mut done, mut placer) = (0, 0, placer);
                 // The records end at the highest sphere id: a chunk's later slots (and the
                 // chunks after the records) hold no sphere.
                 for i in 0..records.len() {
@@ -223,16 +234,23 @@ impl BroadPhase {
                     (speed[i], stamp[i]) = (v, now);
                     fast += usize::from(f);
                     let at = placer.placement_of(center, grown.radius);
-                    if records[i].store_in_place(&placer, center, grown.radius, &at) {
+                    let r = grown.radius;
+                    if records[i].store_placed(&placer, s as u32, center, r, &at, moves) {
                         flags[i] &= !flag::STALE;
+                        done += 1;
                     }
                 }
-                fast
+                (fast, done)
             })
-            .sum();
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         self.fast_movers += fast;
-        // What is left: the bodies, and the spheres that change node or enter or leave the
-        // region, placed again (the region is the one the tasks placed them in).
+        self.octree.take_moves(&mut self.par.moves[..tasks]);
+        // Every stale slot is counted (`self.stale`): none left, no walk.
+        if done == self.stale {
+            return true;
+        }
+        // What is left: the bodies, and the spheres that enter or leave the region or the
+        // root, placed again (the region is the one the tasks placed them in).
         for s in 0..slots {
             let f = &mut self.store.flags[s];
             if *f & flag::STALE == 0 {
@@ -246,9 +264,10 @@ impl BroadPhase {
             if let Shape::Sphere { center, radius } = self.store.shape[s] {
                 let key = self.store.key(s as u32);
                 let r = fat::grown_sphere(center, radius, margin).radius;
-                self.octree.update_live(key, center, r);
+                self.octree.update_live_deferred(key, center, r);
             }
         }
+        self.octree.order_deferred();
         true
     }
 

@@ -32,9 +32,10 @@
 //! the parts of the pair sort as it finds them (at the quantiles of the last step's pairs),
 //! each part is sorted by its own task, and the event diff is split the same way. Each pair is
 //! found by one producer, once, and every part covers a key range, so the lists are the
-//! serial pass's at any thread count. What stays serial: the octree's relinks and the body
-//! leaves of the updates' apply (see [`super::apply`]), the refits, the sphere × body queries
-//! (one task), and the incremental pass.
+//! serial pass's at any thread count. What stays serial: the octree's relinks (one task,
+//! beside the walk-order sort) and the body leaves of the updates' apply (see
+//! [`super::apply`]), the refits, the sphere × body queries (one task), and the incremental
+//! pass.
 
 use super::fat::{LOOKAHEAD_STEPS, PREDICT_STEPS};
 use super::*;
@@ -138,6 +139,8 @@ pub(super) struct Parallel {
     /// The diff's parts' first positions in the current and the previous pair lists.
     cur_at: Vec<usize>,
     prev_at: Vec<usize>,
+    /// Per task of the parallel apply: the spheres it moved to another node.
+    pub(super) moves: Vec<crate::octree::Moves>,
 }
 
 #[cfg(feature = "parallel")]
@@ -153,6 +156,11 @@ impl Parallel {
             + self.prev_at.capacity())
             * 8
             + self.split.heap_bytes()
+            + self
+                .moves
+                .iter()
+                .map(crate::octree::Moves::heap_bytes)
+                .sum::<usize>()
     }
 }
 

@@ -240,6 +240,11 @@ pub struct Octree {
     /// covers the world.
     overflow_after: u32,
     reroots: u32,
+    /// Spheres moved to another node by [`Octree::update_live_deferred`] whose lists have not
+    /// caught up yet, each id at most once, in the order they moved (the broadphase's slot
+    /// order). The next pass relinks them while it sorts (see [`Octree::prepare_pass`]); any
+    /// other change to the tree relinks them first ([`Octree::flush_relinks`]).
+    deferred: Vec<Deferred>,
 }
 
 impl Octree {
@@ -307,6 +312,7 @@ impl Octree {
             regrow: Regrow::default(),
             overflow_after: 0,
             reroots: 0,
+            deferred: Vec::new(),
         }
     }
 
@@ -387,6 +393,8 @@ impl Octree {
         self.nodes.reset(cell::node_count(p.depth));
         self.per_level = [0; MAX_DEPTH as usize + 1];
         self.overflow = 0;
+        // Every sphere is linked again from scratch below: the lists owe nothing.
+        self.deferred.clear();
         for id in 0..self.objs.len() as u32 {
             let o = &mut self.objs[id as usize];
             if o.node == NONE {
@@ -459,6 +467,7 @@ impl Octree {
             + self.versions.capacity() * 4
             + self.nodes.heap_bytes()
             + self.passes.heap_bytes()
+            + self.deferred.capacity() * core::mem::size_of::<Deferred>()
     }
 
     /// Moves and/or resizes a sphere. `Err(UnknownProxy)` for a stale or foreign key, `Err`
@@ -484,27 +493,36 @@ impl Octree {
         Ok(())
     }
 
-    /// [`Octree::update_checked`] of a key its caller knows is live here (the `BroadPhase`,
-    /// which holds every live sphere here under its key): no key check, one cache line fewer
-    /// for a caller that updates in no particular order.
-    #[inline(always)]
-    pub(crate) fn update_live(&mut self, key: ProxyKey, center: Vec3, radius: f32) {
-        debug_assert!(
-            self.id_of(key).is_some(),
-            "update_live of a key not live here"
-        );
-        self.update_id(crate::pair::slot(key), center, radius);
-    }
-
     /// Readies the next pair pass ([`Octree::for_each_pair`], or with `parts` above 1
     /// [`Octree::for_each_pair_chunked`], whose sort is then split in up to `parts` parts):
     /// maintains the region, then sorts the spheres into walk order with `tmp` as the sort's
     /// second buffer, which the caller lends while it holds nothing (the broadphase's pair list,
-    /// before the pass fills it); `tmp` is left empty. The pass must come next, with no change
-    /// to the tree between.
+    /// before the pass fills it); `tmp` is left empty. The relinks deferred by
+    /// [`Octree::update_live_deferred`] are done here too: beside the sort, as a task of their
+    /// own, when the sort is split. The pass must come next, with no change to the tree
+    /// between.
     pub(crate) fn prepare_pass(&mut self, tmp: &mut Vec<u64>, parts: usize) {
         self.maintain();
         let mut p = core::mem::take(&mut self.passes);
+        // The deferred relinks write only the lists (links and node arrays), which the sort
+        // does not read: with the sort split over the pool, they run beside it.
+        #[cfg(feature = "parallel")]
+        if parts > 1 && !self.deferred.is_empty() {
+            let mut links = core::mem::take(&mut self.links);
+            let mut nodes = core::mem::replace(&mut self.nodes, Nodes::new(0));
+            let deferred = core::mem::take(&mut self.deferred);
+            let tree = &*self;
+            rayon::join(
+                || tree.prepare_walk(&mut p.walk, tmp, parts),
+                || relink_all(&tree.objs, &mut links, &mut nodes, &deferred),
+            );
+            (self.links, self.nodes, self.deferred) = (links, nodes, deferred);
+            crate::radix::ahead(&mut self.deferred);
+            self.deferred.clear();
+            self.passes = p;
+            return;
+        }
+        self.flush_relinks();
         self.prepare_walk(&mut p.walk, tmp, parts);
         self.passes = p;
     }
@@ -535,8 +553,60 @@ impl Octree {
 
     #[inline(always)]
     fn update_id(&mut self, id: u32, center: Vec3, radius: f32) {
+        self.flush_relinks();
         let at = self.lattice.locate_memo(center, radius, &mut self.memo);
         self.store_located(id, center, radius, &at);
+    }
+
+    /// [`Octree::update_checked`] of a key its caller knows is live here (the `BroadPhase`,
+    /// which holds every live sphere here under its key: no key check), which leaves the
+    /// node lists behind: a sphere that changes node gets its node, walk key and level count
+    /// at once (all that a pass's walk-order sort reads) and is listed in `deferred`. The
+    /// next [`Octree::prepare_pass`] relinks the listed spheres beside its sort, on another
+    /// thread when it splits the sort; any other change first relinks them
+    /// ([`Octree::flush_relinks`]). The lists end as relinking each sphere here would have
+    /// left them. Each id at most once until one of those: the broadphase's apply updates
+    /// each stale slot once per step, and its step ends with a flush.
+    #[inline(always)]
+    pub(crate) fn update_live_deferred(&mut self, key: ProxyKey, center: Vec3, radius: f32) {
+        let id = crate::pair::slot(key);
+        debug_assert!(self.id_of(key).is_some(), "a key not live here");
+        let at = self.lattice.locate_memo(center, radius, &mut self.memo);
+        let i = id as usize;
+        let old = self.objs[i].node;
+        if old == 0 || at.outside() {
+            let was_outside = self.is_outside(id);
+            self.overflow = self.overflow - u32::from(was_outside) + u32::from(at.outside());
+        }
+        let new = at.node();
+        let o = &mut self.objs[i];
+        (o.center, o.radius) = (center, radius);
+        if old != new {
+            // Truncated past 32 bits, where it is not read (see `Obj::walk_key`).
+            o.walk_key = self.lattice.walk_key(new) as u32;
+            o.node = new;
+            self.per_level[level_of(old) as usize] -= 1;
+            self.per_level[level_of(new) as usize] += 1;
+            self.deferred.push(Deferred { id, old });
+        }
+    }
+
+    /// Relinks, one by one and in the order they were moved, the spheres whose lists
+    /// [`Octree::update_live_deferred`] left behind: the lists then are what relinking each
+    /// at its move would have made. Nothing (one test) when there are none.
+    #[inline]
+    pub(crate) fn flush_relinks(&mut self) {
+        if !self.deferred.is_empty() {
+            self.relink_deferred();
+        }
+    }
+
+    #[inline(never)]
+    fn relink_deferred(&mut self) {
+        relink_all(&self.objs, &mut self.links, &mut self.nodes, &self.deferred);
+        // Room for half again as many, so that a steady world stops allocating here.
+        crate::radix::ahead(&mut self.deferred);
+        self.deferred.clear();
     }
 
     /// Stores sphere `id` at `center`, `radius`, placed at `at` (from this tree's lattice),
@@ -569,6 +639,7 @@ impl Octree {
     /// foreign key (tree unchanged).
     pub fn remove(&mut self, key: ProxyKey) -> Result<(), Error> {
         let id = self.id_of(key).ok_or(Error::UnknownProxy)?;
+        self.flush_relinks();
         self.unlink(id);
         let i = id as usize;
         self.per_level[level_of(self.objs[i].node) as usize] -= 1;
@@ -651,6 +722,7 @@ impl Octree {
     /// A growing tree first [maintains](Octree::maintain) its region.
     pub fn for_each_pair(&mut self, f: impl FnMut(ProxyKey, ProxyKey)) {
         if !self.passes.walk.ready {
+            self.flush_relinks();
             self.maintain();
         }
         let mut p = core::mem::take(&mut self.passes);
@@ -673,6 +745,7 @@ impl Octree {
         A: FnOnce(&Octree) + Send,
     {
         if !self.passes.walk.ready {
+            self.flush_relinks();
             self.maintain();
         }
         let mut p = core::mem::take(&mut self.passes);
@@ -733,6 +806,7 @@ impl Octree {
 
     /// Adds a sphere that passed the checks under `key` (not live here) at its id.
     fn push(&mut self, key: ProxyKey, center: Vec3, radius: f32) {
+        self.flush_relinks();
         let at = self.lattice.locate(center, radius);
         let id = crate::pair::slot(key);
         let i = id as usize;
@@ -770,39 +844,69 @@ impl Octree {
     fn link(&mut self, id: u32, node: u32) {
         // Truncated past 32 bits, where it is not read (see `Obj::walk_key`).
         let walk_key = self.lattice.walk_key(node) as u32;
-        let became_occupied = self.nodes.is_empty(node);
-        let head = self.nodes.head(node);
         let o = &mut self.objs[id as usize];
         o.node = node;
         o.walk_key = walk_key;
-        self.links[id as usize] = Link {
-            next: head,
-            prev: NONE,
-        };
-        if head != NONE {
-            self.links[head as usize].prev = id;
-        }
-        self.nodes.set_head(node, id);
-        if became_occupied {
-            self.nodes.mark_occupied(node);
-        }
+        list_link(&mut self.links, &mut self.nodes, id, node);
     }
 
     /// Takes object `id` out of its node's list (its `node` field is left as it was).
     fn unlink(&mut self, id: u32) {
         let node = self.objs[id as usize].node;
-        let Link { next, prev } = self.links[id as usize];
-        if prev == NONE {
-            self.nodes.set_head(node, next);
-        } else {
-            self.links[prev as usize].next = next;
-        }
-        if next != NONE {
-            self.links[next as usize].prev = prev;
-        }
-        if self.nodes.is_empty(node) {
-            self.nodes.mark_empty(node);
-        }
+        list_unlink(&mut self.links, &mut self.nodes, id, node);
+    }
+}
+
+/// A sphere whose move to another node its lists have not caught up with yet (see
+/// [`Octree::update_live_deferred`]).
+#[derive(Clone, Copy, Debug)]
+struct Deferred {
+    id: u32,
+    /// The node whose list still holds it (its record names the node it is placed in).
+    old: u32,
+}
+
+/// Moves each deferred sphere from its old node's list to the list of the node its record
+/// names, in order.
+fn relink_all(objs: &[Obj], links: &mut [Link], nodes: &mut Nodes, deferred: &[Deferred]) {
+    for d in deferred {
+        list_unlink(links, nodes, d.id, d.old);
+        list_link(links, nodes, d.id, objs[d.id as usize].node);
+    }
+}
+
+/// Pushes `id` at the front of `node`'s list, marking the path up occupied if the node
+/// was empty.
+fn list_link(links: &mut [Link], nodes: &mut Nodes, id: u32, node: u32) {
+    let became_occupied = nodes.is_empty(node);
+    let head = nodes.head(node);
+    links[id as usize] = Link {
+        next: head,
+        prev: NONE,
+    };
+    if head != NONE {
+        links[head as usize].prev = id;
+    }
+    nodes.set_head(node, id);
+    if became_occupied {
+        nodes.mark_occupied(node);
+    }
+}
+
+/// Takes `id` out of the list of `node`, which holds it, marking the path up empty if the
+/// node emptied.
+fn list_unlink(links: &mut [Link], nodes: &mut Nodes, id: u32, node: u32) {
+    let Link { next, prev } = links[id as usize];
+    if prev == NONE {
+        nodes.set_head(node, next);
+    } else {
+        links[prev as usize].next = next;
+    }
+    if next != NONE {
+        links[next as usize].prev = prev;
+    }
+    if nodes.is_empty(node) {
+        nodes.mark_empty(node);
     }
 }
 
@@ -820,9 +924,9 @@ impl Octree {
     /// The tree's placement (read-only) beside its spheres' records by id (a slot's id is its
     /// key's slot; the records end at the highest id ever held), for a batched update split
     /// over tasks by id range: each task places its spheres with [`Placer::placement_of`] and
-    /// stores the moves that keep a sphere in its node with [`Record::store_in_place`]; the
-    /// others (a relink, a sphere entering or leaving the region) go through
-    /// [`Octree::update_live`] afterwards, on one thread.
+    /// stores the moves with [`Record::store_placed`] (those to another node noted for
+    /// [`Octree::take_moves`]); the others (a sphere entering or leaving the region or the
+    /// root) go through [`Octree::update_live_deferred`] afterwards, on one thread.
     pub(crate) fn split_for_update(&mut self) -> (Placer<'_>, &mut [Record]) {
         let placer = Placer {
             lattice: &self.lattice,
@@ -850,6 +954,55 @@ impl Placer<'_> {
     }
 }
 
+/// What the tasks of a batched update noted of the spheres they moved to another node (see
+/// [`Record::store_placed`]), for [`Octree::take_moves`]: one per task, reused.
+#[cfg(feature = "parallel")]
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Moves {
+    deferred: Vec<Deferred>,
+    per_level: [i32; MAX_DEPTH as usize + 1],
+}
+
+#[cfg(feature = "parallel")]
+impl Moves {
+    pub(crate) fn heap_bytes(&self) -> usize {
+        self.deferred.capacity() * core::mem::size_of::<Deferred>()
+    }
+}
+
+#[cfg(feature = "parallel")]
+impl Octree {
+    /// Takes over the moves the tasks of a batched update noted (each task's spheres in id
+    /// order, the tasks in id order): their lists catch up like those of
+    /// [`Octree::update_live_deferred`], in id order whatever the split, and the level counts
+    /// follow at once. Leaves every `Moves` empty, its room kept.
+    pub(crate) fn take_moves(&mut self, moves: &mut [Moves]) {
+        // The tasks' moves come before any the caller deferred after them: the list is kept
+        // in id order, as one serial walk over the slots would have made it.
+        let sorted = self.deferred.is_empty();
+        for m in moves {
+            self.deferred.extend_from_slice(&m.deferred);
+            for (count, delta) in self.per_level.iter_mut().zip(m.per_level) {
+                *count = count.wrapping_add_signed(delta);
+            }
+            crate::radix::ahead(&mut m.deferred);
+            m.deferred.clear();
+            m.per_level = [0; MAX_DEPTH as usize + 1];
+        }
+        if !sorted {
+            self.deferred.sort_unstable_by_key(|d| d.id);
+        }
+    }
+
+    /// Puts the deferred relinks in id order after the caller deferred some past the tasks'
+    /// (see [`Octree::take_moves`]).
+    pub(crate) fn order_deferred(&mut self) {
+        if !self.deferred.is_sorted_by_key(|d| d.id) {
+            self.deferred.sort_unstable_by_key(|d| d.id);
+        }
+    }
+}
+
 /// A sphere's placement from [`Placer::placement_of`], for [`Record::store_in_place`].
 #[cfg(feature = "parallel")]
 #[derive(Clone, Copy, Debug)]
@@ -865,7 +1018,7 @@ impl Obj {
     /// Stores `center`, `radius` placed at `at` (from `placer`, this record's tree) if the
     /// sphere stays in its node and the update leaves the count of spheres outside the region
     /// as it was: the record is all such a move changes. False, with nothing stored, if the
-    /// move needs [`Octree::update_live`].
+    /// move needs [`Octree::update_live_deferred`].
     #[inline(always)]
     pub(crate) fn store_in_place(
         &mut self,
@@ -885,6 +1038,35 @@ impl Obj {
             return false;
         }
         (self.center, self.radius) = (center, radius);
+        true
+    }
+
+    /// [`Record::store_in_place`], and a move to another node too, noted in `moves` (the
+    /// record, id `id`, gets its new node and walk key; its lists catch up once the tree takes
+    /// the moves, see [`Octree::take_moves`]). False, with nothing stored, if the move enters
+    /// or leaves the region, or starts or ends in the root, where the count of spheres
+    /// outside it may change: [`Octree::update_live_deferred`] then.
+    #[inline(always)]
+    pub(crate) fn store_placed(
+        &mut self,
+        placer: &Placer<'_>,
+        id: u32,
+        center: Vec3,
+        radius: f32,
+        at: &Placed,
+        moves: &mut Moves,
+    ) -> bool {
+        let (old, new) = (self.node, at.0.node());
+        if old == new || old == 0 || new == 0 || old == NONE {
+            return self.store_in_place(placer, center, radius, at);
+        }
+        (self.center, self.radius) = (center, radius);
+        // Truncated past 32 bits, where it is not read (see `Obj::walk_key`).
+        self.walk_key = placer.lattice.walk_key(new) as u32;
+        self.node = new;
+        moves.per_level[level_of(old) as usize] -= 1;
+        moves.per_level[level_of(new) as usize] += 1;
+        moves.deferred.push(Deferred { id, old });
         true
     }
 }

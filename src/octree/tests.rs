@@ -579,3 +579,80 @@ fn an_audit_refits_the_cells_to_shrunk_spheres() {
     assert!(!fixed.is_growing());
     assert_eq!((fixed.stats().reroots, fixed.bounds()), (0, unit()));
 }
+
+/// Updates whose relinks are deferred (`update_live_deferred`) leave the lists exactly as
+/// updating each sphere at once does, whichever operation catches them up: a prepared pass
+/// (serial, or split with the relinks beside the sort), a pass nobody prepared, an insert, a
+/// remove or a plain update. After each, the tree validates and its pairs and a box query
+/// equal brute force over the latest spheres.
+#[test]
+fn deferred_relinks_leave_the_lists_as_immediate_ones() {
+    let mut rng = crate::rng::Rng::new(41);
+    for p in BOTH {
+        for catch_up in 0..6 {
+            let mut now = Octree::with_placement(unit(), 5, p).unwrap();
+            let mut keys = Vec::new();
+            for _ in 0..300 {
+                let c = rng.vec3_in(Vec3::splat(-1.1), Vec3::splat(1.1));
+                keys.push(now.insert(c, rng.range(0.0, 0.1)).unwrap());
+            }
+            let mut later = now.clone();
+            for round in 0..4 {
+                for &k in keys.iter().skip(round).step_by(2) {
+                    let c = rng.vec3_in(Vec3::splat(-1.1), Vec3::splat(1.1));
+                    let r = rng.range(0.0, 0.1);
+                    now.update(k, c, r).unwrap();
+                    later.update_live_deferred(k, c, r);
+                }
+                assert!(
+                    !later.deferred.is_empty(),
+                    "{p:?} {round}: nothing moved node"
+                );
+                let mut lent = Vec::new();
+                match catch_up {
+                    0 => later.prepare_pass(&mut lent, 1),
+                    1 => later.prepare_pass(&mut lent, 2),
+                    2 => {
+                        sorted_pairs(&mut later);
+                    }
+                    3 => {
+                        let c = rng.vec3_in(Vec3::splat(-1.0), Vec3::splat(1.0));
+                        let k = later.insert(c, 0.05).unwrap();
+                        assert_eq!(now.insert(c, 0.05).unwrap(), k);
+                    }
+                    4 => {
+                        let k = keys.swap_remove(round);
+                        later.remove(k).unwrap();
+                        now.remove(k).unwrap();
+                    }
+                    _ => {
+                        let (k, c) = (keys[round], Vec3::splat(0.3));
+                        later.update(k, c, 0.02).unwrap();
+                        now.update(k, c, 0.02).unwrap();
+                    }
+                }
+                later.flush_relinks();
+                assert!(later.deferred.is_empty(), "{p:?} {catch_up}: not caught up");
+                assert_eq!(
+                    format!("{:?}{:?}", later.links, later.nodes),
+                    format!("{:?}{:?}", now.links, now.nodes),
+                    "{p:?} catch-up {catch_up} round {round}"
+                );
+                later.validate();
+                let want = brute::pairs(&proxies(&later));
+                assert_eq!(sorted_pairs(&mut later), want, "{p:?} {catch_up} {round}");
+                let q = Aabb::new(Vec3::splat(-0.4), Vec3::splat(0.5));
+                let mut got = Vec::new();
+                later.query_aabb(&q, |k| got.push(k));
+                got.sort_unstable();
+                let mut want: Vec<ProxyKey> = proxies(&later)
+                    .iter()
+                    .filter(|x| x.aabb.overlaps(&q))
+                    .map(|x| x.key)
+                    .collect();
+                want.sort_unstable();
+                assert_eq!(got, want, "{p:?} {catch_up} {round}: query");
+            }
+        }
+    }
+}

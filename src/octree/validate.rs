@@ -14,6 +14,10 @@ impl Octree {
     /// name its node; a child bit is set iff the child's subtree holds a sphere; per-level,
     /// overflow and key-map counts agree. O(n + occupied nodes); for tests and debugging.
     pub fn validate(&self) {
+        assert!(
+            self.deferred.is_empty(),
+            "relinks deferred past the step that deferred them"
+        );
         let n = self.objs.len();
         assert_eq!(self.links.len(), n, "links and objects differ in length");
         assert_eq!(
