@@ -689,8 +689,8 @@ impl BroadPhase {
         self.octree.maintain();
         let plan = self.plan();
         self.run(plan);
-        // The octree's lists, left behind by the apply, are rebuilt by a full pass; a step
-        // that ran none relinks them here, so queries see them whole.
+        // The apply leaves the octree's lists behind for the pass to relink (beside its sort);
+        // a step that sorted none relinks them here, so queries see them whole.
         self.octree.flush_relinks();
         self.trim_events();
         self.now = self.now.wrapping_add(1);

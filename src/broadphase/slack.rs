@@ -130,9 +130,7 @@ impl Hints {
 /// of its entries without the `HIT` bit) for every `a` listed, after `hint` is grown to
 /// `slots` entries.
 fn hint_firsts(hint: &mut Vec<u32>, slots: usize, list: &[u64]) {
-    if hint.len() < slots {
-        hint.resize(slots, 0);
-    }
+    fit(hint, slots);
     let mut last = u64::MAX;
     for (i, &e) in list.iter().enumerate() {
         let a = (e & !HIT) >> 32;
@@ -140,6 +138,13 @@ fn hint_firsts(hint: &mut Vec<u32>, slots: usize, list: &[u64]) {
             hint[a as usize] = i as u32;
             last = a;
         }
+    }
+}
+
+/// Grows `hint` to `slots` entries (a new slot's hint is 0: any start is exact).
+fn fit(hint: &mut Vec<u32>, slots: usize) {
+    if hint.len() < slots {
+        hint.resize(slots, 0);
     }
 }
 
@@ -374,14 +379,9 @@ impl BroadPhase {
         if lookup {
             let key_at = |i: usize| cand[i] & !HIT;
             let hints = &mut self.hints;
-            // A proxy inserted since the hints were last set has none yet (any start is
-            // exact).
-            let slots = self.store.slots();
-            for h in [&mut hints.cand, &mut hints.rev] {
-                if h.len() < slots {
-                    h.resize(slots, 0);
-                }
-            }
+            // A proxy inserted since the hints were last set has none yet.
+            fit(&mut hints.cand, self.store.slots());
+            fit(&mut hints.rev, self.store.slots());
             for &s in self.loud.iter().chain(self.store.freed()) {
                 let first = u64::from(s) << 32;
                 let hint = hints.cand[s as usize] as usize;

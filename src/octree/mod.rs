@@ -137,6 +137,14 @@ impl Obj {
         Aabb::from_center_radius(self.center, self.radius)
     }
 
+    /// Places the record in `node` of `lattice`, its walk key with it (truncated past 32 bits,
+    /// where it is not read, see [`Obj::walk_key`]).
+    #[inline]
+    fn set_node(&mut self, lattice: &Lattice, node: u32) {
+        self.walk_key = lattice.walk_key(node) as u32;
+        self.node = node;
+    }
+
     /// [`Obj::aabb`] as the passes' SIMD box.
     #[inline]
     pub(crate) fn simd_box(&self) -> crate::geom::SimdBox {
@@ -517,8 +525,7 @@ impl Octree {
                 || relink_all(&tree.objs, &mut links, &mut nodes, &deferred),
             );
             (self.links, self.nodes, self.deferred) = (links, nodes, deferred);
-            crate::radix::ahead(&mut self.deferred);
-            self.deferred.clear();
+            self.relinked();
             self.passes = p;
             return;
         }
@@ -572,21 +579,10 @@ impl Octree {
         let id = crate::pair::slot(key);
         debug_assert!(self.id_of(key).is_some(), "a key not live here");
         let at = self.lattice.locate_memo(center, radius, &mut self.memo);
-        let i = id as usize;
-        let old = self.objs[i].node;
-        if old == 0 || at.outside() {
-            let was_outside = self.is_outside(id);
-            self.overflow = self.overflow - u32::from(was_outside) + u32::from(at.outside());
-        }
-        let new = at.node();
-        let o = &mut self.objs[i];
-        (o.center, o.radius) = (center, radius);
+        let (old, new) = (self.store_sphere(id, center, radius, &at), at.node());
         if old != new {
-            // Truncated past 32 bits, where it is not read (see `Obj::walk_key`).
-            o.walk_key = self.lattice.walk_key(new) as u32;
-            o.node = new;
-            self.per_level[level_of(old) as usize] -= 1;
-            self.per_level[level_of(new) as usize] += 1;
+            self.count_move(old, new);
+            self.objs[id as usize].set_node(&self.lattice, new);
             self.deferred.push(Deferred { id, old });
         }
     }
@@ -604,7 +600,12 @@ impl Octree {
     #[inline(never)]
     fn relink_deferred(&mut self) {
         relink_all(&self.objs, &mut self.links, &mut self.nodes, &self.deferred);
-        // Room for half again as many, so that a steady world stops allocating here.
+        self.relinked();
+    }
+
+    /// Empties `deferred` once its spheres are relinked, keeping room for half again as
+    /// many, so that a steady world stops allocating here.
+    fn relinked(&mut self) {
         crate::radix::ahead(&mut self.deferred);
         self.deferred.clear();
     }
@@ -613,24 +614,38 @@ impl Octree {
     /// relinking it if its node changed.
     #[inline(always)]
     fn store_located(&mut self, id: u32, center: Vec3, radius: f32, at: &placement::Located) {
+        let old = self.store_sphere(id, center, radius, at);
+        if old != at.node() {
+            self.relink(id, old, at.node());
+        }
+    }
+
+    /// Stores sphere `id`'s new `center` and `radius`, placed at `at`, and keeps the count of
+    /// spheres outside the region; returns the node it was in (its record still names it).
+    #[inline(always)]
+    fn store_sphere(&mut self, id: u32, center: Vec3, radius: f32, at: &placement::Located) -> u32 {
         let i = id as usize;
-        let old_node = self.objs[i].node;
-        if old_node == 0 || at.outside() {
+        let old = self.objs[i].node;
+        if old == 0 || at.outside() {
             let was_outside = self.is_outside(id);
             self.overflow = self.overflow - u32::from(was_outside) + u32::from(at.outside());
         }
         let o = &mut self.objs[i];
         (o.center, o.radius) = (center, radius);
-        if old_node != at.node() {
-            self.relink(id, old_node, at.node());
-        }
+        old
+    }
+
+    /// Moves one sphere's count from the level of node `from` to that of node `to`.
+    #[inline]
+    fn count_move(&mut self, from: u32, to: u32) {
+        self.per_level[level_of(from) as usize] -= 1;
+        self.per_level[level_of(to) as usize] += 1;
     }
 
     /// Moves sphere `id` from node `from` to node `to`.
     #[inline(never)]
     fn relink(&mut self, id: u32, from: u32, to: u32) {
-        self.per_level[level_of(from) as usize] -= 1;
-        self.per_level[level_of(to) as usize] += 1;
+        self.count_move(from, to);
         self.unlink(id);
         self.link(id, to);
     }
@@ -842,11 +857,7 @@ impl Octree {
 
     /// Pushes object `id` at the front of `node`'s list.
     fn link(&mut self, id: u32, node: u32) {
-        // Truncated past 32 bits, where it is not read (see `Obj::walk_key`).
-        let walk_key = self.lattice.walk_key(node) as u32;
-        let o = &mut self.objs[id as usize];
-        o.node = node;
-        o.walk_key = walk_key;
+        self.objs[id as usize].set_node(&self.lattice, node);
         list_link(&mut self.links, &mut self.nodes, id, node);
     }
 
@@ -974,12 +985,11 @@ impl Moves {
 impl Octree {
     /// Takes over the moves the tasks of a batched update noted (each task's spheres in id
     /// order, the tasks in id order): their lists catch up like those of
-    /// [`Octree::update_live_deferred`], in id order whatever the split, and the level counts
-    /// follow at once. Leaves every `Moves` empty, its room kept.
+    /// [`Octree::update_live_deferred`], in id order as one serial walk over the slots would
+    /// list them, and the level counts follow at once. Leaves every `Moves` empty, its room
+    /// kept. Nothing may be deferred before (a step's apply starts with none).
     pub(crate) fn take_moves(&mut self, moves: &mut [Moves]) {
-        // The tasks' moves come before any the caller deferred after them: the list is kept
-        // in id order, as one serial walk over the slots would have made it.
-        let sorted = self.deferred.is_empty();
+        debug_assert!(self.deferred.is_empty(), "moves taken after a deferral");
         for m in moves {
             self.deferred.extend_from_slice(&m.deferred);
             for (count, delta) in self.per_level.iter_mut().zip(m.per_level) {
@@ -988,9 +998,6 @@ impl Octree {
             crate::radix::ahead(&mut m.deferred);
             m.deferred.clear();
             m.per_level = [0; MAX_DEPTH as usize + 1];
-        }
-        if !sorted {
-            self.deferred.sort_unstable_by_key(|d| d.id);
         }
     }
 
@@ -1061,9 +1068,7 @@ impl Obj {
             return self.store_in_place(placer, center, radius, at);
         }
         (self.center, self.radius) = (center, radius);
-        // Truncated past 32 bits, where it is not read (see `Obj::walk_key`).
-        self.walk_key = placer.lattice.walk_key(new) as u32;
-        self.node = new;
+        self.set_node(placer.lattice, new);
         moves.per_level[level_of(old) as usize] -= 1;
         moves.per_level[level_of(new) as usize] += 1;
         moves.deferred.push(Deferred { id, old });
