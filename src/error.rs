@@ -54,6 +54,14 @@ pub enum Error {
     /// `u32::MAX - 1` boxes (removed ones count until its next rebuild), or a `BroadPhase`
     /// has `2^31` slots and none free to reuse.
     Full,
+    /// Two slices that pair up entry by entry differ in length (e.g. the keys and the centres
+    /// of [`BroadPhase::update_centers`](crate::BroadPhase::update_centers)).
+    LengthMismatch {
+        /// The length of the first slice (the keys).
+        keys: usize,
+        /// The length of the second slice (the values).
+        values: usize,
+    },
 }
 
 impl fmt::Display for Error {
@@ -81,6 +89,9 @@ impl fmt::Display for Error {
                 write!(f, "config field {what} is out of range: {value}")
             }
             Error::Full => write!(f, "structure is full (index space exhausted)"),
+            Error::LengthMismatch { keys, values } => {
+                write!(f, "{keys} keys but {values} values")
+            }
         }
     }
 }
@@ -88,8 +99,9 @@ impl fmt::Display for Error {
 impl std::error::Error for Error {}
 
 /// A refused batch ([`BroadPhase::update_spheres`](crate::BroadPhase::update_spheres),
+/// [`BroadPhase::update_centers`](crate::BroadPhase::update_centers),
 /// [`BroadPhase::update_bodies`](crate::BroadPhase::update_bodies)): the first bad entry's
-/// index and why. When a batch is refused, nothing of it was applied.
+/// index and why (for slices of different lengths, the first index only one of them has). When a batch is refused, nothing of it was applied.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BatchError {
     /// Index of the first refused entry in the batch.

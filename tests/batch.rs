@@ -1,10 +1,13 @@
-//! Batches are checked whole: `update_spheres` / `update_bodies` with good entries and bad ones
+//! Batches are checked whole: `update_spheres` / `update_centers` / `update_bodies` with good
+//! entries and bad ones
 //! (NaN or infinite coordinates or radius, a negative radius, an inverted box, a stale key, a
 //! key of the other kind) at random positions. On `Err` the `BatchError` names the first bad
 //! entry with the right error, and nothing changed: `len()`, every `aabb()`, and the next
 //! step's lists equal those of a twin `BroadPhase` that got no batch and of the test's model.
 //! On `Ok` the result equals applying the entries one by one (a key given twice: the last
 //! wins): same lists and boxes as a twin that got the per-object calls, and as the model.
+//! `update_centers` keeps each sphere's radius (its entries' radius defects do not apply to
+//! it), and refuses slices of different lengths at the first index only one of them has.
 
 mod common;
 
@@ -65,6 +68,14 @@ fn entry() -> impl Strategy<Value = Entry> {
     )
 }
 
+/// Which batch call a batch goes through.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Call {
+    Spheres,
+    Centers,
+    Bodies,
+}
+
 /// The world both twins hold: spheres, dynamic and static bodies in a ±6 m box, some removed
 /// (their keys are the stale ones).
 struct World {
@@ -107,9 +118,9 @@ impl World {
         Self { a, b, model, stale }
     }
 
-    /// Applies one batch of spheres (`spheres`) or bodies to `a`; on `Ok` gives `b` the same
-    /// entries one by one.
-    fn batch(&mut self, spheres: bool, entries: &[Entry]) {
+    /// Applies one batch through `call` to `a`; on `Ok` gives `b` the same entries one by one.
+    fn batch(&mut self, call: Call, entries: &[Entry]) {
+        let spheres = call != Call::Bodies;
         let of_kind = |model: &Model, sphere: bool| -> Vec<ProxyKey> {
             let keys = model.keys().into_iter();
             keys.filter(|k| model.shapes[k].is_sphere() == sphere)
@@ -127,14 +138,30 @@ impl World {
         for (index, e) in entries.iter().enumerate() {
             let key = mine[e.pick % mine.len()];
             let s = self.model.shapes[&key];
-            let good = s.placed(s.center() + e.offset * e.scale, e.size);
-            let (key, shape, error) = spoil(good, key, e, &self.stale, &others);
+            let (size, e) = match (call, s, e.defect) {
+                // A centre update keeps the radius, so a radius defect has nothing to spoil.
+                (Call::Centers, ModelShape::Sphere { radius, .. }, d) => {
+                    let keeps = matches!(d, Defect::BadSize(..) | Defect::Negative(_));
+                    let mut e = *e;
+                    if keeps {
+                        e.defect = Defect::None;
+                    }
+                    (radius, e)
+                }
+                _ => (e.size, *e),
+            };
+            let good = s.placed(s.center() + e.offset * e.scale, size);
+            let (key, shape, error) = spoil(good, key, &e, &self.stale, &others);
             if let (None, Some(error)) = (first_bad, error) {
                 first_bad = Some((index, error));
             }
             batch.push((key, shape));
         }
-        let got = if spheres {
+        let got = if call == Call::Centers {
+            let keys: Vec<ProxyKey> = batch.iter().map(|&(k, _)| k).collect();
+            let centers: Vec<Vec3> = batch.iter().map(|&(_, s)| s.center()).collect();
+            self.a.update_centers(&keys, &centers)
+        } else if spheres {
             let b: Vec<_> = batch
                 .iter()
                 .map(|&(k, s)| match s {
@@ -287,8 +314,13 @@ fn run(config: Config, seed: u64, rounds: &[(Vec<Entry>, Vec<Entry>)]) {
     let mut world = World::new(config, seed);
     world.step("setup");
     for (n, (spheres, bodies)) in rounds.iter().enumerate() {
-        world.batch(true, spheres);
-        world.batch(false, bodies);
+        let call = if n % 2 == 0 {
+            Call::Spheres
+        } else {
+            Call::Centers
+        };
+        world.batch(call, spheres);
+        world.batch(Call::Bodies, bodies);
         world.step(&format!("round {n}"));
     }
 }
@@ -348,6 +380,41 @@ fn bad_last_entry_leaves_the_good_prefix_unapplied() {
         .model
         .assert_same_proxies(&world.a, "after the refused batch");
     world.step("after the refused batch");
+}
+
+/// `update_centers` with slices of different lengths is refused at the first index only one
+/// of them has, naming both lengths; nothing is applied.
+#[test]
+fn centers_of_another_length_are_refused_whole() {
+    let mut world = World::new(Config::default(), 11);
+    world.step("setup");
+    let spheres: Vec<ProxyKey> = world
+        .model
+        .keys()
+        .into_iter()
+        .filter(|k| world.model.shapes[k].is_sphere())
+        .collect();
+    let centers = vec![Vec3::ZERO; spheres.len() + 1];
+    for (keys, centers) in [
+        (&spheres[..], &centers[..]),
+        (&spheres[..], &centers[..spheres.len() - 1]),
+        (&spheres[..0], &centers[..1]),
+    ] {
+        let err = world.a.update_centers(keys, centers).unwrap_err();
+        assert_eq!(err.index, keys.len().min(centers.len()));
+        assert_eq!(
+            err.error,
+            Error::LengthMismatch {
+                keys: keys.len(),
+                values: centers.len(),
+            }
+        );
+        world
+            .model
+            .assert_same_proxies(&world.a, "after the refused batch");
+    }
+    assert_eq!(world.a.update_centers(&[], &[]), Ok(()));
+    world.step("after the refused batches");
 }
 
 /// A key given twice in one batch ends where its last entry puts it, in both orders.

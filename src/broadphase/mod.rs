@@ -530,6 +530,44 @@ impl BroadPhase {
         Ok(())
     }
 
+    /// Moves many spheres at once, keeping their radii: `centers[i]` is the new centre of
+    /// `keys[i]`, as an engine keeps them in two arrays. Checked whole first like
+    /// [`BroadPhase::update_spheres`]: slices of different lengths (`Error::LengthMismatch`,
+    /// at the first index only one slice has), a non-finite centre, a stale key or a body's
+    /// key refuse the batch, nothing is applied and the error names the entry. A key given
+    /// twice is fine: the last entry wins.
+    pub fn update_centers(
+        &mut self,
+        keys: &[ProxyKey],
+        centers: &[Vec3],
+    ) -> Result<(), BatchError> {
+        if keys.len() != centers.len() {
+            return Err(BatchError {
+                index: keys.len().min(centers.len()),
+                error: Error::LengthMismatch {
+                    keys: keys.len(),
+                    values: centers.len(),
+                },
+            });
+        }
+        for (index, (&key, &center)) in keys.iter().zip(centers).enumerate() {
+            self.check_center_update(key, center)
+                .map_err(|error| BatchError { index, error })?;
+        }
+        let (st, movers) = (&mut self.store, &mut self.movers);
+        let (shape, flags) = (&mut st.shape[..], &mut st.flags[..]);
+        let mut newly_stale = 0;
+        for (&key, &center) in keys.iter().zip(centers) {
+            let slot = crate::pair::slot(key);
+            if let Shape::Sphere { center: c, .. } = &mut shape[slot as usize] {
+                *c = center;
+            }
+            newly_stale += usize::from(mark_stale_in(flags, movers, slot));
+        }
+        self.stale += newly_stale;
+        Ok(())
+    }
+
     /// Sets many bodies' boxes at once: `(key, aabb)` per entry. The whole batch is checked
     /// first; on the first bad entry (non-finite or inverted box, stale key, a sphere's key)
     /// nothing is applied and the error names the entry. A key given twice is fine: the last
@@ -549,6 +587,19 @@ impl BroadPhase {
     #[inline]
     fn check_sphere_update(&self, key: ProxyKey, center: Vec3, radius: f32) -> Result<u32, Error> {
         check_sphere(center, radius)?;
+        let slot = self.store.resolve(key).ok_or(Error::UnknownProxy)?;
+        match self.store.kind[slot as usize] {
+            Kind::Sphere => Ok(slot),
+            _ => Err(Error::WrongKind),
+        }
+    }
+
+    /// The slot of a live sphere given a new `center`, or what
+    /// [`BroadPhase::update_centers`] refuses.
+    #[inline]
+    fn check_center_update(&self, key: ProxyKey, center: Vec3) -> Result<u32, Error> {
+        // A radius of 0 always passes: only the centre is checked.
+        check_sphere(center, 0.0)?;
         let slot = self.store.resolve(key).ok_or(Error::UnknownProxy)?;
         match self.store.kind[slot as usize] {
             Kind::Sphere => Ok(slot),
