@@ -653,6 +653,23 @@ pub(crate) fn cast_pad(center: Vec3, radius: f32, dir: Vec3, max_t: f32) -> f32 
         + (max_t + reach) * f32::MIN_POSITIVE
 }
 
+/// The factor by which the queries grow a sphere's radius for the box they prune it by:
+/// `1 + 2⁻²⁰`, so the radius grows by at least `2⁻²¹` of itself after rounding.
+const SPHERE_PRUNE: f32 = 1.0 + 1.0 / (1u32 << 20) as f32;
+
+/// The box the queries prune a sphere by before its exact `f64` test: `center ± radius`, the
+/// radius grown by `2⁻²⁰` of itself. The `f64` sphere tests ([`first_touch`],
+/// [`point_sphere_distance`], [`spheres_touch`]) are exact for a sphere moved by a few `2⁻⁵²`
+/// of `|center − start|` and of `radius`. The query's pad ([`cast_pad`], [`distance_pad`])
+/// covers what is relative to the query's own coordinates; this covers what is relative to
+/// the radius, which is far larger for a huge sphere whose surface passes near a small query
+/// (a sphere of radius `1e30` about `(1e30, 0, 0)` and a ray by the origin). The structures'
+/// nodes hold this box: their slack exceeds `2⁻²⁰` of any radius they place.
+#[inline]
+pub(crate) fn sphere_prune_box(center: Vec3, radius: f32) -> SimdBox {
+    SimdBox::from_center_radius(center, radius * SPHERE_PRUNE)
+}
+
 /// What the structures add to `radius` when they look for the shapes within `radius` of `p`
 /// ([`QUERY_PAD`] times the magnitude of the coordinates involved).
 pub(crate) fn distance_pad(p: Vec3, radius: f32) -> f32 {

@@ -478,8 +478,9 @@ impl Octree {
         );
     }
 
-    /// Calls `visit(key, aabb)` for every sphere whose stored box `aabb` (`center ± radius`),
-    /// grown by `inflate` on every side, the segment `origin + t·dir`, `t ∈ [0, best]` enters
+    /// Calls `visit(key, aabb)`, `aabb` its stored box `center ± radius`, for every sphere
+    /// whose pruning box ([`geom::sphere_prune_box`]: the radius grown by `2⁻²⁰` of itself,
+    /// for the `f64` re-tests), grown by `inflate` on every side, the segment `origin + t·dir`, `t ∈ [0, best]` enters
     /// ([`Aabb::ray_entry`], touching counts), once each; `best` starts at `max_t` and becomes
     /// `min(best, returned value)` after each visit (a NaN return leaves it), so a sphere
     /// entered exactly at `best` is still visited. Nodes come in walk order, not by distance.
@@ -498,9 +499,9 @@ impl Octree {
         }
         let slab = Slab::new(origin, dir, inflate);
         self.ray_ids(origin, dir, max_t, inflate, |id, best| {
-            let aabb = self.box_of(id);
-            match slab.entry(&SimdBox::new(&aabb), best) {
-                Some(_) => visit(self.key_of(id), &aabb),
+            let (c, r) = self.sphere_of(id);
+            match slab.entry(&geom::sphere_prune_box(c, r), best) {
+                Some(_) => visit(self.key_of(id), &self.box_of(id)),
                 None => best,
             }
         });
@@ -520,7 +521,8 @@ impl Octree {
         self.candidates(&Aabb::from_center_radius(p, radius), visit)
     }
 
-    /// Calls `f(key)` for every sphere whose stored box overlaps the cube `p ± radius`, once
+    /// Calls `f(key)` for every sphere whose pruning box ([`geom::sphere_prune_box`])
+    /// overlaps the cube `p ± radius`, once
     /// each: a superset of those within `radius` of `p`, for callers that measure exact
     /// distances themselves. Nothing for a non-finite `p` or a NaN or negative `radius`. The
     /// first `Break` of `f` ends it and is returned.
@@ -534,8 +536,10 @@ impl Octree {
             return ControlFlow::Continue(());
         }
         let cube = Aabb::from_center_radius(p, radius);
+        let simd_cube = SimdBox::new(&cube);
         self.near_ids(p, radius, |id| {
-            if self.box_of(id).overlaps(&cube) {
+            let (c, r) = self.sphere_of(id);
+            if geom::sphere_prune_box(c, r).overlaps(&simd_cube) {
                 f(self.key_of(id))
             } else {
                 ControlFlow::Continue(())
@@ -682,7 +686,9 @@ mod tests {
         (tree, shapes)
     }
 
+    /// A sphere's box as the queries prune it: the radius grown by `2⁻²⁰` of itself.
     fn own_box(c: Vec3, r: f32) -> (Vec3, Vec3) {
+        let r = r * (1.0 + 2f32.powi(-20));
         (
             Vec3::new(c.x - r, c.y - r, c.z - r),
             Vec3::new(c.x + r, c.y + r, c.z + r),
