@@ -439,7 +439,7 @@ impl BroadPhase {
         });
         self.for_each_stale(|s| {
             let held = match self.store.shape[s] {
-                Shape::Sphere { center, radius } => geom::sphere_prune_box(center, radius),
+                Shape::Sphere { center, radius } => geom::sphere_prune_box(center, radius, 0.0),
                 Shape::Body { aabb, .. } => SimdBox::new(&aabb),
             };
             if held.overlaps(&cube) {
