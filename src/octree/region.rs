@@ -52,10 +52,102 @@
 //! of it for as much motion again, so a world in flight re-roots less often the faster it
 //! goes: re-roots are amortised like a growing `Vec`'s copies.
 
+use super::cell::{self, level_of};
 use super::placement::{Lattice, depth_for};
-use super::{MAX_DEPTH, NONE, Obj, Placement};
+use super::{MAX_DEPTH, NONE, Obj, Octree, Placement};
 use crate::geom::{self, Aabb, from_ordered_bits, ordered_bits};
 use glam::Vec3;
+
+impl Octree {
+    /// A growing tree re-roots here if it needs to (see [`Octree::growing`]): when more
+    /// spheres lie outside its region than `max(64, len / 64)` (and than twice as many as
+    /// right after its last re-root), when it holds more than twice the spheres it held at its
+    /// last re-root, or when a periodic audit (its period doubling while audits find nothing,
+    /// up to 1024 calls) finds cells that no longer fit the spheres. O(1) otherwise; a re-root
+    /// places every sphere again, O(n), and may allocate. The pair passes call it first; a
+    /// caller that moves spheres and only queries should call it after each batch of moves
+    /// (queries stay exact without it, but pay for every sphere outside the region). Does
+    /// nothing for a tree with a fixed region.
+    pub fn maintain(&mut self) {
+        if !self.growing {
+            return;
+        }
+        if self.live == 0 {
+            self.regrow.rooted = 0;
+            return;
+        }
+        let limit = overflow_limit(self.live).max(2 * self.overflow_after as usize);
+        if self.overflow as usize > limit || self.live > 2 * self.regrow.rooted {
+            match self.propose() {
+                Some(p) => self.reroot(&p),
+                None => {
+                    // No finite region covers the world: keep this one, and wait for twice
+                    // the overflow (or spheres) before trying again.
+                    let sampled = self.audit_sample();
+                    self.regrow.rooted(self.live, None, sampled);
+                    self.overflow_after = self.overflow;
+                }
+            }
+            return;
+        }
+        if self.regrow.tick() {
+            let sampled = self.audit_sample();
+            if self.regrow.sample_unchanged(sampled) {
+                self.regrow.back_off();
+                return;
+            }
+            self.regrow.full_audits += 1;
+            match self.propose() {
+                Some(p) if worth_it(&self.lattice, &p) => self.reroot(&p),
+                _ => self.regrow.back_off(),
+            }
+        }
+    }
+
+    /// The audit's sample of the spheres now (`Sampled::of`, with the walk order's
+    /// buffer lent as scratch).
+    fn audit_sample(&mut self) -> Option<Sampled> {
+        Sampled::of(&self.objs, self.passes.walk.idle_items())
+    }
+
+    /// The region and depth the spheres call for now (`Regrow::propose` over this tree's
+    /// spheres, hint and placement, with the walk order's buffers lent as scratch).
+    fn propose(&mut self) -> Option<Proposal> {
+        self.regrow.propose(
+            &self.objs,
+            self.live,
+            self.hint,
+            self.lattice.placement,
+            self.passes.walk.idle_items(),
+        )
+    }
+
+    /// Places every sphere again in a tree over the proposal's region and depth.
+    #[inline(never)]
+    fn reroot(&mut self, p: &Proposal) {
+        self.lattice = Lattice::new(p.bounds, p.depth, self.lattice.placement);
+        self.memo = super::placement::LevelMemo::EMPTY;
+        self.nodes.reset(cell::node_count(p.depth));
+        self.per_level = [0; MAX_DEPTH as usize + 1];
+        self.overflow = 0;
+        // Every sphere is linked again from scratch below: the lists owe nothing.
+        self.deferred.clear();
+        for id in 0..self.objs.len() as u32 {
+            let o = &mut self.objs[id as usize];
+            if o.node == NONE {
+                continue;
+            }
+            let at = self.lattice.locate(o.center, o.radius);
+            self.per_level[level_of(at.node()) as usize] += 1;
+            self.overflow += u32::from(at.outside());
+            self.link(id, at.node());
+        }
+        let sampled = self.audit_sample();
+        self.regrow.rooted(self.live, Some(p.span_center), sampled);
+        self.overflow_after = self.overflow;
+        self.reroots += 1;
+    }
+}
 
 /// Cells of the level the median sphere lives at span this many of its diameters. Below 2, so
 /// the median sphere is placed at that level; above 1 by enough that a fat margin on its
