@@ -16,7 +16,7 @@
 //!   node's loose bounds wherever the centre is, so a sphere's level depends only on its radius
 //!   and nothing stays near the root for straddling a plane. Pairs are found between a node and
 //!   its 26 same-level neighbours, and across levels by descending the neighbours' occupied
-//!   subtrees (module `loose`). Use [`depth_for_loose`] for the depth. The default of
+//!   subtrees (module `loose`). The default of
 //!   [`BroadPhase`](crate::BroadPhase) ([`Config::octree_placement`](crate::Config)), whose
 //!   octree holds spheres of every size.
 //!
@@ -25,8 +25,8 @@
 //! re-roots is quadratic).
 //!
 //! Queries and rays follow the per-node lists through occupied subtrees, testing nodes by
-//! their cells (strict) or loose bounds (loose) (module `query`); [`Octree::validate`] checks
-//! every invariant (module `validate`).
+//! their cells (strict) or loose bounds (loose) (module `query`); module `validate` checks
+//! every invariant, for the tests.
 //!
 //! The modules, each standing only on those before it: `cell` (implicit node indexing and
 //! Morton codes), `nodes` (paged per-node arrays and the one subtree walk), `placement` (both
@@ -52,8 +52,7 @@
 //! - **Constructors refuse, never correct.** [`Octree::new`] and [`Octree::with_placement`]
 //!   return `Err` naming the first bad argument ([`Error::DepthOutOfRange`],
 //!   [`Error::InvalidBounds`]) and build nothing; no argument is clamped or replaced.
-//! - **`validate` panics, `check` returns.** [`Octree::validate`] checks every internal
-//!   invariant and panics on the first broken one (tests, debugging); a `check` method (such as
+//! - **`check` returns.** A `check` method (such as
 //!   [`BvhConfig::check`](crate::BvhConfig::check)) tells a caller whether values it gives are
 //!   valid, as a `Result`.
 //! - **Pairs two ways.** [`Octree::for_each_pair`] calls a closure per overlapping pair;
