@@ -121,9 +121,8 @@ pub struct BroadPhase {
     pending: Vec<u32>,
     /// Proxies removed since the last step.
     removals: usize,
-    /// Proxies updated since the last step that move far enough per step to outgrow the
-    /// smallest fat margin: about one in `LOOKAHEAD_STEPS` of them escapes each step.
-    fast_movers: usize,
+    /// The motion of the proxies applied this step, for the pass estimate.
+    motion: fat::Motion,
     /// Candidate pairs (packed slot pairs, `HIT` set if their exact boxes overlapped at the
     /// last step), sorted.
     cand: slack::Gapped<u64>,
@@ -220,7 +219,7 @@ impl BroadPhase {
             loud: Vec::new(),
             pending: Vec::new(),
             removals: 0,
-            fast_movers: 0,
+            motion: fat::Motion::default(),
             cand: slack::Gapped::default(),
             rev: slack::Gapped::default(),
             rev_stale: false,
