@@ -236,10 +236,10 @@ mod tests {
     use super::super::BvhConfig;
     use super::*;
     use crate::geom::Aabb;
+    use crate::pair::Pair;
     use crate::rng::Rng;
     use glam::Vec3;
     use slotmap::SlotMap;
-    use crate::pair::Pair;
 
     /// A tree of `n` random boxes built, then changed so that every kind of primitive is
     /// there: boxes moved out of their leaves, pending inserts and tombstones.
