@@ -203,10 +203,10 @@ impl World {
             }
         };
         let err = got.expect_err("bad input is refused");
-        let expected = match err {
-            Error::NonFinite { .. } | Error::NegativeRadius(_) | Error::InvertedAabb { .. } => true,
-            _ => false,
-        };
+        let expected = matches!(
+            err,
+            Error::NonFinite { .. } | Error::NegativeRadius(_) | Error::InvertedAabb { .. }
+        );
         assert!(expected, "{context}: bad input refused with {err:?}");
         assert_eq!(
             self.bp.len(),

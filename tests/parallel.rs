@@ -15,9 +15,8 @@ mod common;
 
 use broadleaf::fixtures::scene::{Feed, Frame, Gas, Scene};
 use broadleaf::octree::Placement;
-use broadleaf::{BodyKind, BroadPhase, CollisionGroups, Config, Pair, Passes, ProxyKey, Vec3};
+use broadleaf::{BodyKind, BroadPhase, CollisionGroups, Config, Passes, ProxyKey, Vec3};
 use common::{Fnv, KeyPair, Model, ModelShape, Rng};
-use slotmap::Key;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::collections::{BTreeSet, HashMap};
 use std::sync::atomic::{AtomicUsize, Ordering};

@@ -239,6 +239,7 @@ mod tests {
     use crate::rng::Rng;
     use glam::Vec3;
     use slotmap::SlotMap;
+    use crate::pair::Pair;
 
     /// A tree of `n` random boxes built, then changed so that every kind of primitive is
     /// there: boxes moved out of their leaves, pending inserts and tombstones.
