@@ -1,10 +1,10 @@
 //! The demo: a few thousand spheres fall into a box and settle, driven by `broadleaf::fixtures::sim`.
 //! It prints a progress bar and a summary table, and writes an animated GIF: a side view
 //! (x–y) of the octree at work. Under the default loose placement every sphere lives at the
-//! level its radius picks, so each is coloured by the octree cell it lives in (neighbouring
-//! cells never share a colour) and those cells are outlined; under `--placement strict` each
-//! is coloured by its level, with a legend, and the occupied cells are outlined in their
-//! level's colour.
+//! level its radius picks: each is a grey disc whose centre dot has the colour of the cell
+//! holding it there (cells side by side in the view never share a colour), and the occupied
+//! cells are outlined. Under `--placement strict` each sphere is coloured by its level, with a
+//! legend, and the occupied cells are outlined in their level's colour.
 //!
 //! `--vs-rapier` also runs the same drop (same spheres, start positions, container and steps)
 //! in rapier3d (dynamic balls, fixed walls, default parameters, sleeping on) and prints its

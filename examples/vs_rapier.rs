@@ -228,6 +228,9 @@ fn parse_args(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
     if args.moving.len() > 1 && !args.scene_given {
         args.scene = "idle".into();
     }
+    if args.every && !matches!(args.scene.as_str(), "fall" | "all") {
+        return Err(format!("--every applies to fall, not {}", args.scene).into());
+    }
     Ok(args)
 }
 
