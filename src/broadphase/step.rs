@@ -252,6 +252,11 @@ pub(super) enum Plan {
 /// size times this. Once the regime has run and been left, the estimate follows what it saw
 /// instead ([`Costs::loud_per_motion`]).
 const LOUD_PER_MOTION: f64 = 2.0 * 64.0;
+/// Per step outside the incremental regime, what the regime's last steps taught the estimate
+/// ([`Costs::loud_per_motion`]) keeps this share of its distance from [`LOUD_PER_MOTION`]: a
+/// world left in a burst (a landing, a wake-up) is tried again once it has calmed, instead of
+/// being priced by that burst for good.
+const RELEARN_KEEP: f64 = 0.9;
 
 /// An incremental step refits the dynamic BVH once this fraction of its bodies got new fat
 /// boxes since its last refit: until then the boxes enlarged on update keep it exact, only
@@ -272,7 +277,7 @@ pub(super) struct Costs {
     /// Outside the incremental regime, the slow movers expected to re-test their candidates
     /// per unit of their summed motion (`fat::Motion::slow_motion`): [`LOUD_PER_MOTION`] until
     /// the regime is left, then what the regime's last step saw, over the motion of the first
-    /// step after it.
+    /// step after it, returning towards [`LOUD_PER_MOTION`] by [`RELEARN_KEEP`] a step.
     loud_per_motion: f64,
     /// The incremental regime was left at the last step: this step's motion, with the
     /// regime's last `loud_per_slow`, gives `loud_per_motion`.
@@ -346,9 +351,11 @@ impl BroadPhase {
             let m = self.motion;
             let escapes =
                 m.fast as f64 / (1.5 * f64::from(PREDICT_STEPS)) + self.escaped.len() as f64;
-            if core::mem::take(&mut self.costs.just_left) && m.slow_motion > 0.0 {
-                self.costs.loud_per_motion =
-                    self.costs.loud_per_slow * m.slow as f64 / m.slow_motion;
+            let c = &mut self.costs;
+            c.loud_per_motion =
+                LOUD_PER_MOTION + (c.loud_per_motion - LOUD_PER_MOTION) * RELEARN_KEEP;
+            if core::mem::take(&mut c.just_left) && m.slow_motion > 0.0 {
+                c.loud_per_motion = c.loud_per_slow * m.slow as f64 / m.slow_motion;
             }
             let slow_loud = (self.costs.loud_per_motion * m.slow_motion).min(m.slow as f64);
             let inc = self.incremental_cost(slow_loud + escapes, escapes);
