@@ -23,8 +23,8 @@
 //!   [`Octree::new`] subdivides a region you give, for good. Two [`Placement`]s: `Strict` (the standalone
 //!   default) keeps a sphere in the deepest node whose split planes it does not straddle;
 //!   `Loose` (RTCD 7.3.6, looseness 2; the [`BroadPhase`] default) puts every sphere at the
-//!   level its radius fits (for a fixed region, pick the depth with
-//!   [`octree::depth_for_loose`]).
+//!   level its radius fits (for a fixed region, give a depth whose deepest cells are about a
+//!   sphere's diameter).
 //! - **[`Bvh`]** — rigid bodies of any shape and size, given by their world AABBs, on their own.
 //!   A binned-SAH bounding-volume hierarchy in a flat depth-first array, refitted bottom-up and
 //!   rebuilt when its quality degrades. Use it for static geometry queries too.
@@ -147,6 +147,7 @@ pub mod bvh;
 mod error;
 #[cfg(feature = "fixtures")]
 pub mod fixtures;
+#[doc(hidden)]
 pub mod geom;
 pub mod octree;
 pub mod pair;

@@ -191,7 +191,8 @@ fn sort_planned<const B: usize, const P: usize>(
 
 /// Writes to `splitters` the first keys of parts `1..parts` of a cut of the key range into
 /// `parts` parts (fewer where keys repeat), increasing: the quantiles of `sorted` read
-/// through `key`, a sorted list like the one about to be sorted, of at least `parts` keys.
+/// through `key`, a sorted list like the one about to be sorted (a sample of it, or all of
+/// it), not empty unless `parts` is 1.
 #[cfg(feature = "parallel")]
 pub(crate) fn split_points<T>(
     sorted: &[T],
@@ -199,7 +200,7 @@ pub(crate) fn split_points<T>(
     parts: usize,
     splitters: &mut Vec<u64>,
 ) {
-    debug_assert!(sorted.len() >= parts || parts == 1);
+    debug_assert!(!sorted.is_empty() || parts <= 1);
     splitters.clear();
     for p in 1..parts {
         let k = key(&sorted[sorted.len() * p / parts]);

@@ -9,27 +9,6 @@ use slotmap::Key;
 
 const GOLDEN: u64 = 0x76df_1956_69f5_ec7b;
 
-/// FNV-1a over the keys' FFI bits: stable across runs and platforms.
-struct Fnv(u64);
-
-impl Fnv {
-    fn write(&mut self, x: u64) {
-        for byte in x.to_le_bytes() {
-            self.0 ^= u64::from(byte);
-            self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
-        }
-    }
-
-    fn pairs(&mut self, tag: u64, pairs: &[Pair]) {
-        self.write(tag);
-        self.write(pairs.len() as u64);
-        for p in pairs {
-            self.write(p.a.data().as_ffi());
-            self.write(p.b.data().as_ffi());
-        }
-    }
-}
-
 /// How to insert the unrelated proxies (far from everything and from each other).
 #[derive(Clone, Copy)]
 enum Unrelated {
@@ -102,7 +81,7 @@ fn scene_hash_with_skin(unrelated: Unrelated, skin: f32) -> u64 {
             bp.insert_body(aabb, kind).unwrap();
         }
     }
-    let mut h = Fnv(0xcbf2_9ce4_8422_2325);
+    let mut h = Fnv::new();
     for step in 0..300 {
         gas.step(DT);
         for (i, &key) in spheres.iter().enumerate() {
@@ -174,7 +153,7 @@ fn the_incremental_pass_gives_the_same_lists() {
 
 mod common;
 
-use common::{Expected, KeyPair, Model, ModelShape};
+use common::{Expected, Fnv, KeyPair, Model, ModelShape};
 use std::collections::HashMap;
 
 /// The model's hash of the scene below (every step's `pairs`, `added`, `removed` as the keys'
@@ -257,11 +236,7 @@ fn model_scene_hashes(config: Config) -> Hashes {
     for i in 0..1400 {
         live.push(insert(&mut bp, &mut model, &mut rng, &mut ordinal, i));
     }
-    let (mut lib, mut own, mut ord) = (
-        Fnv(0xcbf2_9ce4_8422_2325),
-        Fnv(0xcbf2_9ce4_8422_2325),
-        Fnv(0xcbf2_9ce4_8422_2325),
-    );
+    let (mut lib, mut own, mut ord) = (Fnv::new(), Fnv::new(), Fnv::new());
     for step in 0..200 {
         let mut batch = Vec::new();
         for &(key, v) in live.iter().skip(step % 3).step_by(3) {

@@ -5,7 +5,7 @@
 
 mod common;
 
-use broadleaf::{Aabb, BroadPhase, Config, Passes, Vec3};
+use broadleaf::{Aabb, BroadPhase, Config, Pass, Passes, Vec3};
 use common::{Model, ModelShape};
 
 fn body(min: [f32; 3], max: [f32; 3], is_static: bool) -> ModelShape {
@@ -72,4 +72,12 @@ fn boxes_touching_at_3e38_pair_incrementally() {
     let moved = body([-4.25, 3e38, -2.5], [-1.25, 3e38, 1.25], true);
     model.update(&mut bp, flat, moved);
     model.check_step(&mut bp, "the flat body moved out of its fat box");
+    let stats = bp.stats();
+    assert_eq!(
+        stats.pass,
+        Pass::Incremental,
+        "the move ran {:?}",
+        stats.pass
+    );
+    assert_eq!(stats.enlarged, 1, "the flat body's escape was not counted");
 }

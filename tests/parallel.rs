@@ -15,9 +15,8 @@ mod common;
 
 use broadleaf::fixtures::scene::{Feed, Frame, Gas, Scene};
 use broadleaf::octree::Placement;
-use broadleaf::{BodyKind, BroadPhase, CollisionGroups, Config, Pair, Passes, ProxyKey, Vec3};
-use common::{KeyPair, Model, ModelShape, Rng};
-use slotmap::Key;
+use broadleaf::{BodyKind, BroadPhase, CollisionGroups, Config, Passes, ProxyKey, Vec3};
+use common::{Fnv, KeyPair, Model, ModelShape, Rng};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::collections::{BTreeSet, HashMap};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -34,31 +33,6 @@ const BODY_START: usize = 22_000;
 
 /// Thread counts every world runs at.
 const THREADS: [usize; 4] = [1, 2, 3, 8];
-
-/// FNV-1a over the keys' FFI bits.
-struct Fnv(u64);
-
-impl Fnv {
-    fn write(&mut self, x: u64) {
-        for byte in x.to_le_bytes() {
-            self.0 ^= u64::from(byte);
-            self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
-        }
-    }
-
-    fn key(&mut self, k: ProxyKey) {
-        self.write(k.data().as_ffi());
-    }
-
-    fn pairs(&mut self, tag: u64, pairs: &[Pair]) {
-        self.write(tag);
-        self.write(pairs.len() as u64);
-        for p in pairs {
-            self.key(p.a);
-            self.key(p.b);
-        }
-    }
-}
 
 /// How a world is built and configured.
 #[derive(Clone, Copy, Debug)]
@@ -181,7 +155,7 @@ fn run(world: World) -> u64 {
         model: Model::new(world.margin),
         groups: HashMap::new(),
         prev: BTreeSet::new(),
-        digest: Fnv(0xcbf2_9ce4_8422_2325),
+        digest: Fnv::new(),
     };
     c.model.quadratic = false;
     for _ in 0..world.start {

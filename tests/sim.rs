@@ -4,9 +4,12 @@
 //! handed its broadphase (centres copied before the step, radii, growths), grown by the margin
 //! by the test.
 
+mod common;
+
 use broadleaf::fixtures::sim::{DropConfig, IndexKind, SphereDrop, World};
 use broadleaf::octree::Placement;
 use broadleaf::{Aabb, Pair, Vec3, brute};
+use common::Fnv;
 
 const N: usize = 1000;
 const RADIUS: f32 = 0.5;
@@ -132,9 +135,11 @@ fn position_bits(world: &World) -> Vec<u32> {
 
 /// FNV-1a over the bits of every position and velocity.
 fn hash(bits: &[u32]) -> u64 {
-    bits.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-    })
+    let mut h = Fnv::new();
+    for &b in bits {
+        h.write(u64::from(b));
+    }
+    h.0
 }
 
 #[test]

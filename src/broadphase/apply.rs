@@ -154,7 +154,7 @@ impl BroadPhase {
         let (margin, now) = (self.config.margin, self.now);
         let first_escape = self.escaped.len();
         let (st, loud, escaped) = (&mut self.store, &mut self.loud, &mut self.escaped);
-        // The fast movers are not counted: only the estimate outside the regime reads them.
+        // The motion is not counted: only the estimate outside the regime reads it.
         let rest = if dense {
             fat_walk(0..st.slots(), st, loud, escaped, margin, now)
         } else {
@@ -208,7 +208,7 @@ impl BroadPhase {
         let (placer, records) = self.octree.split_for_update();
         let st = &mut self.store;
         let shape = &st.shape;
-        let (fast, done) = st
+        let (motion, done) = st
             .speed
             .par_chunks_mut(chunk)
             .zip(st.stamp.par_chunks_mut(chunk))
@@ -217,7 +217,7 @@ impl BroadPhase {
             .zip(moves[..tasks].par_iter_mut())
             .enumerate()
             .map(|(c, ((((speed, stamp), flags), records), moves))| {
-                let (mut fast, mut done, mut placer) = (0, 0, placer);
+                let (mut motion, mut done, mut placer) = (fat::Motion::default(), 0, placer);
                 // The records end at the highest sphere id: a chunk's later slots (and the
                 // chunks after the records) hold no sphere.
                 for i in 0..records.len() {
@@ -230,9 +230,9 @@ impl BroadPhase {
                     }
                     let grown = fat::grown_sphere(center, radius, margin);
                     // Outside the incremental regime the sphere's record holds its exact box.
-                    let (v, f) = fat::motion(&records[i].simd_box(), &grown.aabb, stamp[i], now);
+                    let v = fat::speed(&records[i].simd_box(), &grown.aabb, stamp[i], now);
                     (speed[i], stamp[i]) = (v, now);
-                    fast += usize::from(f);
+                    motion.note(v, grown.aabb.extent().max_element());
                     let at = placer.placement_of(center, grown.radius);
                     let r = grown.radius;
                     if records[i].store_placed(&placer, s as u32, center, r, &at, moves) {
@@ -240,10 +240,13 @@ impl BroadPhase {
                         done += 1;
                     }
                 }
-                (fast, done)
+                (motion, done)
             })
-            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-        self.fast_movers += fast;
+            .reduce(
+                || (fat::Motion::default(), 0),
+                |a, b| (a.0.add(b.0), a.1 + b.1),
+            );
+        self.motion = self.motion.add(motion);
         self.octree.take_moves(&mut self.par.moves[..tasks]);
         // Every stale slot is counted (`self.stale`): none left, no walk.
         if done == self.stale {

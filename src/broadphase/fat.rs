@@ -51,16 +51,53 @@ fn jitter(slot: u32, now: u32) -> f32 {
 }
 
 /// The speed (metres per step, largest axis) of a box that moved from `old` to `new` since
-/// step `stamp`, at step `now`; and whether that outgrows the smallest fat margin
-/// ([`outgrows_min_margin`]).
-#[cfg(feature = "parallel")]
+/// step `stamp`, at step `now`.
 #[inline(always)]
-pub(super) fn motion(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> (f32, bool) {
-    let speed = displacement(old, new, stamp, now).abs().max_element();
-    (
-        speed,
-        outgrows_min_margin(speed, new.extent().max_element()),
-    )
+pub(super) fn speed(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> f32 {
+    displacement(old, new, stamp, now).abs().max_element()
+}
+
+/// What the updates applied since the last step say of the movers' motion: what the pass
+/// estimate reads outside the incremental regime to price that regime (see
+/// [`Motion::note`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Motion {
+    /// Movers that outgrow the smallest fat margin ([`outgrows_min_margin`]): in the
+    /// incremental regime about one in [`PREDICT_STEPS`] of them would leave its fat box each
+    /// step.
+    pub(super) fast: usize,
+    /// The other movers: they would stay in their fat boxes.
+    pub(super) slow: usize,
+    /// Over the slow movers, the sum of each one's speed as a fraction of its box's largest
+    /// extent (per step): a slow mover re-tests its candidates about once in the steps it
+    /// takes to drift half their least slack, so the loud movers of a step follow this sum.
+    pub(super) slow_motion: f64,
+}
+
+impl Motion {
+    /// Counts a mover of box extent `size` moving `speed` metres per step.
+    #[inline(always)]
+    pub(super) fn note(&mut self, speed: f32, size: f32) {
+        if outgrows_min_margin(speed, size) {
+            self.fast += 1;
+        } else {
+            self.slow += 1;
+            // Not fast, so `speed` is 0 where `size` is.
+            if speed > 0.0 {
+                self.slow_motion += f64::from(speed / size);
+            }
+        }
+    }
+
+    /// The motion of two sets of movers together.
+    #[cfg(feature = "parallel")]
+    pub(super) fn add(self, other: Motion) -> Motion {
+        Motion {
+            fast: self.fast + other.fast,
+            slow: self.slow + other.slow,
+            slow_motion: self.slow_motion + other.slow_motion,
+        }
+    }
 }
 
 /// How far the centre of a box that moved from `old` to `new` since step `stamp` moved per
@@ -88,7 +125,7 @@ impl BroadPhase {
         let d = displacement(old, exact, self.store.stamp[s], self.now);
         let speed = d.abs().max_element();
         self.store.speed[s] = speed;
-        self.fast_movers += usize::from(outgrows_min_margin(speed, exact.extent().max_element()));
+        self.motion.note(speed, exact.extent().max_element());
         self.store.stamp[s] = self.now;
         d
     }

@@ -12,7 +12,8 @@
 //!
 //! An update stores the new shape and marks the slot; the step applies it ([`apply`]).
 //!
-//! The files: this one holds the type and its public API; [`config`] the settings,
+//! The files: this one holds the type and its public API; [`shape`] what a proxy is and
+//! whom it pairs with; [`config`] the settings,
 //! [`fat`] the fat-box layer (motion, fat boxes, the marks a step reads), [`slack`] what the
 //! incremental pass need not re-test, [`step`] the passes,
 //! [`query`] the queries, [`snapshot`] the serde form and [`validate`] the invariants.
@@ -21,6 +22,7 @@ mod apply;
 mod config;
 mod fat;
 mod query;
+mod shape;
 mod slack;
 #[cfg(feature = "serde")]
 mod snapshot;
@@ -30,6 +32,7 @@ mod validate;
 
 pub use config::{Config, Passes};
 pub use query::{QueryFilter, QueryPredicate};
+pub use shape::{BodyKind, CollisionGroups, Shape};
 
 use crate::bvh::Bvh;
 use crate::geom::{self, check_aabb, check_sphere};
@@ -37,100 +40,6 @@ use crate::octree::Octree;
 use crate::pair::{Pair, ProxyKey};
 use crate::{Aabb, BatchError, Error, Vec3};
 use store::{Kind, Store, flag};
-
-/// Whether a body moves. Static bodies never pair with each other.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum BodyKind {
-    /// A moving body: its box is expected to change every step.
-    Dynamic,
-    /// A body that does not move (walls, floors, terrain); it may still be updated, at the
-    /// price of a rebuild of the static tree.
-    Static,
-}
-
-/// What a proxy is. `Sphere` boxes are `center ± radius`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Shape {
-    /// A sphere.
-    Sphere {
-        /// Centre in world space.
-        center: Vec3,
-        /// Radius, `>= 0`.
-        radius: f32,
-    },
-    /// A rigid body given by its world AABB.
-    Body {
-        /// The body's world box.
-        aabb: Aabb,
-        /// Dynamic or static.
-        kind: BodyKind,
-    },
-}
-
-impl Shape {
-    /// The box as the user gave it (no margin).
-    #[must_use]
-    pub fn aabb(&self) -> Aabb {
-        match *self {
-            Shape::Sphere { center, radius } => Aabb::from_center_radius(center, radius),
-            Shape::Body { aabb, .. } => aabb,
-        }
-    }
-
-    /// True for a static body: two of them never pair.
-    #[must_use]
-    pub fn is_static(&self) -> bool {
-        matches!(
-            self,
-            Shape::Body {
-                kind: BodyKind::Static,
-                ..
-            }
-        )
-    }
-
-    /// The box the broadphase pairs: a sphere's `center ± (radius + margin)` (a radius sum
-    /// that overflows stays at `f32::MAX`), a body's box grown by `margin` on every side
-    /// (faces that overflow stay at `±f32::MAX`, which overlaps exactly what `±∞` would).
-    /// (For a sphere this is not always bit-equal to `aabb().grown(margin)`, which rounds
-    /// twice.)
-    #[must_use]
-    pub fn grown_aabb(&self, margin: f32) -> Aabb {
-        fat::grown(*self, margin).aabb.aabb()
-    }
-}
-
-/// Which proxies may pair: a pair is reported only if
-/// `a.memberships & b.filter != 0 && b.memberships & a.filter != 0` (bevy_rapier's rule).
-/// The default is every group in both masks, so every pair is allowed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct CollisionGroups {
-    /// The groups this proxy belongs to, one bit each.
-    pub memberships: u32,
-    /// The groups this proxy may pair with.
-    pub filter: u32,
-}
-
-impl Default for CollisionGroups {
-    fn default() -> Self {
-        Self::ALL
-    }
-}
-
-impl CollisionGroups {
-    /// Member of every group, pairs with every group.
-    pub const ALL: CollisionGroups = CollisionGroups {
-        memberships: u32::MAX,
-        filter: u32::MAX,
-    };
-
-    /// True if proxies with `self` and `other` may pair.
-    #[inline]
-    #[must_use]
-    pub fn allows(self, other: CollisionGroups) -> bool {
-        self.memberships & other.filter != 0 && other.memberships & self.filter != 0
-    }
-}
 
 /// Which pass a step ran.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -212,9 +121,8 @@ pub struct BroadPhase {
     pending: Vec<u32>,
     /// Proxies removed since the last step.
     removals: usize,
-    /// Proxies updated since the last step that move far enough per step to outgrow the
-    /// smallest fat margin: about one in `LOOKAHEAD_STEPS` of them escapes each step.
-    fast_movers: usize,
+    /// The motion of the proxies applied this step, for the pass estimate.
+    motion: fat::Motion,
     /// Candidate pairs (packed slot pairs, `HIT` set if their exact boxes overlapped at the
     /// last step), sorted.
     cand: slack::Gapped<u64>,
@@ -311,7 +219,7 @@ impl BroadPhase {
             loud: Vec::new(),
             pending: Vec::new(),
             removals: 0,
-            fast_movers: 0,
+            motion: fat::Motion::default(),
             cand: slack::Gapped::default(),
             rev: slack::Gapped::default(),
             rev_stale: false,
@@ -430,17 +338,48 @@ impl BroadPhase {
     /// Adds a sphere; it pairs from the next [`BroadPhase::step`] on. `Err` on a non-finite
     /// centre or radius or a negative radius. Any finite position is accepted: the octree's region follows the spheres.
     pub fn insert_sphere(&mut self, center: Vec3, radius: f32) -> Result<ProxyKey, Error> {
-        check_sphere(center, radius)?;
-        self.insert(Shape::Sphere { center, radius })
+        self.insert_sphere_with(center, radius, CollisionGroups::ALL)
     }
 
     /// Adds a body by its world AABB. `Err` on a non-finite or inverted box.
     pub fn insert_body(&mut self, aabb: Aabb, kind: BodyKind) -> Result<ProxyKey, Error> {
-        check_aabb(&aabb)?;
-        self.insert(Shape::Body { aabb, kind })
+        self.insert_body_with(aabb, kind, CollisionGroups::ALL)
     }
 
-    fn insert(&mut self, shape: Shape) -> Result<ProxyKey, Error> {
+    /// [`BroadPhase::insert_sphere`] with collision `groups`: the same checks and errors (on
+    /// `Err` nothing changes), and the same as inserting then calling
+    /// [`BroadPhase::set_groups`], in one call.
+    pub fn insert_sphere_with(
+        &mut self,
+        center: Vec3,
+        radius: f32,
+        groups: CollisionGroups,
+    ) -> Result<ProxyKey, Error> {
+        check_sphere(center, radius)?;
+        self.insert(Shape::Sphere { center, radius }, groups)
+    }
+
+    /// [`BroadPhase::insert_body`] with collision `groups`: the same checks and errors (on
+    /// `Err` nothing changes), and the same as inserting then calling
+    /// [`BroadPhase::set_groups`], in one call.
+    pub fn insert_body_with(
+        &mut self,
+        aabb: Aabb,
+        kind: BodyKind,
+        groups: CollisionGroups,
+    ) -> Result<ProxyKey, Error> {
+        check_aabb(&aabb)?;
+        self.insert(Shape::Body { aabb, kind }, groups)
+    }
+
+    /// True if `key` names a live proxy here: false for a stale key (its proxy removed) or a
+    /// null one.
+    #[must_use]
+    pub fn contains(&self, key: ProxyKey) -> bool {
+        self.store.resolve(key).is_some()
+    }
+
+    fn insert(&mut self, shape: Shape, groups: CollisionGroups) -> Result<ProxyKey, Error> {
         let exact = self.exact_box(&shape);
         if self.octree.len() + self.dynamic.len() + self.statics.len() >= MAX_PROXIES {
             return Err(Error::Full);
@@ -449,6 +388,10 @@ impl BroadPhase {
             .store
             .alloc(shape, exact, self.now)
             .ok_or(Error::Full)?;
+        if groups != CollisionGroups::ALL {
+            self.store.set_group(slot as usize, groups);
+            self.any_groups = true;
+        }
         self.place(slot);
         Ok(self.store.key(slot))
     }

@@ -44,7 +44,7 @@ use glam::Vec3A;
 /// search per candidate it has, each a chain of cache misses) costs about as much as scanning
 /// this many candidates for a loud or removed side (the scan reads two flags per candidate,
 /// from an array that stays in the cache): past that many proxies to visit, the step scans.
-const CANDIDATES_PER_LOOKUP: usize = 300;
+pub(super) const CANDIDATES_PER_LOOKUP: usize = 300;
 
 /// The candidates to visit and the reverse entries that change are sorted by a radix sort
 /// from this many on, by the standard library's sort below it (whose cost per item is

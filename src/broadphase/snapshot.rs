@@ -270,55 +270,7 @@ impl Snapshot {
         // The slots with groups other than `ALL`, set once every slot is in.
         let mut grouped = Vec::new();
         for (s, slot) in self.slots.iter().enumerate() {
-            let (version, kind, shape, groups) = match *slot {
-                Slot::Free(version) => {
-                    let nothing = Shape::Sphere {
-                        center: Vec3::ZERO,
-                        radius: 0.0,
-                    };
-                    (version, Kind::Free, nothing, None)
-                }
-                Slot::Sphere {
-                    version,
-                    center,
-                    radius,
-                    groups,
-                } => {
-                    let center = Vec3::from_array(center);
-                    (
-                        version,
-                        Kind::Sphere,
-                        Shape::Sphere { center, radius },
-                        groups,
-                    )
-                }
-                Slot::Dynamic {
-                    version,
-                    min,
-                    max,
-                    groups,
-                } => (
-                    version,
-                    Kind::Dynamic,
-                    body(min, max, BodyKind::Dynamic),
-                    groups,
-                ),
-                Slot::Static {
-                    version,
-                    min,
-                    max,
-                    groups,
-                } => (
-                    version,
-                    Kind::Static,
-                    body(min, max, BodyKind::Static),
-                    groups,
-                ),
-            };
-            let groups = groups.map_or(CollisionGroups::ALL, |g| CollisionGroups {
-                memberships: g.memberships,
-                filter: g.filter,
-            });
+            let (version, kind, shape, groups) = slot.parts();
             if kind != Kind::Free {
                 live += 1;
             }
@@ -383,6 +335,16 @@ impl Snapshot {
                 "{n} slots, more than the {MAX_SLOTS} a broadphase holds"
             ));
         }
+        let mut roles = self.slot_roles()?;
+        self.list_roles(&mut roles)?;
+        self.check_pairs(&roles)?;
+        Ok(roles)
+    }
+
+    /// Each slot's part as the slots say (live, or free and not listed yet), every live slot's
+    /// version and shape checked.
+    fn slot_roles(&self) -> Result<Vec<Role>, String> {
+        let n = self.slots.len();
         let mut roles = Vec::with_capacity(n);
         for (s, slot) in self.slots.iter().enumerate() {
             let (version, shape) = match *slot {
@@ -419,6 +381,13 @@ impl Snapshot {
             shape.map_err(|e| format!("slot {s}: {e}"))?;
             roles.push(Role::Live);
         }
+        Ok(roles)
+    }
+
+    /// The free list's and the quarantine's part in `roles`: each names a free slot once, with
+    /// a version it may have there, and every free slot whose version is not spent is in one.
+    fn list_roles(&self, roles: &mut [Role]) -> Result<(), String> {
+        let n = self.slots.len();
         for (list, name, role) in [
             (&self.free, "free list", Role::Free),
             (&self.quarantine, "quarantine", Role::Quarantined),
@@ -464,6 +433,13 @@ impl Snapshot {
                 ));
             }
         }
+        Ok(())
+    }
+
+    /// The pair list: strictly increasing pairs of two slots, each live or quarantined, not
+    /// both static.
+    fn check_pairs(&self, roles: &[Role]) -> Result<(), String> {
+        let n = self.slots.len();
         let mut last = None;
         for &(lo, hi) in &self.pairs {
             if lo >= hi || hi as usize >= n {
@@ -488,7 +464,64 @@ impl Snapshot {
                 return Err(format!("pair ({lo}, {hi}) is two static bodies"));
             }
         }
-        Ok(roles)
+        Ok(())
+    }
+}
+
+impl Slot {
+    /// The slot's version, kind, shape (a zero sphere for a free slot) and groups
+    /// ([`CollisionGroups::ALL`] where none were saved).
+    fn parts(&self) -> (u32, Kind, Shape, CollisionGroups) {
+        let (version, kind, shape, groups) = match *self {
+            Slot::Free(version) => {
+                let nothing = Shape::Sphere {
+                    center: Vec3::ZERO,
+                    radius: 0.0,
+                };
+                (version, Kind::Free, nothing, None)
+            }
+            Slot::Sphere {
+                version,
+                center,
+                radius,
+                groups,
+            } => {
+                let center = Vec3::from_array(center);
+                (
+                    version,
+                    Kind::Sphere,
+                    Shape::Sphere { center, radius },
+                    groups,
+                )
+            }
+            Slot::Dynamic {
+                version,
+                min,
+                max,
+                groups,
+            } => (
+                version,
+                Kind::Dynamic,
+                body(min, max, BodyKind::Dynamic),
+                groups,
+            ),
+            Slot::Static {
+                version,
+                min,
+                max,
+                groups,
+            } => (
+                version,
+                Kind::Static,
+                body(min, max, BodyKind::Static),
+                groups,
+            ),
+        };
+        let groups = groups.map_or(CollisionGroups::ALL, |g| CollisionGroups {
+            memberships: g.memberships,
+            filter: g.filter,
+        });
+        (version, kind, shape, groups)
     }
 }
 

@@ -54,10 +54,24 @@ mod cost {
     /// The full pass, per pair found (its sort and the lists).
     pub(super) const FULL_PAIR: f64 = 20.0;
     /// Carrying one candidate through the step without testing it: the scan for loud sides
-    /// and the patches that move it.
+    /// and the patches that move it. With few loud proxies the step looks their candidates up
+    /// instead of scanning (see `slack::CANDIDATES_PER_LOOKUP`), at the price of scanning that
+    /// many candidates per lookup.
     pub(super) const CARRY: f64 = 7.0;
-    /// Re-testing one candidate's exact boxes (scattered reads, a branch per outcome).
-    pub(super) const TEST: f64 = 33.0;
+    /// Re-testing one candidate's exact boxes (a branch per outcome), while the exact boxes
+    /// of every proxy fit in [`CACHE_BYTES`]: the partner's box is read from the cache.
+    pub(super) const TEST: f64 = 10.0;
+    /// Re-testing one candidate whose partner's box is a cache miss: in a world whose exact
+    /// boxes outgrow [`CACHE_BYTES`], the share of partners that miss costs this.
+    pub(super) const TEST_MISS: f64 = 33.0;
+    /// The cache the exact boxes of the re-tested partners are read from, in bytes.
+    pub(super) const CACHE_BYTES: f64 = 1024.0 * 1024.0;
+
+    /// One re-test in a world of `n` proxies (32-byte exact boxes each).
+    pub(super) fn test(n: f64) -> f64 {
+        let missing = (1.0 - CACHE_BYTES / (32.0 * n.max(1.0))).max(0.0);
+        TEST + (TEST_MISS - TEST) * missing
+    }
     /// One escaped proxy in a world of about [`DENSE_CANDIDATES`] candidates per proxy or
     /// more: its structure queries, its new fat box and relink, its new candidates' sort and
     /// merge.
@@ -232,6 +246,18 @@ pub(super) enum Plan {
     Incremental,
 }
 
+/// Before the incremental regime has run, a slow mover (one that stays in its fat box) is
+/// taken to re-test its candidates once in the steps it takes to drift half the smallest fat
+/// margin, `1/64` of its size (see `fat::MIN_MARGIN`): per step, its speed as a fraction of its
+/// size times this. Once the regime has run and been left, the estimate follows what it saw
+/// instead ([`Costs::loud_per_motion`]).
+const LOUD_PER_MOTION: f64 = 2.0 * 64.0;
+/// Per step outside the incremental regime, what the regime's last steps taught the estimate
+/// ([`Costs::loud_per_motion`]) keeps this share of its distance from [`LOUD_PER_MOTION`]: a
+/// world left in a burst (a landing, a wake-up) is tried again once it has calmed, instead of
+/// being priced by that burst for good.
+const RELEARN_KEEP: f64 = 0.9;
+
 /// An incremental step refits the dynamic BVH once this fraction of its bodies got new fat
 /// boxes since its last refit: until then the boxes enlarged on update keep it exact, only
 /// looser.
@@ -245,6 +271,17 @@ pub(super) struct Costs {
     /// Of the movers of the last incremental step, the fraction that re-tested their
     /// candidates (see [`super::slack`]).
     loud_per_mover: f64,
+    /// Of the movers of the last incremental step that stayed in their fat boxes, the
+    /// fraction that re-tested their candidates.
+    loud_per_slow: f64,
+    /// Outside the incremental regime, the slow movers expected to re-test their candidates
+    /// per unit of their summed motion (`fat::Motion::slow_motion`): [`LOUD_PER_MOTION`] until
+    /// the regime is left, then what the regime's last step saw, over the motion of the first
+    /// step after it, returning towards [`LOUD_PER_MOTION`] by [`RELEARN_KEEP`] a step.
+    loud_per_motion: f64,
+    /// The incremental regime was left at the last step: this step's motion, with the
+    /// regime's last `loud_per_slow`, gives `loud_per_motion`.
+    just_left: bool,
     /// The last incremental step's estimate was over the full pass's.
     over: bool,
     /// The step that last entered the incremental regime.
@@ -259,6 +296,9 @@ impl Default for Costs {
         Costs {
             cand_per_proxy: None,
             loud_per_mover: 1.0,
+            loud_per_slow: 1.0,
+            loud_per_motion: LOUD_PER_MOTION,
+            just_left: false,
             over: false,
             entered: 0,
             pairs_seen: false,
@@ -285,7 +325,8 @@ impl BroadPhase {
             // Leaving drops the candidates, which a later return rebuilds with a full pass of
             // its own: a single step over the full pass's cost (a burst of escapes) does not
             // leave, two in a row do, and so does one step far over it (a world waking up).
-            let inc = self.incremental_cost(movers as f64, self.escaped.len() as f64);
+            let escapes = self.escaped.len() as f64;
+            let inc = self.incremental_cost(movers as f64 * self.costs.loud_per_mover, escapes);
             let over = inc > full;
             let was_over = core::mem::replace(&mut self.costs.over, over);
             let settling = self.now.wrapping_sub(self.costs.entered) <= ENTRY_BURST_STEPS;
@@ -295,16 +336,29 @@ impl BroadPhase {
                 LEAVE_AT_ONCE
             };
             if over && ((was_over && !settling) || inc > full * at_once) {
+                self.costs.just_left = true;
                 Plan::Full
             } else {
                 Plan::Incremental
             }
         } else {
-            // A fast mover's fat box is swept over `PREDICT_STEPS` of its motion, times a
-            // jitter of 1.5 on average: one that keeps its velocity escapes about once in that
-            // many steps.
-            let escapes = self.fast_movers as f64 / (1.5 * f64::from(PREDICT_STEPS));
-            let inc = self.incremental_cost(movers as f64, escapes);
+            // The regime is priced from the motion just applied: a fast mover's fat box is
+            // swept over `PREDICT_STEPS` of its motion, times a jitter of 1.5 on average, so
+            // one that keeps its velocity escapes about once in that many steps; a slow one
+            // stays in its fat box and re-tests its candidates in proportion to its motion
+            // (zero for a proxy sent where it already was). An insert or a regroup (listed as
+            // escaped) would query the structures like an escape.
+            let m = self.motion;
+            let escapes =
+                m.fast as f64 / (1.5 * f64::from(PREDICT_STEPS)) + self.escaped.len() as f64;
+            let c = &mut self.costs;
+            c.loud_per_motion =
+                LOUD_PER_MOTION + (c.loud_per_motion - LOUD_PER_MOTION) * RELEARN_KEEP;
+            if core::mem::take(&mut c.just_left) && m.slow_motion > 0.0 {
+                c.loud_per_motion = c.loud_per_slow * m.slow as f64 / m.slow_motion;
+            }
+            let slow_loud = (self.costs.loud_per_motion * m.slow_motion).min(m.slow as f64);
+            let inc = self.incremental_cost(slow_loud + escapes, escapes);
             if inc < full * ENTER_FRACTION {
                 self.costs.entered = self.now;
                 Plan::FullFat
@@ -314,8 +368,9 @@ impl BroadPhase {
         }
     }
 
-    /// The estimated cost of an incremental step with `movers` updated and `escapes` escaped.
-    fn incremental_cost(&self, movers: f64, escapes: f64) -> f64 {
+    /// The estimated cost of an incremental step in which `loud` proxies re-test their
+    /// candidates, `escapes` of them after leaving their fat boxes.
+    fn incremental_cost(&self, loud: f64, escapes: f64) -> f64 {
         let n = self.store.len().max(1) as f64;
         // Before any count, fat boxes are taken to double the pairs.
         let per_proxy = self
@@ -327,7 +382,6 @@ impl BroadPhase {
         } else {
             n * per_proxy
         };
-        let loud = movers * self.costs.loud_per_mover;
         // Before any pass an escape is priced as a dense world's: the first step of a gas
         // has no pairs yet.
         let density = if self.costs.pairs_seen {
@@ -335,8 +389,10 @@ impl BroadPhase {
         } else {
             cost::DENSE_CANDIDATES
         };
-        cands * cost::CARRY
-            + (loud * per_proxy * 2.0).min(cands) * cost::TEST
+        // The loud proxies' candidates are looked up, or found by one scan of them all.
+        let visited = cands.min(loud * super::slack::CANDIDATES_PER_LOOKUP as f64);
+        visited * cost::CARRY
+            + (loud * per_proxy * 2.0).min(cands) * cost::test(n)
             + escapes * cost::query(density)
     }
 
@@ -388,7 +444,7 @@ impl BroadPhase {
         }
         self.escaped.clear();
         self.removals = 0;
-        self.fast_movers = 0;
+        self.motion = super::fat::Motion::default();
         self.store.release_quarantine();
         self.keep_headroom();
     }
@@ -636,6 +692,10 @@ impl BroadPhase {
         self.update_candidates();
         let movers = self.movers.len().max(1) as f64;
         self.costs.loud_per_mover = (self.loud.len() as f64 / movers).min(1.0);
+        let escaped = self.escaped.len();
+        let slow = self.movers.len().saturating_sub(escaped).max(1) as f64;
+        let slow_loud = self.loud.len().saturating_sub(escaped) as f64;
+        self.costs.loud_per_slow = (slow_loud / slow).min(1.0);
     }
 
     /// New candidates of each escaped proxy: every held box its own overlaps, in the octree

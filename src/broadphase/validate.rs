@@ -15,85 +15,13 @@ impl BroadPhase {
     /// own invariants, the step lists, and with candidates, that they
     /// are exactly the allowed pairs of overlapping held boxes and that the pair list is their
     /// overlapping part. For tests: O(n log n + candidates).
+    #[doc(hidden)]
     pub fn validate(&self) {
         let st = &self.store;
         let mut live = [0usize; 3];
         let mut stale = 0;
         for s in 0..st.slots() {
-            let v = st.version[s];
-            assert_eq!(
-                v & 1 == 1,
-                st.kind[s] != Kind::Free,
-                "slot {s}: version and kind"
-            );
-            if st.kind[s] == Kind::Free {
-                continue;
-            }
-            assert_eq!(st.flags[s] & flag::GONE, 0, "slot {s}: live but gone");
-            let is_stale = st.flags[s] & flag::STALE != 0;
-            if is_stale {
-                stale += 1;
-                assert_ne!(st.flags[s] & flag::MOVED, 0, "slot {s}: stale, not moved");
-            } else if self.cached || st.kind[s] != Kind::Sphere {
-                assert_eq!(
-                    st.exact[s],
-                    self.exact_box(&st.shape[s]),
-                    "slot {s}: exact box stale"
-                );
-            }
-            let key = st.key(s as u32);
-            // Outside the incremental regime the structure holds the exact box, which the
-            // store keeps only inside it: a stale slot's, the last applied, is known only to
-            // its structure there.
-            let held = if self.cached {
-                Some(st.held[s])
-            } else if is_stale {
-                None
-            } else {
-                Some(self.exact_box(&st.shape[s]))
-            };
-            let (home, held_there) = match st.shape[s] {
-                Shape::Sphere { .. } => (0, self.octree.aabb(key)),
-                Shape::Body {
-                    kind: BodyKind::Dynamic,
-                    ..
-                } => (1, self.dynamic.aabb(key)),
-                Shape::Body {
-                    kind: BodyKind::Static,
-                    ..
-                } => (2, self.statics.aabb(key)),
-            };
-            live[home] += 1;
-            assert!(held_there.is_some(), "slot {s}: missing from its structure");
-            if let Some(held) = held {
-                assert_eq!(
-                    held_there.map(|a| SimdBox::new(&a)),
-                    Some(held),
-                    "slot {s}: its structure does not hold its box"
-                );
-            }
-            let others = [
-                self.octree.contains(key),
-                self.dynamic.contains(key),
-                self.statics.contains(key),
-            ];
-            assert_eq!(
-                others.iter().filter(|&&c| c).count(),
-                1,
-                "slot {s}: held by more than one structure"
-            );
-            if self.cached {
-                assert!(
-                    st.held[s].contains(&st.exact[s]),
-                    "slot {s}: outside its fat box"
-                );
-            }
-            if st.flags[s] & flag::MOVED != 0 {
-                assert!(
-                    self.movers.contains(&(s as u32)),
-                    "slot {s}: moved, not listed"
-                );
-            }
+            self.validate_slot(s, &mut live, &mut stale);
         }
         assert_eq!(live.iter().sum::<usize>(), st.len(), "live count");
         assert_eq!(stale, self.stale, "stale count");
@@ -114,9 +42,94 @@ impl BroadPhase {
         if self.cached && self.movers.is_empty() && self.removals == 0 {
             self.validate_candidates();
         }
-        // The pair list is what the next full pass diffs against, reading it packed: each
-        // pair names the keys its slots hold (live, or quarantined since their removal) in
-        // canonical order, and the packed pairs strictly increase.
+        self.validate_pairs();
+    }
+
+    /// Slot `s`, if live: its flags and lists, its box held under its key by its own structure
+    /// alone; counted in `live` (by structure) and `stale`.
+    fn validate_slot(&self, s: usize, live: &mut [usize; 3], stale: &mut usize) {
+        let st = &self.store;
+        let v = st.version[s];
+        assert_eq!(
+            v & 1 == 1,
+            st.kind[s] != Kind::Free,
+            "slot {s}: version and kind"
+        );
+        if st.kind[s] == Kind::Free {
+            return;
+        }
+        assert_eq!(st.flags[s] & flag::GONE, 0, "slot {s}: live but gone");
+        let is_stale = st.flags[s] & flag::STALE != 0;
+        if is_stale {
+            *stale += 1;
+            assert_ne!(st.flags[s] & flag::MOVED, 0, "slot {s}: stale, not moved");
+        } else if self.cached || st.kind[s] != Kind::Sphere {
+            assert_eq!(
+                st.exact[s],
+                self.exact_box(&st.shape[s]),
+                "slot {s}: exact box stale"
+            );
+        }
+        let key = st.key(s as u32);
+        // Outside the incremental regime the structure holds the exact box, which the
+        // store keeps only inside it: a stale slot's, the last applied, is known only to
+        // its structure there.
+        let held = if self.cached {
+            Some(st.held[s])
+        } else if is_stale {
+            None
+        } else {
+            Some(self.exact_box(&st.shape[s]))
+        };
+        let (home, held_there) = match st.shape[s] {
+            Shape::Sphere { .. } => (0, self.octree.aabb(key)),
+            Shape::Body {
+                kind: BodyKind::Dynamic,
+                ..
+            } => (1, self.dynamic.aabb(key)),
+            Shape::Body {
+                kind: BodyKind::Static,
+                ..
+            } => (2, self.statics.aabb(key)),
+        };
+        live[home] += 1;
+        assert!(held_there.is_some(), "slot {s}: missing from its structure");
+        if let Some(held) = held {
+            assert_eq!(
+                held_there.map(|a| SimdBox::new(&a)),
+                Some(held),
+                "slot {s}: its structure does not hold its box"
+            );
+        }
+        let others = [
+            self.octree.contains(key),
+            self.dynamic.contains(key),
+            self.statics.contains(key),
+        ];
+        assert_eq!(
+            others.iter().filter(|&&c| c).count(),
+            1,
+            "slot {s}: held by more than one structure"
+        );
+        if self.cached {
+            assert!(
+                st.held[s].contains(&st.exact[s]),
+                "slot {s}: outside its fat box"
+            );
+        }
+        if st.flags[s] & flag::MOVED != 0 {
+            assert!(
+                self.movers.contains(&(s as u32)),
+                "slot {s}: moved, not listed"
+            );
+        }
+    }
+
+    /// The pair list is what the next full pass diffs against, reading it packed: each pair
+    /// names the keys its slots hold (live, or quarantined since their removal) in canonical
+    /// order, and the packed pairs strictly increase.
+    fn validate_pairs(&self) {
+        let st = &self.store;
         assert!(
             self.pairs.iter().all(|p| p.a < p.b),
             "pair list holds a pair out of order"

@@ -326,16 +326,24 @@ fn build_parallel(
     leaf_of: &mut [u32],
     threads: usize,
 ) {
-    use rayon::prelude::*;
+    let cutoff = (refs.len() / (SUBTREES_PER_THREAD * threads)).max(config.max_leaf_size as usize);
+    split_top(config, s, refs, cutoff);
+    build_subtrees(config, s, refs, leaf_of);
+    write_top(&s.top, &s.subtrees, nodes, parent, leaf_of);
+}
+
+/// The top of the tree, split on the calling thread in [`build_nodes`]' depth-first order
+/// into `s.top`: interior nodes, and a subtree task for each node of at most `cutoff`
+/// primitives (or that does not split).
+#[cfg(feature = "parallel")]
+fn split_top(config: &BvhConfig, s: &mut BuildScratch, refs: &mut [SimdBox], cutoff: usize) {
     let BuildScratch {
         ids,
         tasks,
         work,
         top,
-        subtrees,
         ..
     } = s;
-    let cutoff = (refs.len() / (SUBTREES_PER_THREAD * threads)).max(config.max_leaf_size as usize);
     work.prepare();
     top.clear();
     tasks.clear();
@@ -372,8 +380,21 @@ fn build_parallel(
         });
         push_children(tasks, &t, index, sp);
     }
+}
 
-    // One part of each buffer per subtree, in depth-first (= primitive) order.
+/// Builds the subtrees of `s.top`'s tasks over rayon's current pool, each on its own part of
+/// the buffers (the parts are consecutive in depth-first order) into its own `s.subtrees`.
+#[cfg(feature = "parallel")]
+fn build_subtrees(
+    config: &BvhConfig,
+    s: &mut BuildScratch,
+    refs: &mut [SimdBox],
+    leaf_of: &mut [u32],
+) {
+    use rayon::prelude::*;
+    let BuildScratch {
+        ids, top, subtrees, ..
+    } = s;
     let count = top
         .iter()
         .filter(|i| matches!(i, TopItem::Subtree { .. }))
@@ -407,12 +428,22 @@ fn build_parallel(
             parent.clear();
             build_nodes(config, tasks, work, r, i, nodes, parent, l, &task.bounds);
         });
+}
 
-    // The top in depth-first order, each subtree copied in at its place. `placed[k]`: where
-    // top item `k` landed (an interior item's node, or a subtree's root).
+/// Writes the top in depth-first order into `nodes` and `parent`, each subtree's nodes copied
+/// in at its place with their indices shifted to where they landed (and `leaf_of` with them).
+#[cfg(feature = "parallel")]
+fn write_top(
+    top: &[TopItem],
+    subtrees: &[Subtree],
+    nodes: &mut Vec<Node>,
+    parent: &mut Vec<u32>,
+    leaf_of: &mut [u32],
+) {
+    // `place[k]`: where top item `k` landed (an interior item's node, or a subtree's root).
     let mut place = Vec::with_capacity(top.len());
     let mut next_subtree = 0;
-    for item in top.iter() {
+    for item in top {
         let index = nodes.len() as u32;
         place.push(index);
         let (p, second) = match *item {

@@ -34,9 +34,8 @@
 //! - **Constructors refuse, never correct.** [`Bvh::new`] and [`Bvh::from_aabbs`] return `Err`
 //!   naming the first bad field or box ([`Error::InvalidConfig`], [`Error::NonFinite`],
 //!   [`Error::InvertedAabb`]) and build nothing; no value is clamped or replaced.
-//! - **`validate` panics, `check` returns.** [`Bvh::validate`] checks every internal invariant
-//!   and panics on the first broken one (tests, debugging); [`BvhConfig::check`] tells a caller
-//!   whether a configuration is valid, as a `Result`.
+//! - **`check` returns.** [`BvhConfig::check`] tells a caller whether a configuration is
+//!   valid, as a `Result`.
 //! - **Pairs two ways.** [`Bvh::for_each_pair`] calls a closure per overlapping pair;
 //!   [`Bvh::pairs_into`] appends them to a `Vec<Pair>`, canonical and unsorted.
 //! - **Stats are cheap.** [`Bvh::stats`] walks the node array once (for the SAH cost and the
@@ -46,6 +45,8 @@ mod build;
 mod lanes;
 mod node;
 mod pairs;
+#[cfg(feature = "parallel")]
+mod pairs_split;
 mod query;
 mod refit;
 mod split;
@@ -59,9 +60,9 @@ use node::Node;
 use slotmap::{Key, SecondaryMap, SlotMap};
 
 pub(crate) use build::BuildScratch;
-pub use pairs::PairScratch;
+use pairs::PairScratch;
 #[cfg(feature = "parallel")]
-pub(crate) use pairs::SplitScratch;
+pub(crate) use pairs_split::SplitScratch;
 
 /// "No index" in the `u32` side arrays.
 const NONE: u32 = u32::MAX;
@@ -405,7 +406,7 @@ impl Bvh {
     /// was 0), and the builds so far: [`Bvh::stats`]'s `cost_ratio` and `rebuilds` as of the
     /// last refit, in O(1).
     #[must_use]
-    pub fn refit_stats(&self) -> (f32, u64) {
+    pub(crate) fn refit_stats(&self) -> (f32, u64) {
         let ratio = if self.cost_at_build > 0.0 {
             self.cost_last / self.cost_at_build
         } else {

@@ -11,6 +11,7 @@ impl Bvh {
     /// tree primitive lies in exactly one leaf and `leaf_of` names it; keys and the key map
     /// agree; tombstones hold [`Aabb::EMPTY`](crate::Aabb::EMPTY) and live boxes are finite
     /// and not inverted. O(n); for tests and debugging.
+    #[doc(hidden)]
     pub fn validate(&self) {
         assert!(
             self.deferred.is_empty(),

@@ -16,7 +16,7 @@
 //!   node's loose bounds wherever the centre is, so a sphere's level depends only on its radius
 //!   and nothing stays near the root for straddling a plane. Pairs are found between a node and
 //!   its 26 same-level neighbours, and across levels by descending the neighbours' occupied
-//!   subtrees (module `loose`). Use [`depth_for_loose`] for the depth. The default of
+//!   subtrees (module `loose`). The default of
 //!   [`BroadPhase`](crate::BroadPhase) ([`Config::octree_placement`](crate::Config)), whose
 //!   octree holds spheres of every size.
 //!
@@ -25,15 +25,19 @@
 //! re-roots is quadratic).
 //!
 //! Queries and rays follow the per-node lists through occupied subtrees, testing nodes by
-//! their cells (strict) or loose bounds (loose) (module `query`); [`Octree::validate`] checks
-//! every invariant (module `validate`).
+//! their cells (strict) or loose bounds (loose) (module `query`); module `validate` checks
+//! every invariant, for the tests.
 //!
 //! The modules, each standing only on those before it: `cell` (implicit node indexing and
 //! Morton codes), `nodes` (paged per-node arrays and the one subtree walk), `placement` (both
 //! placement rules, the walk keys and the region a node's spheres reach: apart from
-//! [`Octree::for_each_pair`] choosing the pass, the only code that tells the placements apart), `walk` (the walk order, the test counter and the short and
-//! swept pair loops both passes use), then `strict` and `loose` (one pair pass each), `query`
-//! and `validate`.
+//! [`Octree::for_each_pair`] choosing the pass, the only code that tells the placements
+//! apart), `lists` (the per-node sphere lists and the relinks a move defers to the next
+//! pass), `region` (the growing region), `batch` (the batched update split over tasks,
+//! feature `parallel`), `walk` (the walk order, the test counter and the short and swept pair
+//! loops both passes use), then `strict` and `loose` (one pair pass each; `loose_node`
+//! holds the loose pass's work per node), `query` and
+//! `validate`. This file holds the type and its API.
 //!
 //! Memory: the tree is "preallocated" in the sense of implicit indexing (level `L` starts at
 //! node `(8^L − 1)/7`, a node's index within its level is its Morton code), but the per-node
@@ -48,16 +52,19 @@
 //! - **Constructors refuse, never correct.** [`Octree::new`] and [`Octree::with_placement`]
 //!   return `Err` naming the first bad argument ([`Error::DepthOutOfRange`],
 //!   [`Error::InvalidBounds`]) and build nothing; no argument is clamped or replaced.
-//! - **`validate` panics, `check` returns.** [`Octree::validate`] checks every internal
-//!   invariant and panics on the first broken one (tests, debugging); a `check` method (such as
+//! - **`check` returns.** A `check` method (such as
 //!   [`BvhConfig::check`](crate::BvhConfig::check)) tells a caller whether values it gives are
 //!   valid, as a `Result`.
 //! - **Pairs two ways.** [`Octree::for_each_pair`] calls a closure per overlapping pair;
 //!   [`Octree::pairs_into`] appends them to a `Vec<Pair>`, canonical and unsorted.
 //! - **Stats are cheap.** [`Octree::stats`] copies counters: no allocation, O(1).
 
+#[cfg(feature = "parallel")]
+mod batch;
 mod cell;
+mod lists;
 mod loose;
+mod loose_node;
 mod nodes;
 mod placement;
 mod query;
@@ -66,6 +73,8 @@ mod strict;
 mod validate;
 mod walk;
 
+#[cfg(feature = "parallel")]
+pub(crate) use batch::Moves;
 pub use placement::{depth_for, depth_for_loose};
 
 use crate::error::Error;
@@ -73,6 +82,7 @@ use crate::geom::{self, Aabb};
 use crate::pair::{Pair, ProxyKey};
 use cell::level_of;
 use glam::Vec3;
+use lists::{Deferred, relink_all};
 use nodes::Nodes;
 use placement::Lattice;
 use region::Regrow;
@@ -330,95 +340,6 @@ impl Octree {
         self.growing
     }
 
-    /// A growing tree re-roots here if it needs to (see [`Octree::growing`]): when more
-    /// spheres lie outside its region than `max(64, len / 64)` (and than twice as many as
-    /// right after its last re-root), when it holds more than twice the spheres it held at its
-    /// last re-root, or when a periodic audit (its period doubling while audits find nothing,
-    /// up to 1024 calls) finds cells that no longer fit the spheres. O(1) otherwise; a re-root
-    /// places every sphere again, O(n), and may allocate. The pair passes call it first; a
-    /// caller that moves spheres and only queries should call it after each batch of moves
-    /// (queries stay exact without it, but pay for every sphere outside the region). Does
-    /// nothing for a tree with a fixed region.
-    pub fn maintain(&mut self) {
-        if !self.growing {
-            return;
-        }
-        if self.live == 0 {
-            self.regrow.rooted = 0;
-            return;
-        }
-        let limit = region::overflow_limit(self.live).max(2 * self.overflow_after as usize);
-        if self.overflow as usize > limit || self.live > 2 * self.regrow.rooted {
-            match self.propose() {
-                Some(p) => self.reroot(&p),
-                None => {
-                    // No finite region covers the world: keep this one, and wait for twice
-                    // the overflow (or spheres) before trying again.
-                    let sampled = self.audit_sample();
-                    self.regrow.rooted(self.live, None, sampled);
-                    self.overflow_after = self.overflow;
-                }
-            }
-            return;
-        }
-        if self.regrow.tick() {
-            let sampled = self.audit_sample();
-            if self.regrow.sample_unchanged(sampled) {
-                self.regrow.back_off();
-                return;
-            }
-            self.regrow.full_audits += 1;
-            match self.propose() {
-                Some(p) if region::worth_it(&self.lattice, &p) => self.reroot(&p),
-                _ => self.regrow.back_off(),
-            }
-        }
-    }
-
-    /// The audit's sample of the spheres now (`region::Sampled::of`, with the walk order's
-    /// buffer lent as scratch).
-    fn audit_sample(&mut self) -> Option<region::Sampled> {
-        region::Sampled::of(&self.objs, self.passes.walk.idle_items())
-    }
-
-    /// The region and depth the spheres call for now (`Regrow::propose` over this tree's
-    /// spheres, hint and placement, with the walk order's buffers lent as scratch).
-    fn propose(&mut self) -> Option<region::Proposal> {
-        self.regrow.propose(
-            &self.objs,
-            self.live,
-            self.hint,
-            self.lattice.placement,
-            self.passes.walk.idle_items(),
-        )
-    }
-
-    /// Places every sphere again in a tree over the proposal's region and depth.
-    #[inline(never)]
-    fn reroot(&mut self, p: &region::Proposal) {
-        self.lattice = Lattice::new(p.bounds, p.depth, self.lattice.placement);
-        self.memo = placement::LevelMemo::EMPTY;
-        self.nodes.reset(cell::node_count(p.depth));
-        self.per_level = [0; MAX_DEPTH as usize + 1];
-        self.overflow = 0;
-        // Every sphere is linked again from scratch below: the lists owe nothing.
-        self.deferred.clear();
-        for id in 0..self.objs.len() as u32 {
-            let o = &mut self.objs[id as usize];
-            if o.node == NONE {
-                continue;
-            }
-            let at = self.lattice.locate(o.center, o.radius);
-            self.per_level[level_of(at.node()) as usize] += 1;
-            self.overflow += u32::from(at.outside());
-            self.link(id, at.node());
-        }
-        let sampled = self.audit_sample();
-        self.regrow.rooted(self.live, Some(p.span_center), sampled);
-        self.overflow_after = self.overflow;
-        self.reroots += 1;
-    }
-
     /// Inserts a sphere and returns its new key. `Err` on a non-finite centre or radius or a
     /// negative radius (tree unchanged); a sphere outside the bounds is accepted.
     pub fn insert(&mut self, center: Vec3, radius: f32) -> Result<ProxyKey, Error> {
@@ -565,51 +486,6 @@ impl Octree {
         self.store_located(id, center, radius, &at);
     }
 
-    /// [`Octree::update_checked`] of a key its caller knows is live here (the `BroadPhase`,
-    /// which holds every live sphere here under its key: no key check), which leaves the
-    /// node lists behind: a sphere that changes node gets its node, walk key and level count
-    /// at once (all that a pass's walk-order sort reads) and is listed in `deferred`. The
-    /// next [`Octree::prepare_pass`] relinks the listed spheres beside its sort, on another
-    /// thread when it splits the sort; any other change first relinks them
-    /// ([`Octree::flush_relinks`]). The lists end as relinking each sphere here would have
-    /// left them. Each id at most once until one of those: the broadphase's apply updates
-    /// each stale slot once per step, and its step ends with a flush.
-    #[inline(always)]
-    pub(crate) fn update_live_deferred(&mut self, key: ProxyKey, center: Vec3, radius: f32) {
-        let id = crate::pair::slot(key);
-        debug_assert!(self.id_of(key).is_some(), "a key not live here");
-        let at = self.lattice.locate_memo(center, radius, &mut self.memo);
-        let (old, new) = (self.store_sphere(id, center, radius, &at), at.node());
-        if old != new {
-            self.count_move(old, new);
-            self.objs[id as usize].set_node(&self.lattice, new);
-            self.deferred.push(Deferred { id, old });
-        }
-    }
-
-    /// Relinks, one by one and in the order they were moved, the spheres whose lists
-    /// [`Octree::update_live_deferred`] left behind: the lists then are what relinking each
-    /// at its move would have made. Nothing (one test) when there are none.
-    #[inline]
-    pub(crate) fn flush_relinks(&mut self) {
-        if !self.deferred.is_empty() {
-            self.relink_deferred();
-        }
-    }
-
-    #[inline(never)]
-    fn relink_deferred(&mut self) {
-        relink_all(&self.objs, &mut self.links, &mut self.nodes, &self.deferred);
-        self.relinked();
-    }
-
-    /// Empties `deferred` once its spheres are relinked, keeping room for half again as
-    /// many, so that a steady world stops allocating here.
-    fn relinked(&mut self) {
-        crate::radix::ahead(&mut self.deferred);
-        self.deferred.clear();
-    }
-
     /// Stores sphere `id` at `center`, `radius`, placed at `at` (from this tree's lattice),
     /// relinking it if its node changed.
     #[inline(always)]
@@ -640,14 +516,6 @@ impl Octree {
     fn count_move(&mut self, from: u32, to: u32) {
         self.per_level[level_of(from) as usize] -= 1;
         self.per_level[level_of(to) as usize] += 1;
-    }
-
-    /// Moves sphere `id` from node `from` to node `to`.
-    #[inline(never)]
-    fn relink(&mut self, id: u32, from: u32, to: u32) {
-        self.count_move(from, to);
-        self.unlink(id);
-        self.link(id, to);
     }
 
     /// Removes a sphere; its key is never valid again. `Err(UnknownProxy)` for a stale or
@@ -854,71 +722,6 @@ impl Octree {
             self.lattice.is_outside(&o.aabb(), c, r)
         }
     }
-
-    /// Pushes object `id` at the front of `node`'s list.
-    fn link(&mut self, id: u32, node: u32) {
-        self.objs[id as usize].set_node(&self.lattice, node);
-        list_link(&mut self.links, &mut self.nodes, id, node);
-    }
-
-    /// Takes object `id` out of its node's list (its `node` field is left as it was).
-    fn unlink(&mut self, id: u32) {
-        let node = self.objs[id as usize].node;
-        list_unlink(&mut self.links, &mut self.nodes, id, node);
-    }
-}
-
-/// A sphere whose move to another node its lists have not caught up with yet (see
-/// [`Octree::update_live_deferred`]).
-#[derive(Clone, Copy, Debug)]
-struct Deferred {
-    id: u32,
-    /// The node whose list still holds it (its record names the node it is placed in).
-    old: u32,
-}
-
-/// Moves each deferred sphere from its old node's list to the list of the node its record
-/// names, in order.
-fn relink_all(objs: &[Obj], links: &mut [Link], nodes: &mut Nodes, deferred: &[Deferred]) {
-    for d in deferred {
-        list_unlink(links, nodes, d.id, d.old);
-        list_link(links, nodes, d.id, objs[d.id as usize].node);
-    }
-}
-
-/// Pushes `id` at the front of `node`'s list, marking the path up occupied if the node
-/// was empty.
-fn list_link(links: &mut [Link], nodes: &mut Nodes, id: u32, node: u32) {
-    let became_occupied = nodes.is_empty(node);
-    let head = nodes.head(node);
-    links[id as usize] = Link {
-        next: head,
-        prev: NONE,
-    };
-    if head != NONE {
-        links[head as usize].prev = id;
-    }
-    nodes.set_head(node, id);
-    if became_occupied {
-        nodes.mark_occupied(node);
-    }
-}
-
-/// Takes `id` out of the list of `node`, which holds it, marking the path up empty if the
-/// node emptied.
-fn list_unlink(links: &mut [Link], nodes: &mut Nodes, id: u32, node: u32) {
-    let Link { next, prev } = links[id as usize];
-    if prev == NONE {
-        nodes.set_head(node, next);
-    } else {
-        links[prev as usize].next = next;
-    }
-    if next != NONE {
-        links[next as usize].prev = prev;
-    }
-    if nodes.is_empty(node) {
-        nodes.mark_empty(node);
-    }
 }
 
 /// The key of id `id` whose version is `versions[id]`: slotmap's FFI form, `version << 32 |
@@ -927,153 +730,6 @@ fn list_unlink(links: &mut [Link], nodes: &mut Nodes, id: u32, node: u32) {
 fn key_at(versions: &[u32], id: u32) -> ProxyKey {
     let ffi = (u64::from(versions[id as usize]) << 32) | u64::from(id);
     ProxyKey::from(slotmap::KeyData::from_ffi(ffi))
-}
-
-/// The batched update split over tasks.
-#[cfg(feature = "parallel")]
-impl Octree {
-    /// The tree's placement (read-only) beside its spheres' records by id (a slot's id is its
-    /// key's slot; the records end at the highest id ever held), for a batched update split
-    /// over tasks by id range: each task places its spheres with [`Placer::placement_of`] and
-    /// stores the moves with [`Record::store_placed`] (those to another node noted for
-    /// [`Octree::take_moves`]); the others (a sphere entering or leaving the region or the
-    /// root) go through [`Octree::update_live_deferred`] afterwards, on one thread.
-    pub(crate) fn split_for_update(&mut self) -> (Placer<'_>, &mut [Record]) {
-        let placer = Placer {
-            lattice: &self.lattice,
-            memo: placement::LevelMemo::EMPTY,
-        };
-        (placer, &mut self.objs)
-    }
-}
-
-/// Places spheres in a tree whose records are lent out ([`Octree::split_for_update`]); each
-/// task places with its own copy (which notes the last radius's level).
-#[cfg(feature = "parallel")]
-#[derive(Clone, Copy)]
-pub(crate) struct Placer<'a> {
-    lattice: &'a Lattice,
-    memo: placement::LevelMemo,
-}
-
-#[cfg(feature = "parallel")]
-impl Placer<'_> {
-    /// Where a sphere at `center`, `radius` goes in the tree as it is now.
-    #[inline(always)]
-    pub(crate) fn placement_of(&mut self, center: Vec3, radius: f32) -> Placed {
-        Placed(self.lattice.locate_memo(center, radius, &mut self.memo))
-    }
-}
-
-/// What the tasks of a batched update noted of the spheres they moved to another node (see
-/// [`Record::store_placed`]), for [`Octree::take_moves`]: one per task, reused.
-#[cfg(feature = "parallel")]
-#[derive(Clone, Debug, Default)]
-pub(crate) struct Moves {
-    deferred: Vec<Deferred>,
-    per_level: [i32; MAX_DEPTH as usize + 1],
-}
-
-#[cfg(feature = "parallel")]
-impl Moves {
-    pub(crate) fn heap_bytes(&self) -> usize {
-        self.deferred.capacity() * core::mem::size_of::<Deferred>()
-    }
-}
-
-#[cfg(feature = "parallel")]
-impl Octree {
-    /// Takes over the moves the tasks of a batched update noted (each task's spheres in id
-    /// order, the tasks in id order): their lists catch up like those of
-    /// [`Octree::update_live_deferred`], in id order as one serial walk over the slots would
-    /// list them, and the level counts follow at once. Leaves every `Moves` empty, its room
-    /// kept. Nothing may be deferred before (a step's apply starts with none).
-    pub(crate) fn take_moves(&mut self, moves: &mut [Moves]) {
-        debug_assert!(self.deferred.is_empty(), "moves taken after a deferral");
-        for m in moves {
-            self.deferred.extend_from_slice(&m.deferred);
-            for (count, delta) in self.per_level.iter_mut().zip(m.per_level) {
-                *count = count.wrapping_add_signed(delta);
-            }
-            crate::radix::ahead(&mut m.deferred);
-            m.deferred.clear();
-            m.per_level = [0; MAX_DEPTH as usize + 1];
-        }
-    }
-
-    /// Puts the deferred relinks in id order after the caller deferred some past the tasks'
-    /// (see [`Octree::take_moves`]).
-    pub(crate) fn order_deferred(&mut self) {
-        if !self.deferred.is_sorted_by_key(|d| d.id) {
-            self.deferred.sort_unstable_by_key(|d| d.id);
-        }
-    }
-}
-
-/// A sphere's placement from [`Placer::placement_of`], for [`Record::store_in_place`].
-#[cfg(feature = "parallel")]
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Placed(placement::Located);
-
-/// A sphere's record in the tree (opaque outside it), lent out by
-/// [`Octree::split_for_update`].
-#[cfg(feature = "parallel")]
-pub(crate) type Record = Obj;
-
-#[cfg(feature = "parallel")]
-impl Obj {
-    /// Stores `center`, `radius` placed at `at` (from `placer`, this record's tree) if the
-    /// sphere stays in its node and the update leaves the count of spheres outside the region
-    /// as it was: the record is all such a move changes. False, with nothing stored, if the
-    /// move needs [`Octree::update_live_deferred`].
-    #[inline(always)]
-    pub(crate) fn store_in_place(
-        &mut self,
-        placer: &Placer<'_>,
-        center: Vec3,
-        radius: f32,
-        at: &Placed,
-    ) -> bool {
-        let at = &at.0;
-        // Only a sphere in the root (node 0) can be outside the region.
-        let counted = self.node == 0
-            && (at.outside()
-                || placer
-                    .lattice
-                    .is_outside(&self.aabb(), self.center, self.radius));
-        if self.node != at.node() || self.node == NONE || counted {
-            return false;
-        }
-        (self.center, self.radius) = (center, radius);
-        true
-    }
-
-    /// [`Record::store_in_place`], and a move to another node too, noted in `moves` (the
-    /// record, id `id`, gets its new node and walk key; its lists catch up once the tree takes
-    /// the moves, see [`Octree::take_moves`]). False, with nothing stored, if the move enters
-    /// or leaves the region, or starts or ends in the root, where the count of spheres
-    /// outside it may change: [`Octree::update_live_deferred`] then.
-    #[inline(always)]
-    pub(crate) fn store_placed(
-        &mut self,
-        placer: &Placer<'_>,
-        id: u32,
-        center: Vec3,
-        radius: f32,
-        at: &Placed,
-        moves: &mut Moves,
-    ) -> bool {
-        let (old, new) = (self.node, at.0.node());
-        if old == new || old == 0 || new == 0 || old == NONE {
-            return self.store_in_place(placer, center, radius, at);
-        }
-        (self.center, self.radius) = (center, radius);
-        self.set_node(placer.lattice, new);
-        moves.per_level[level_of(old) as usize] -= 1;
-        moves.per_level[level_of(new) as usize] += 1;
-        moves.deferred.push(Deferred { id, old });
-        true
-    }
 }
 
 #[cfg(test)]

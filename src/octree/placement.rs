@@ -11,6 +11,7 @@ use glam::{Vec3, Vec3A};
 impl Placement {
     /// A sensible octree depth for spheres of about `typical_radius` in `bounds` under this
     /// placement: [`depth_for`] for `Strict`, [`depth_for_loose`] for `Loose`.
+    #[doc(hidden)]
     #[must_use]
     pub fn depth_for(self, bounds: &Aabb, typical_radius: f32) -> u32 {
         match self {
@@ -31,6 +32,7 @@ const LOOSE_CELL_DIAMETERS: f32 = 1.0;
 /// A sensible depth for a scene: the deepest level whose cells are still at least two sphere
 /// diameters along the bounds' longest axis, clamped to `0..=MAX_DEPTH`. A zero radius gives
 /// `MAX_DEPTH`; a negative or non-finite radius, or invalid bounds, give 0.
+#[doc(hidden)]
 #[must_use]
 pub fn depth_for(bounds: &Aabb, typical_radius: f32) -> u32 {
     let cell = STRICT_CELL_DIAMETERS * 2.0 * typical_radius;
@@ -42,6 +44,7 @@ pub fn depth_for(bounds: &Aabb, typical_radius: f32) -> u32 {
 /// (or smaller) are placed there, one level deeper than [`depth_for`] usually gives. Clamped to
 /// `0..=MAX_DEPTH`; a zero radius gives `MAX_DEPTH`; a negative or non-finite radius, or
 /// invalid bounds, give 0.
+#[doc(hidden)]
 #[must_use]
 pub fn depth_for_loose(bounds: &Aabb, typical_radius: f32) -> u32 {
     let cell = LOOSE_CELL_DIAMETERS * 2.0 * typical_radius;

@@ -52,10 +52,102 @@
 //! of it for as much motion again, so a world in flight re-roots less often the faster it
 //! goes: re-roots are amortised like a growing `Vec`'s copies.
 
+use super::cell::{self, level_of};
 use super::placement::{Lattice, depth_for};
-use super::{MAX_DEPTH, NONE, Obj, Placement};
+use super::{MAX_DEPTH, NONE, Obj, Octree, Placement};
 use crate::geom::{self, Aabb, from_ordered_bits, ordered_bits};
 use glam::Vec3;
+
+impl Octree {
+    /// A growing tree re-roots here if it needs to (see [`Octree::growing`]): when more
+    /// spheres lie outside its region than `max(64, len / 64)` (and than twice as many as
+    /// right after its last re-root), when it holds more than twice the spheres it held at its
+    /// last re-root, or when a periodic audit (its period doubling while audits find nothing,
+    /// up to 1024 calls) finds cells that no longer fit the spheres. O(1) otherwise; a re-root
+    /// places every sphere again, O(n), and may allocate. The pair passes call it first; a
+    /// caller that moves spheres and only queries should call it after each batch of moves
+    /// (queries stay exact without it, but pay for every sphere outside the region). Does
+    /// nothing for a tree with a fixed region.
+    pub fn maintain(&mut self) {
+        if !self.growing {
+            return;
+        }
+        if self.live == 0 {
+            self.regrow.rooted = 0;
+            return;
+        }
+        let limit = overflow_limit(self.live).max(2 * self.overflow_after as usize);
+        if self.overflow as usize > limit || self.live > 2 * self.regrow.rooted {
+            match self.propose() {
+                Some(p) => self.reroot(&p),
+                None => {
+                    // No finite region covers the world: keep this one, and wait for twice
+                    // the overflow (or spheres) before trying again.
+                    let sampled = self.audit_sample();
+                    self.regrow.rooted(self.live, None, sampled);
+                    self.overflow_after = self.overflow;
+                }
+            }
+            return;
+        }
+        if self.regrow.tick() {
+            let sampled = self.audit_sample();
+            if self.regrow.sample_unchanged(sampled) {
+                self.regrow.back_off();
+                return;
+            }
+            self.regrow.full_audits += 1;
+            match self.propose() {
+                Some(p) if worth_it(&self.lattice, &p) => self.reroot(&p),
+                _ => self.regrow.back_off(),
+            }
+        }
+    }
+
+    /// The audit's sample of the spheres now (`Sampled::of`, with the walk order's
+    /// buffer lent as scratch).
+    fn audit_sample(&mut self) -> Option<Sampled> {
+        Sampled::of(&self.objs, self.passes.walk.idle_items())
+    }
+
+    /// The region and depth the spheres call for now (`Regrow::propose` over this tree's
+    /// spheres, hint and placement, with the walk order's buffers lent as scratch).
+    fn propose(&mut self) -> Option<Proposal> {
+        self.regrow.propose(
+            &self.objs,
+            self.live,
+            self.hint,
+            self.lattice.placement,
+            self.passes.walk.idle_items(),
+        )
+    }
+
+    /// Places every sphere again in a tree over the proposal's region and depth.
+    #[inline(never)]
+    fn reroot(&mut self, p: &Proposal) {
+        self.lattice = Lattice::new(p.bounds, p.depth, self.lattice.placement);
+        self.memo = super::placement::LevelMemo::EMPTY;
+        self.nodes.reset(cell::node_count(p.depth));
+        self.per_level = [0; MAX_DEPTH as usize + 1];
+        self.overflow = 0;
+        // Every sphere is linked again from scratch below: the lists owe nothing.
+        self.deferred.clear();
+        for id in 0..self.objs.len() as u32 {
+            let o = &mut self.objs[id as usize];
+            if o.node == NONE {
+                continue;
+            }
+            let at = self.lattice.locate(o.center, o.radius);
+            self.per_level[level_of(at.node()) as usize] += 1;
+            self.overflow += u32::from(at.outside());
+            self.link(id, at.node());
+        }
+        let sampled = self.audit_sample();
+        self.regrow.rooted(self.live, Some(p.span_center), sampled);
+        self.overflow_after = self.overflow;
+        self.reroots += 1;
+    }
+}
 
 /// Cells of the level the median sphere lives at span this many of its diameters. Below 2, so
 /// the median sphere is placed at that level; above 1 by enough that a fat margin on its
@@ -218,26 +310,50 @@ impl Regrow {
         // one value per live sphere for the median and the quantiles, then the occupancy
         // count's cell codes. Exactly one per live sphere: the walk order's sort fills it so.
         crate::radix::grow_to(scratch, live);
-        let s = &mut *scratch;
-        let r = median(s, objs.iter().filter(|o| o.node != NONE).map(|o| o.radius));
+        let r = median(
+            scratch,
+            objs.iter().filter(|o| o.node != NONE).map(|o| o.radius),
+        );
         let cell = CELL_DIAMETERS * 2.0 * r;
+        let (span, span_center) = self.span(objs, live, hint, cell, scratch)?;
+        let (bounds, depth) = cube(objs, live, &span, (cell, r), placement, scratch)?;
+        let lattice = Lattice::new(bounds, depth, placement);
+        Some(Proposal {
+            bounds,
+            depth,
+            typical_cell: lattice.typical_cell(r),
+            typical_radius: r,
+            span_center,
+        })
+    }
+
+    /// The box a region for cells of `cell` should cover, and the centre of the spheres'
+    /// span: the spheres' boxes (and `hint` where that still fits), or the boxes between the
+    /// quantiles when an outlier would need cells wider than `cell`, then room ahead for the
+    /// motion since the last re-root. `None` if the span has no finite centre.
+    fn span(
+        &self,
+        objs: &[Obj],
+        live: usize,
+        hint: Option<Aabb>,
+        cell: f32,
+        scratch: &mut Vec<u64>,
+    ) -> Option<(Aabb, Vec3)> {
         let mut full = Aabb::EMPTY;
         for o in objs.iter().filter(|o| o.node != NONE) {
             full = full.union(&o.aabb());
         }
-        let wide = |b: &Aabb| b.extent().max_element() * GROW;
-        let fits = |side: f32| side.is_finite() && side <= cell * (1u32 << MAX_DEPTH) as f32;
         let mut span = full;
         if let Some(h) = hint {
             let both = full.union(&h);
-            if fits(wide(&both)) {
+            if fits(wide(&both), cell) {
                 span = both;
             }
         }
-        if !fits(wide(&span)) {
+        if !fits(wide(&span), cell) {
             let q = (overflow_limit(live) / 16).min(live / 16);
             if q > 0 {
-                let robust = quantile_box(s, objs, q);
+                let robust = quantile_box(scratch, objs, q);
                 if robust.is_finite() && wide(&robust) <= 0.5 * wide(&full) {
                     span = robust;
                 }
@@ -253,60 +369,77 @@ impl Regrow {
             .last_center
             .map_or(Vec3::ZERO, |last| span_center - last);
         let ahead = span.union(&Aabb::new(span.min + moved, span.max + moved));
-        if ahead.is_finite() && fits(wide(&ahead)) {
+        if ahead.is_finite() && fits(wide(&ahead), cell) {
             span = ahead;
         }
-        let center = span.center();
-        let side = wide(&span);
-        // The side's floor: a cube a few float steps wide at the region's distance from the
-        // origin, so its corners stay apart.
-        let floor = center.abs().max_element().max(1.0) * f32::EPSILON * 64.0;
-        // The cells the spheres would get: the median sphere's, or wider where the side
-        // needs more than `MAX_DEPTH` levels of them.
-        let finest = if fits(side) {
-            cell
-        } else {
-            side / (1u32 << MAX_DEPTH) as f32
-        };
-        let doublings = if finest > 0.0 && finest.is_finite() && live >= MIN_SPHERES_TO_COARSEN {
-            doublings(objs, live, span.min, finest, side, scratch)
-        } else {
-            0
-        };
-        let cell = if doublings > 0 {
-            finest * (1u32 << doublings) as f32
-        } else {
-            cell
-        };
-        let fits = |side: f32| side.is_finite() && side <= cell * (1u32 << MAX_DEPTH) as f32;
-        let (side, k) = if cell > 0.0 && cell.is_finite() && side <= cell {
-            (cell.max(floor), 0)
-        } else if fits(side) && cell > 0.0 {
-            let k = (side / cell).log2().ceil().clamp(0.0, MAX_DEPTH as f32) as u32;
-            ((cell * (1u32 << k) as f32).max(floor), k)
-        } else {
-            (side.max(floor), MAX_DEPTH)
-        };
-        let half = Vec3::splat(side * 0.5);
-        let bounds = Aabb::new(center - half, center + half);
-        geom::check_bounds(&bounds).ok()?;
-        // Cells coarsened for occupancy are the deepest: a level below them would have cells
-        // of at least the median diameter again, and the spheres would move down to it.
-        let depth = match placement {
-            Placement::Strict if doublings > 0 => depth_for(&bounds, r).min(k),
-            Placement::Strict => depth_for(&bounds, r),
-            Placement::Loose if doublings > 0 => k,
-            Placement::Loose => (k + LEVELS_BELOW_TYPICAL).min(MAX_DEPTH),
-        };
-        let lattice = Lattice::new(bounds, depth, placement);
-        Some(Proposal {
-            bounds,
-            depth,
-            typical_cell: lattice.typical_cell(r),
-            typical_radius: r,
-            span_center,
-        })
+        Some((span, span_center))
     }
+}
+
+/// The side of a cube over `b` with the hysteresis [`GROW`].
+fn wide(b: &Aabb) -> f32 {
+    b.extent().max_element() * GROW
+}
+
+/// True if a cube of `side` is finite and split into cells of `cell` within `MAX_DEPTH`
+/// levels.
+fn fits(side: f32, cell: f32) -> bool {
+    side.is_finite() && side <= cell * (1u32 << MAX_DEPTH) as f32
+}
+
+/// The cube over `span` and its depth for spheres of median radius `r` wanting cells of
+/// `cell`, the cells coarsened for a sparse world: `None` if no valid bounds
+/// come out.
+fn cube(
+    objs: &[Obj],
+    live: usize,
+    span: &Aabb,
+    (cell, r): (f32, f32),
+    placement: Placement,
+    scratch: &mut Vec<u64>,
+) -> Option<(Aabb, u32)> {
+    let center = span.center();
+    let side = wide(span);
+    // The side's floor: a cube a few float steps wide at the region's distance from the
+    // origin, so its corners stay apart.
+    let floor = center.abs().max_element().max(1.0) * f32::EPSILON * 64.0;
+    // The cells the spheres would get: the median sphere's, or wider where the side
+    // needs more than `MAX_DEPTH` levels of them.
+    let finest = if fits(side, cell) {
+        cell
+    } else {
+        side / (1u32 << MAX_DEPTH) as f32
+    };
+    let doublings = if finest > 0.0 && finest.is_finite() && live >= MIN_SPHERES_TO_COARSEN {
+        doublings(objs, live, span.min, finest, side, scratch)
+    } else {
+        0
+    };
+    let cell = if doublings > 0 {
+        finest * (1u32 << doublings) as f32
+    } else {
+        cell
+    };
+    let (side, k) = if cell > 0.0 && cell.is_finite() && side <= cell {
+        (cell.max(floor), 0)
+    } else if fits(side, cell) && cell > 0.0 {
+        let k = (side / cell).log2().ceil().clamp(0.0, MAX_DEPTH as f32) as u32;
+        ((cell * (1u32 << k) as f32).max(floor), k)
+    } else {
+        (side.max(floor), MAX_DEPTH)
+    };
+    let half = Vec3::splat(side * 0.5);
+    let bounds = Aabb::new(center - half, center + half);
+    geom::check_bounds(&bounds).ok()?;
+    // Cells coarsened for occupancy are the deepest: a level below them would have cells
+    // of at least the median diameter again, and the spheres would move down to it.
+    let depth = match placement {
+        Placement::Strict if doublings > 0 => depth_for(&bounds, r).min(k),
+        Placement::Strict => depth_for(&bounds, r),
+        Placement::Loose if doublings > 0 => k,
+        Placement::Loose => (k + LEVELS_BELOW_TYPICAL).min(MAX_DEPTH),
+    };
+    Some((bounds, depth))
 }
 
 /// How many times to double the cell `cell` so that the spheres per occupied cell stay

@@ -13,6 +13,7 @@ impl Octree {
     /// would take it); every node list is doubly linked and reaches exactly the spheres that
     /// name its node; a child bit is set iff the child's subtree holds a sphere; per-level,
     /// overflow and key-map counts agree. O(n + occupied nodes); for tests and debugging.
+    #[doc(hidden)]
     pub fn validate(&self) {
         assert!(
             self.deferred.is_empty(),

@@ -20,7 +20,7 @@ use super::{NONE, Octree};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
 #[cfg(feature = "parallel")]
-use crate::radix::ahead;
+use crate::radix::{ahead, part_of, split_points};
 use crate::radix::{room_for, sort_bits_by, sort_bits_in};
 use crate::sweep::{self, Ordered};
 use core::borrow::Borrow;
@@ -619,13 +619,7 @@ impl Octree {
             return;
         }
         par.sample.sort_unstable();
-        par.splitters.clear();
-        for p in 1..parts {
-            let k = par.sample[par.sample.len() * p / parts];
-            if par.splitters.last().is_none_or(|&last| last < k) {
-                par.splitters.push(k);
-            }
-        }
+        split_points(&par.sample, |&k| k, parts, &mut par.splitters);
         // Each range of ids lists its spheres by part (the number of splitters at most the
         // walk key) as `(walk key << 32) | id`: a part then sorts only its own lists.
         let np = par.splitters.len() + 1;
@@ -644,13 +638,8 @@ impl Octree {
             .for_each(|(c, (buckets, objs))| {
                 for (i, o) in objs.iter().enumerate() {
                     if o.node != NONE {
-                        // Counted without a branch: there are at most `MAX_PARTS − 1`.
-                        let p: usize = splitters
-                            .iter()
-                            .map(|&x| usize::from(x <= u64::from(o.walk_key)))
-                            .sum();
                         let key = u64::from(o.walk_key);
-                        buckets[p].push((key << 32) | (c * range + i) as u64);
+                        buckets[part_of(splitters, key)].push((key << 32) | (c * range + i) as u64);
                     }
                 }
                 buckets.iter_mut().for_each(ahead);

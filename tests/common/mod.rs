@@ -11,6 +11,7 @@
 )]
 
 use broadleaf::{Aabb, BodyKind, BroadPhase, Error, Pair, ProxyKey, Shape, Vec3};
+use slotmap::Key as _;
 use std::collections::{BTreeSet, HashMap};
 
 /// splitmix64: a seeded generator whose stream depends on nothing but the seed. Only `+ - * /`
@@ -421,4 +422,37 @@ impl Model {
 pub fn uniform(lo: f32, hi: f32) -> impl proptest::strategy::Strategy<Value = f32> + Clone {
     use proptest::strategy::Strategy;
     (0u32..1 << 24).prop_map(move |i| lo + (hi - lo) * (i as f32 / (1u32 << 24) as f32))
+}
+
+/// FNV-1a (64 bits) over little-endian bytes: a digest stable across runs and platforms, for
+/// the tests that compare runs (or a run with a golden value) by digest.
+pub struct Fnv(pub u64);
+
+impl Fnv {
+    /// The empty digest (FNV-1a's offset basis).
+    pub fn new() -> Self {
+        Fnv(0xcbf2_9ce4_8422_2325)
+    }
+
+    pub fn write(&mut self, x: u64) {
+        for byte in x.to_le_bytes() {
+            self.0 ^= u64::from(byte);
+            self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+
+    /// A key by its FFI bits.
+    pub fn key(&mut self, k: ProxyKey) {
+        self.write(k.data().as_ffi());
+    }
+
+    /// `tag`, the list's length, then each pair's keys.
+    pub fn pairs(&mut self, tag: u64, pairs: &[Pair]) {
+        self.write(tag);
+        self.write(pairs.len() as u64);
+        for p in pairs {
+            self.key(p.a);
+            self.key(p.b);
+        }
+    }
 }
