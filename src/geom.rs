@@ -302,7 +302,7 @@ pub(crate) fn from_ordered_bits(k: u32) -> f32 {
 /// The smallest `t ∈ [0, max_t]` with `|origin + t·dir − center| ≤ radius`, or `None`.
 /// `dir` need not be unit length (`t` is in units of `dir`); a zero `dir` hits only when the
 /// origin is inside. An origin inside the sphere gives `t = 0`. Computed in `f64` from the
-/// `f32` inputs and rounded once, by [`first_touch`]'s cancellation-free form.
+/// `f32` inputs and rounded once, by `first_touch`'s cancellation-free form.
 ///
 /// The textbook discriminant `b² − a·c` (`a = |dir|²`, `b = m·dir`, `c = |m|² − r²`,
 /// `m = origin − center`) subtracts two nearly equal squares for a ray grazing the sphere far
@@ -522,7 +522,7 @@ pub fn sphere_cast_sphere(
 ///
 /// Where it could cancel: the slab times are one difference and one quotient each (as in
 /// [`Aabb::ray_entry`], no cancellation); the capsules' sides and end spheres are
-/// [`first_touch`], whose discriminant is Lagrange's `a·r² − |m × d|²`, not `b² − ac`. The
+/// `first_touch`, whose discriminant is Lagrange's `a·r² − |m × d|²`, not `b² − ac`. The
 /// entry point's region is read from a rounded point, so a path entering within an `f64`
 /// rounding of an edge's region may be answered as a face (at `t0`), off by that rounding.
 #[must_use]

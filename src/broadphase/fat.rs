@@ -53,6 +53,7 @@ fn jitter(slot: u32, now: u32) -> f32 {
 /// The speed (metres per step, largest axis) of a box that moved from `old` to `new` since
 /// step `stamp`, at step `now`.
 #[inline(always)]
+#[cfg(feature = "parallel")]
 pub(super) fn speed(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> f32 {
     displacement(old, new, stamp, now).abs().max_element()
 }
