@@ -257,11 +257,22 @@ const LOUD_PER_MOTION: f64 = 2.0 * 64.0;
 /// world left in a burst (a landing, a wake-up) is tried again once it has calmed, instead of
 /// being priced by that burst for good.
 const RELEARN_KEEP: f64 = 0.9;
+/// [`RELEARN_KEEP`] for the escapes per fast mover ([`Costs::escape_per_fast`]): they follow
+/// the number of fast movers already, so what was learned fades slower, and a world whose
+/// fast movers keep escaping (a free fall, whose accelerating movers leave their swept boxes)
+/// is not tried again every few steps.
+const ESCAPE_KEEP: f64 = 0.98;
 
 /// An incremental step refits the dynamic BVH once this fraction of its bodies got new fat
 /// boxes since its last refit: until then the boxes enlarged on update keep it exact, only
 /// looser.
 const REFIT_FRACTION: f64 = 0.125;
+
+/// The escapes per step of a fast mover that keeps its velocity: its fat box is swept over
+/// `PREDICT_STEPS` of its motion, times a jitter of 1.5 on average.
+fn swept_escapes() -> f64 {
+    1.0 / (1.5 * f64::from(PREDICT_STEPS))
+}
 
 /// What the cost estimates learn from the steps they watch.
 #[derive(Clone, Copy, Debug)]
@@ -282,6 +293,12 @@ pub(super) struct Costs {
     /// The incremental regime was left at the last step: this step's motion, with the
     /// regime's last `loud_per_slow`, gives `loud_per_motion`.
     just_left: bool,
+    /// The escapes of the step that left the incremental regime.
+    left_escapes: f64,
+    /// Outside the incremental regime, the escapes expected per fast mover: one in the steps
+    /// a swept fat box lasts, or what the regime's last step saw over the fast movers of the
+    /// first step after it, returning towards the former by [`ESCAPE_KEEP`] a step.
+    escape_per_fast: f64,
     /// The last incremental step's estimate was over the full pass's.
     over: bool,
     /// The step that last entered the incremental regime.
@@ -299,6 +316,8 @@ impl Default for Costs {
             loud_per_slow: 1.0,
             loud_per_motion: LOUD_PER_MOTION,
             just_left: false,
+            left_escapes: 0.0,
+            escape_per_fast: swept_escapes(),
             over: false,
             entered: 0,
             pairs_seen: false,
@@ -337,21 +356,28 @@ impl BroadPhase {
             };
             if over && ((was_over && !settling) || inc > full * at_once) {
                 self.costs.just_left = true;
+                self.costs.left_escapes = escapes;
                 Plan::Full
             } else {
                 Plan::Incremental
             }
         } else {
-            // The regime is priced from the motion just applied: a fast mover's fat box is
-            // swept over `PREDICT_STEPS` of its motion, times a jitter of 1.5 on average, so
-            // one that keeps its velocity escapes about once in that many steps; a slow one
+            // The regime is priced from the motion just applied: a fast mover escapes about
+            // once in the steps its swept fat box lasts ([`swept_escapes`]); a slow one
             // stays in its fat box and re-tests its candidates in proportion to its motion
             // (zero for a proxy sent where it already was). An insert or a regroup (listed as
             // escaped) would query the structures like an escape.
+            // Once the regime was left in a burst of escapes, its fast movers are expected to
+            // escape at the rate it saw, returning towards the swept boxes' rate by
+            // `ESCAPE_KEEP` a step.
             let m = self.motion;
-            let escapes =
-                m.fast as f64 / (1.5 * f64::from(PREDICT_STEPS)) + self.escaped.len() as f64;
             let c = &mut self.costs;
+            let swept = swept_escapes();
+            c.escape_per_fast = swept + (c.escape_per_fast - swept) * ESCAPE_KEEP;
+            if c.just_left && m.fast > 0 {
+                c.escape_per_fast = (c.left_escapes / m.fast as f64).max(swept);
+            }
+            let escapes = c.escape_per_fast * m.fast as f64 + self.escaped.len() as f64;
             c.loud_per_motion =
                 LOUD_PER_MOTION + (c.loud_per_motion - LOUD_PER_MOTION) * RELEARN_KEEP;
             if core::mem::take(&mut c.just_left) && m.slow_motion > 0.0 {
@@ -372,11 +398,15 @@ impl BroadPhase {
     /// candidates, `escapes` of them after leaving their fat boxes.
     fn incremental_cost(&self, loud: f64, escapes: f64) -> f64 {
         let n = self.store.len().max(1) as f64;
-        // Before any count, fat boxes are taken to double the pairs.
-        let per_proxy = self
-            .costs
-            .cand_per_proxy
-            .unwrap_or(2.0 * self.pairs.len() as f64 / n);
+        // Before any count, fat boxes are taken to double the pairs; outside the regime the
+        // last count may be of fat boxes grown for another motion (a landing's swept boxes),
+        // so it is taken only where it is below that.
+        let doubled = 2.0 * self.pairs.len() as f64 / n;
+        let per_proxy = match self.costs.cand_per_proxy {
+            Some(counted) if self.cached => counted,
+            Some(counted) => counted.min(doubled),
+            None => doubled,
+        };
         let cands = if self.cached {
             self.cand.len() as f64
         } else {
