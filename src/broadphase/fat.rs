@@ -33,9 +33,14 @@ const MAX_MARGIN: f32 = 0.5;
 /// The fat margin of a box of largest extent `size` moving `speed` metres per step.
 #[inline]
 fn margin(speed: f32, size: f32) -> f32 {
-    (speed * LOOKAHEAD_STEPS)
-        .min(size * MAX_MARGIN)
-        .max(size * MIN_MARGIN)
+    clamp_margin(speed * LOOKAHEAD_STEPS, size)
+}
+
+/// A margin `m` for a box of largest extent `size`, kept between [`MIN_MARGIN`] and
+/// [`MAX_MARGIN`] of that extent.
+#[inline]
+fn clamp_margin(m: f32, size: f32) -> f32 {
+    m.min(size * MAX_MARGIN).max(size * MIN_MARGIN)
 }
 
 /// A factor in `[1, 2)` on the fat margin, hashed from the slot and the step the box is made
@@ -130,17 +135,18 @@ impl BroadPhase {
         d
     }
 
-    /// In the incremental regime: keeps the fat box if it still holds `exact` (and classifies
-    /// the slot quiet or loud, see [`super::slack::settle`]), else gives the slot a new one
-    /// stretched along its `motion` per step, which its structure holds from now on.
+    /// In the incremental regime: keeps the fat box if it still holds `exact` (true: the
+    /// caller then classifies the slot quiet or loud), else gives the slot a new one stretched
+    /// along its `motion` per step, which its structure holds from now on (false).
     #[inline]
-    pub(super) fn refresh_fat(&mut self, slot: u32, exact: &SimdBox, motion: Vec3A) {
+    pub(super) fn refresh_fat(&mut self, slot: u32, exact: &SimdBox, motion: Vec3A) -> bool {
         if self.store.held[slot as usize].contains(exact) {
             self.mark(slot, flag::MOVED);
-            super::slack::settle(&mut self.store, &mut self.loud, slot);
+            true
         } else {
             self.hold_moving(slot, motion);
             self.mark(slot, flag::MOVED | flag::ESCAPED);
+            false
         }
     }
 
@@ -285,9 +291,7 @@ impl BroadPhase {
         } else {
             sweep
         } * jitter;
-        let side = (speed * PREDICT_SIDE_STEPS)
-            .min(size * MAX_MARGIN)
-            .max(size * MIN_MARGIN);
+        let side = clamp_margin(speed * PREDICT_SIDE_STEPS, size);
         let held = match self.store.shape[s] {
             Shape::Sphere { center, radius } => {
                 let r = grown_radius(radius, self.config.margin);
@@ -427,7 +431,7 @@ mod tests {
             })
             .collect();
         let mut entries = 0;
-        let mut was_cached = false;
+        let mut was_incremental = false;
         for step in 0..40u32 {
             // At rest for ten steps, then everyone far away and back for ten.
             let jump = (step / 10) % 2 == 1;
@@ -442,8 +446,8 @@ mod tests {
             }
             bp.step();
             bp.validate();
-            entries += usize::from(bp.cached && !was_cached);
-            was_cached = bp.cached;
+            entries += usize::from(bp.incremental && !was_incremental);
+            was_incremental = bp.incremental;
         }
         assert!(
             entries >= 2,

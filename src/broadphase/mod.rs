@@ -21,6 +21,7 @@
 mod apply;
 mod config;
 mod fat;
+mod packed;
 mod query;
 mod shape;
 mod slack;
@@ -64,15 +65,19 @@ pub struct StepStats {
     pub pass: Pass,
     /// Proxies updated, inserted or removed since the previous step.
     pub updated: usize,
-    /// Proxies given a new fat box (they left the old one, or are new): each one is one
-    /// query of the structures in an incremental step.
-    pub enlarged: usize,
+    /// Proxies that escaped: given a new fat box (they left the old one, or are new); each
+    /// one is one query of the structures in an incremental step.
+    pub escaped: usize,
     /// Candidate pairs whose exact boxes were tested.
     pub candidates_tested: usize,
     /// Candidate pairs held after the step (0 outside the incremental regime).
     pub candidates: usize,
     /// Pairs reported.
     pub pairs: usize,
+    /// The tasks each phase of the step's full pass was split into over rayon's pool (feature
+    /// `parallel`), 0 if no full pass ran split. For the tests that check the split ran.
+    #[doc(hidden)]
+    pub split_tasks: usize,
     /// Spheres per octree level (`[0]` is the root, with the spheres outside its region).
     pub octree_per_level: [u32; crate::octree::MAX_DEPTH as usize + 1],
     /// The dynamic BVH's SAH cost over its cost at its last build (1 when just built).
@@ -101,7 +106,7 @@ pub struct BroadPhase {
     /// Dynamic bodies given a new fat box since the dynamic tree's last refit.
     dynamic_escapes: usize,
     /// True while the structures hold fat boxes and `cand` is complete.
-    cached: bool,
+    incremental: bool,
     /// True once any proxy was given groups other than the default: until then the pair
     /// passes skip the groups test.
     any_groups: bool,
@@ -209,7 +214,7 @@ impl BroadPhase {
             dynamic_changed: false,
             statics_changed: false,
             dynamic_escapes: 0,
-            cached: false,
+            incremental: false,
             any_groups: false,
             movers: Vec::new(),
             stale: 0,
@@ -403,8 +408,8 @@ impl BroadPhase {
     /// both place proxies here.
     fn place(&mut self, slot: u32) {
         let key = self.store.key(slot);
-        let held = self.held_shape(slot, self.cached, glam::Vec3A::ZERO);
-        if self.cached {
+        let held = self.held_shape(slot, self.incremental, glam::Vec3A::ZERO);
+        if self.incremental {
             self.store.set_held(slot as usize, held.aabb);
         }
         match self.store.shape[slot as usize] {
@@ -667,7 +672,7 @@ impl BroadPhase {
         // at its end, the caller), and the split phases inside it (the apply's, the pass's)
         // start on a worker that is already awake.
         #[cfg(feature = "parallel")]
-        if self.tasks() >= 2 && !self.cached {
+        if self.tasks() >= 2 && !self.incremental {
             rayon::scope(|_| self.step_in());
             return;
         }

@@ -136,11 +136,11 @@ impl BroadPhase {
         let q = SimdBox::new(aabb);
         // Outside the incremental regime the structures hold the exact boxes, which their
         // walks have tested; inside it they hold fat ones.
-        let cached = self.cached;
+        let incremental = self.incremental;
         let mut test = |k: ProxyKey| {
             let s = crate::pair::slot(k) as usize;
             if !self.is_stale(s)
-                && (!cached || self.store.exact[s].overlaps(&q))
+                && (!incremental || self.store.exact[s].overlaps(&q))
                 && self.passes(filter, k, s)
             {
                 f(k)

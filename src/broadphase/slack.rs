@@ -30,11 +30,11 @@
 //! removed proxies, plus the escaped proxies' new ones), their reverse index and the key pair
 //! list are patched by position ([`Gapped::patch`]) with the few pairs that started or stopped
 //! overlapping, which are the step's `added` and `removed`. No packed pair list is kept beside
-//! them: the key pairs are read packed (see [`super::step::pack_pair`]) where the packed order
+//! them: the key pairs are read packed (see [`super::packed::pack_pair`]) where the packed order
 //! is needed, here and in a full pass's diff.
 
 use super::BroadPhase;
-use super::step::{HIT, unpack};
+use super::packed::{HIT, keys_into, pack_pair, sort_scratch, unpack};
 use super::store::{Store, flag};
 use crate::geom::SimdBox;
 use crate::radix::{PairBits, sort_bits_by, sort_u64, sort_u64_kept};
@@ -105,6 +105,14 @@ pub(super) fn within(exact: &SimdBox, anchor: &SimdBox, m: f32) -> bool {
     let lo = ((exact.min - anchor.min).abs() * ROUND_UP).cmplt(half);
     let hi = ((exact.max - anchor.max).abs() * ROUND_UP).cmplt(half);
     (lo & hi).all()
+}
+
+/// The quiet/loud rule: true if a mover whose exact box is now `exact`, anchored at `anchor`
+/// with least candidate slack `m`, stays quiet (keeps every candidate's status), false if it
+/// is loud. [`within`] first, the drift only where that cannot tell.
+#[inline(always)]
+pub(super) fn stays_quiet(exact: &SimdBox, anchor: &SimdBox, m: f32) -> bool {
+    within(exact, anchor, m) || quiet(drift(exact, anchor), m)
 }
 
 /// Where each proxy's candidates were last found, by slot: the index in `cand` of its first
@@ -339,7 +347,7 @@ impl BroadPhase {
     fn rebuild_rev(&mut self) {
         let cand = &self.cand;
         let layout = PairBits::for_slots(self.store.slots());
-        let scratch = super::step::sort_scratch(&mut self.octree, &mut self.sort_buf);
+        let scratch = sort_scratch(&mut self.octree, &mut self.sort_buf);
         self.rev.refill(cand.len(), 0, |list| {
             let at = list.len();
             list.extend(cand.iter().map(|&c| {
@@ -564,15 +572,11 @@ impl BroadPhase {
         // The key pairs: the changed pairs' places in the old list, which is in the packed
         // pairs' order.
         let pairs = &self.pairs;
-        let at = |k: u64| pairs.partition_point(|q| super::step::pack_pair(q) < k) as u32;
+        let at = |k: u64| pairs.partition_point(|q| pack_pair(q) < k) as u32;
         p.pairs_gone.extend(removed.iter().map(|&k| at(k)));
         p.pairs_at.extend(added.iter().map(|&k| at(k)));
-        let store = &self.store;
-        let to_pair = |&q: &u64| super::step::key_pair(store, q);
-        self.added.clear();
-        self.added.extend(self.added_packed.iter().map(to_pair));
-        self.removed.clear();
-        self.removed.extend(self.removed_packed.iter().map(to_pair));
+        keys_into(&self.store, &self.added_packed, &mut self.added);
+        keys_into(&self.store, &self.removed_packed, &mut self.removed);
         self.pairs
             .patch(&p.pairs_gone, &p.pairs_at, &self.added, &mut p.scratch);
     }
@@ -586,8 +590,7 @@ pub(super) fn settle(st: &mut Store, loud: &mut Vec<u32>, slot: u32) {
     if st.flags[s] & flag::LOUD != 0 {
         return;
     }
-    let d = drift(&st.exact[s], &st.anchor[s]);
-    if quiet(d, st.slack[s]) {
+    if stays_quiet(&st.exact[s], &st.anchor[s], st.slack[s]) {
         st.flags[s] |= flag::DRIFTED;
     } else {
         make_loud(st, loud, slot);

@@ -38,13 +38,13 @@
 //! pass.
 
 use super::fat::{LOOKAHEAD_STEPS, PREDICT_STEPS};
+use super::packed::{
+    HIT, key_pair, keys_into, null_pair, pack_allowed, pack_pair, sort_scratch, unpack,
+};
 use super::*;
 #[cfg(feature = "parallel")]
 use crate::radix;
 use crate::radix::{PairBits, ahead, grow_to, sort_u64_kept};
-
-/// Set on a candidate whose exact boxes overlapped at the last step.
-pub(super) const HIT: u64 = 1 << 63;
 
 /// Estimated costs, in nanoseconds per unit of work on the machine the defaults were measured
 /// on; only their ratios matter.
@@ -124,10 +124,10 @@ const PARALLEL_MIN_BODIES: usize = 16_384;
 /// (the sort's counters, handing out the task) outweigh the split below it.
 #[cfg(feature = "parallel")]
 const MIN_PART_PAIRS: usize = 4096;
-/// Tasks per thread in each split phase of a parallel pass, so that a thread that finishes its
-/// share early takes over part of a slower one's.
+/// Tasks per thread in each split phase of a parallel pass and of the parallel apply, so that
+/// a thread that finishes its share early takes over part of a slower one's.
 #[cfg(feature = "parallel")]
-const TASKS_PER_THREAD: usize = 4;
+pub(super) const TASKS_PER_THREAD: usize = 4;
 /// The most tasks of one phase: the pair sort keeps a list per producer and part, so their
 /// number grows with its square.
 #[cfg(feature = "parallel")]
@@ -190,47 +190,6 @@ impl Parallel {
             trim(list, 0);
         }
     }
-}
-
-/// What fills the pair list's gap (see [`super::slack::Gapped`]): never read.
-pub(super) fn null_pair() -> Pair {
-    Pair {
-        a: ProxyKey::default(),
-        b: ProxyKey::default(),
-    }
-}
-
-/// The key pair of a packed slot pair (slots live, or quarantined since their removal).
-#[inline]
-pub(super) fn key_pair(store: &Store, p: u64) -> Pair {
-    let (a, b) = unpack(p);
-    Pair {
-        a: store.key(a as u32),
-        b: store.key(b as u32),
-    }
-}
-
-/// The packed pair of two distinct slots: the smaller in the high half.
-#[inline]
-pub(super) fn pack(a: u32, b: u32) -> u64 {
-    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-    (u64::from(lo) << 32) | u64::from(hi)
-}
-
-/// The packed pair of a key pair (both keys live, or quarantined since their removal), the
-/// inverse of [`key_pair`]: the key pairs are sorted as their packed pairs are. The pair is
-/// canonical (`a < b`, so `a`'s slot is the smaller), which spares [`pack`]'s ordering on the
-/// hot reads of the pair list.
-#[inline]
-pub(super) fn pack_pair(p: &Pair) -> u64 {
-    let (a, b) = (crate::pair::slot(p.a), crate::pair::slot(p.b));
-    debug_assert!(a < b, "a key pair is canonical");
-    (u64::from(a) << 32) | u64::from(b)
-}
-
-#[inline]
-pub(super) fn unpack(p: u64) -> (usize, usize) {
-    (((p >> 32) as u32 & !(1 << 31)) as usize, p as u32 as usize)
 }
 
 /// The incremental pass's patch lists keep room for at least one entry per this many
@@ -310,13 +269,13 @@ impl BroadPhase {
         }
         match self.config.passes {
             Passes::Full => return Plan::Full,
-            Passes::Incremental if self.cached => return Plan::Incremental,
+            Passes::Incremental if self.incremental => return Plan::Incremental,
             Passes::Incremental => return Plan::FullFat,
             Passes::Adaptive => {}
         }
         let n = self.store.len() as f64;
         let full = n * cost::FULL + self.pairs.len() as f64 * cost::FULL_PAIR;
-        if self.cached {
+        if self.incremental {
             // Leaving drops the candidates, which a later return rebuilds with a full pass of
             // its own: a single step over the full pass's cost (a burst of escapes) does not
             // leave, two in a row do, and so does one step far over it (a world waking up).
@@ -370,7 +329,7 @@ impl BroadPhase {
             .costs
             .cand_per_proxy
             .unwrap_or(2.0 * self.pairs.len() as f64 / n);
-        let cands = if self.cached {
+        let cands = if self.incremental {
             self.cand.len() as f64
         } else {
             n * per_proxy
@@ -392,7 +351,7 @@ impl BroadPhase {
     /// Runs `plan`, then clears the step's marks.
     pub(super) fn run(&mut self, plan: Plan) {
         let updated = self.movers.len() + self.removals;
-        let enlarged = self.escaped.len();
+        let escaped = self.escaped.len();
         self.stats = StepStats {
             pass: match plan {
                 Plan::Unchanged => Pass::Unchanged,
@@ -401,7 +360,7 @@ impl BroadPhase {
                 Plan::Incremental => Pass::Incremental,
             },
             updated,
-            enlarged: if self.cached { enlarged } else { 0 },
+            escaped: if self.incremental { escaped } else { 0 },
             ..StepStats::default()
         };
         match plan {
@@ -411,7 +370,7 @@ impl BroadPhase {
             }
             Plan::Full => self.full(false),
             Plan::FullFat => self.full(true),
-            Plan::Incremental => self.incremental(),
+            Plan::Incremental => self.incremental_pass(),
         }
         self.costs.pairs_seen |= !matches!(plan, Plan::Unchanged);
         self.stats.pairs = self.pairs.len();
@@ -420,7 +379,7 @@ impl BroadPhase {
         self.stats.dynamic_cost_ratio = d.0;
         self.stats.dynamic_rebuilds = d.1;
         self.stats.static_rebuilds = st.1;
-        self.stats.candidates = if self.cached { self.cand.len() } else { 0 };
+        self.stats.candidates = if self.incremental { self.cand.len() } else { 0 };
         for &s in &self.movers {
             self.store.flags[s as usize] &= !(flag::MOVED | flag::ESCAPED);
         }
@@ -429,7 +388,7 @@ impl BroadPhase {
         }
         self.loud.clear();
         self.movers.clear();
-        if !self.cached {
+        if !self.incremental {
             // Outside the incremental regime only inserts and regroups are listed as escaped:
             // the list gives back the room a burst of inserts (the first step's) left far
             // above that. Inside it the escapes swing from step to step, and it keeps its room.
@@ -449,7 +408,7 @@ impl BroadPhase {
         ahead(&mut self.fresh);
         self.pairs.ahead();
         let n = self.store.len();
-        if self.cached {
+        if self.incremental {
             ahead(&mut self.loud);
             ahead(&mut self.pending);
             self.patch.keep_headroom(n / PATCH_FLOOR);
@@ -496,10 +455,10 @@ impl BroadPhase {
     /// sorted list in `fresh` replaces them.
     #[inline(always)]
     fn full_in(&mut self, fat: bool, tasks: usize) {
-        if fat && !self.cached {
+        if fat && !self.incremental {
             self.fill_exact();
         }
-        if self.cached || fat {
+        if self.incremental || fat {
             for s in 0..self.store.slots() as u32 {
                 if self.store.kind[s as usize] != Kind::Free {
                     self.hold(s, fat);
@@ -509,7 +468,10 @@ impl BroadPhase {
         self.refit(true);
         match tasks {
             #[cfg(feature = "parallel")]
-            2.. => self.sorted_pairs_par(tasks, PairBits::for_slots(self.store.slots())),
+            2.. => {
+                self.stats.split_tasks = tasks;
+                self.sorted_pairs_par(tasks, PairBits::for_slots(self.store.slots()));
+            }
             _ => {
                 self.fresh.clear();
                 self.structure_pairs();
@@ -536,12 +498,12 @@ impl BroadPhase {
             self.stats.candidates_tested = tested;
             let n = self.store.len().max(1) as f64;
             self.costs.cand_per_proxy = Some(self.cand.len() as f64 / n);
-            self.cached = true;
+            self.incremental = true;
         } else {
             self.cand.clear();
             self.rev.clear();
             self.rev_stale = false;
-            self.cached = false;
+            self.incremental = false;
             self.costs.over = false;
             self.clear_pending();
         }
@@ -601,8 +563,8 @@ impl BroadPhase {
         let (store, fresh, groups) = (&self.store, &mut self.fresh, self.any_groups);
         let mut push = |a: ProxyKey, b: ProxyKey| {
             let (a, b) = (crate::pair::slot(a), crate::pair::slot(b));
-            if !groups || store.group(a as usize).allows(store.group(b as usize)) {
-                fresh.push(pack(a, b));
+            if let Some(p) = pack_allowed(store, groups, a, b) {
+                fresh.push(p);
             }
         };
         self.octree.for_each_pair(&mut push);
@@ -641,8 +603,7 @@ impl BroadPhase {
         let (store, groups, splitters) = (&self.store, self.any_groups, &par.splitters[..]);
         let emit = |found: &mut Vec<Vec<u64>>, a: ProxyKey, b: ProxyKey| {
             let (a, b) = (crate::pair::slot(a), crate::pair::slot(b));
-            if !groups || store.group(a as usize).allows(store.group(b as usize)) {
-                let p = pack(a, b);
+            if let Some(p) = pack_allowed(store, groups, a, b) {
                 found[radix::part_of(splitters, p)].push(p);
             }
         };
@@ -675,7 +636,7 @@ impl BroadPhase {
 
     /// The incremental pass (see the module docs and [`super::slack`]): the pair list and the
     /// key pairs are patched in place, so the previous step's are not kept.
-    fn incremental(&mut self) {
+    fn incremental_pass(&mut self) {
         self.refit(false);
         self.fresh.clear();
         self.query_escaped();
@@ -703,8 +664,10 @@ impl BroadPhase {
             let held = store.held[es].aabb();
             let mut push = |k: ProxyKey| {
                 let s = crate::pair::slot(k);
-                if s != e && (!groups || store.group(es).allows(store.group(s as usize))) {
-                    fresh.push(pack(e, s));
+                if s != e
+                    && let Some(p) = pack_allowed(store, groups, e, s)
+                {
+                    fresh.push(p);
                 }
             };
             self.octree.query_aabb_unchecked(&held, &mut push);
@@ -774,12 +737,8 @@ impl BroadPhase {
         self.pairs.refill(fresh.len(), null_pair(), |pairs| {
             pairs.par_extend(fresh.par_iter().map(to_pair));
         });
-        self.added.clear();
-        self.added
-            .par_extend(self.added_packed.par_iter().map(to_pair));
-        self.removed.clear();
-        self.removed
-            .par_extend(self.removed_packed.par_iter().map(to_pair));
+        super::packed::keys_into_par(store, &self.added_packed, &mut self.added);
+        super::packed::keys_into_par(store, &self.removed_packed, &mut self.removed);
     }
 
     /// `added` / `removed` from the previous step's key pairs (read packed) and this step's
@@ -798,22 +757,8 @@ impl BroadPhase {
         self.pairs.refill(fresh.len(), null_pair(), |pairs| {
             pairs.extend(fresh.iter().map(to_pair));
         });
-        self.added.clear();
-        self.added.extend(self.added_packed.iter().map(to_pair));
-        self.removed.clear();
-        self.removed.extend(self.removed_packed.iter().map(to_pair));
-    }
-}
-
-/// The second buffer of the pair sorts: while the octree holds spheres, its buffer that sits
-/// idle between its passes ([`Octree::idle_buffer`]), so the pair sort and the octree's
-/// walk-order sort share one (sized for the larger); else the broadphase's own, so that a
-/// world of bodies leaves the octree empty.
-pub(super) fn sort_scratch<'a>(octree: &'a mut Octree, own: &'a mut Vec<u64>) -> &'a mut Vec<u64> {
-    if octree.is_empty() {
-        own
-    } else {
-        octree.idle_buffer()
+        keys_into(store, &self.added_packed, &mut self.added);
+        keys_into(store, &self.removed_packed, &mut self.removed);
     }
 }
 

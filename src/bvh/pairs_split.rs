@@ -234,8 +234,10 @@ fn expand_cross(
 #[cfg(test)]
 mod tests {
     use super::super::BvhConfig;
+    use super::super::pairs::PairScratch;
     use super::*;
     use crate::geom::Aabb;
+    use crate::pair::Pair;
     use crate::rng::Rng;
     use glam::Vec3;
     use slotmap::SlotMap;
