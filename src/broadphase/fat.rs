@@ -17,6 +17,15 @@ pub(super) const LOOKAHEAD_STEPS: f32 = 3.0;
 /// next escape comes about twice as late as from a box of the same size centred where the
 /// proxy is.
 pub(super) const PREDICT_STEPS: f32 = 6.0;
+/// Steps after entering the incremental regime in which two steps over the full pass's
+/// estimate do not leave it, and one leaves at once only much further over it:
+/// the entry gives every proxy a fat box at once, centred (no motion is known yet) with a
+/// margin of up to `2·LOOKAHEAD_STEPS` steps of its speed, so the fast movers leave them
+/// within that many steps, together, in a burst that says nothing of the steps after it; the
+/// boxes they get then are swept along their motion and jittered, and their escapes spread
+/// out.
+pub(super) const ENTRY_BURST_STEPS: u32 = 2 * LOOKAHEAD_STEPS as u32 + 1;
+
 /// The predicted fat box is grown on every side by this many steps of the speed, so that a
 /// proxy that turns does not leave it at once.
 const PREDICT_SIDE_STEPS: f32 = 1.0;
@@ -92,6 +101,13 @@ impl Motion {
                 self.slow_motion += f64::from(speed / size);
             }
         }
+    }
+
+    /// The escapes per step the fast movers would make in the incremental regime: each one's
+    /// fat box is swept over [`PREDICT_STEPS`] of its motion, times a jitter of 1.5 on
+    /// average, so one that keeps its velocity escapes about once in that many steps.
+    pub(super) fn fast_escapes(&self) -> f64 {
+        self.fast as f64 / (1.5 * f64::from(PREDICT_STEPS))
     }
 
     /// The motion of two sets of movers together.

@@ -10,7 +10,7 @@ use crate::pair::{Pair, ProxyKey};
 /// Set on a candidate whose exact boxes overlapped at the last step.
 pub(super) const HIT: u64 = 1 << 63;
 
-/// What fills the pair list's gap (see [`super::slack::Gapped`]): never read.
+/// What fills the pair list's gap (see [`super::gapped::Gapped`]): never read.
 pub(super) fn null_pair() -> Pair {
     Pair {
         a: ProxyKey::default(),
