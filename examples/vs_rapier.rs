@@ -3,15 +3,15 @@
 //! ```text
 //! cargo run --release --features profiler --example vs_rapier -- --scene gas --n 100000
 //!     [--steps 30] [--warmup 5] [--placement strict|loose] [--seed 1] [--skin 0]
-//!     [--groups G]
+//!     [--groups G] [--every]
 //! ```
 //!
-//! `--scene` is `gas`, `clustered`, `bodies`, `churn`, `pile`, `idle`, one of the worlds no
+//! `--scene` is `gas`, `clustered`, `bodies`, `churn`, `pile`, `fall`, `idle`, one of the worlds no
 //! fixed region suits (`far`: the `gas` cube 3 km from the origin; `open`: spheres moving like
 //! `gas` over 4 km × 40 m × 4 km; `sparse`: the same over 1 km × 40 m × 1 km; `large`: r = 5 m
 //! at 10 % fill, an 806 m cube; `flying`: the `gas` cube crossing x = 512 m at 600 m/s;
-//! `fixtures::scene::worlds`) or `all` (every scene at its default N: bodies and pile 10 000,
-//! the others 100 000; `--n` overrides it for all; `all` runs `idle` at 1 % and at 10 %
+//! `fixtures::scene::worlds`) or `all` (every scene at its default N: fall 4000, bodies and
+//! pile 10 000, the others 100 000; `--n` overrides it for all; `all` runs `idle` at 1 % and at 10 %
 //! moving). `idle` is the `gas`
 //! spheres at rest but for a fixed random `--moving P` % of them (default 1) that move like
 //! `gas`; the others are never updated, in broadleaf or in rapier. `bodies --moving P` moves
@@ -30,7 +30,10 @@
 //!   object instead), then `step()`; spheres go in with `insert_sphere` (into the octree),
 //!   boxes as bodies (into the BVHs). The Config is `Config::default()` (no region: the
 //!   octree's follows the spheres) unless `--placement`, `--skin` (`Config::skin`) or
-//!   `--passes` is given. Timed with `Instant` around all of it.
+//!   `--passes` is given. The frame's batches (keys, centres, boxes: `Feed::stage`) are built
+//!   before the timer starts; `Instant` times the library's calls only (`Feed::commit`: the
+//!   removes, inserts and update batches, then `step()`), as rapier's pose writes happen
+//!   outside its counter.
 //! - rapier: kinematic position-based bodies, ball or cuboid colliders with
 //!   `ActiveCollisionTypes::all()`, fixed bodies for static boxes; moved with
 //!   `set_next_kinematic_translation`, then `PhysicsPipeline::step`. Its broad-phase time per
@@ -51,6 +54,21 @@
 //! `InteractionGroups` (`And` mode) on each collider (`SceneWorld::groups`), and the brute-force
 //! reference is filtered by the same rule (`Feed::retain_allowed`). The scene cell says
 //! `(G groups)`.
+//!
+//! `fall` (`fixtures::rapier_world::record_fall`, the demo's drop: N balls of r = 0.5 m from
+//! a grid into an open box) is not a kinematic replay: rapier simulates the drop for real
+//! (dynamic balls, fixed walls, default `IntegrationParameters`, sleeping on) for 600 steps
+//! (N ≤ 4000) or 900 (above; `--steps` and `--warmup` do not apply), and rapier's column is
+//! its broad-phase counter at each step of that run. broadleaf (walls as static bodies)
+//! replays the recorded frames: each frame's batch of the balls whose centre changed
+//! (`--every`: all balls) is built before the timer, which covers `update_centers` and
+//! `step()` only (frame 0: inserting the balls and the first step, against rapier's first
+//! step, which builds its tree). Its row in the main table holds the means over the whole run;
+//! a phase table follows (falling: until the mean speed drops under 1 m/s after its peak;
+//! settling; resting: after the last step with more than 1 % of the balls awake, when there is
+//! one; whole run), with the worst 30-step window. Every frame's pairs are checked against
+//! brute force (untimed); missed and extra are summed over the frames, and the rapier pairs
+//! cell repeats the exact count (rapier's own pairs of its dynamic run are not recorded).
 //!
 //! Times are medians over the measured steps after the warm-up, in ns per object (every live
 //! object, static ones included) per step. The last line is exactly
@@ -83,12 +101,17 @@
 //! table; the last line is `queries mismatches=<n>` (rapier's and brute force's summed).
 
 use broadleaf::fixtures::cli::{self, Flags, Stop};
-use broadleaf::fixtures::rapier_world::{SceneWorld, record_pile};
-use broadleaf::fixtures::scene::{
-    Bodies, Churn, Feed, Flying, Frame, Gas, Idle, Object, Rng, Scene, Spawn,
+use broadleaf::fixtures::rapier_world::{
+    FallRecording, SceneWorld, fall_steps, record_fall, record_pile,
 };
+use broadleaf::fixtures::scene::{
+    Bodies, Churn, Feed, Flying, Frame, GAS_RADIUS, Gas, Idle, Object, Rng, Scene, Spawn,
+};
+use broadleaf::fixtures::sim::DropConfig;
 use broadleaf::rapier::Comparison;
-use broadleaf::{Aabb, BroadPhase, Config, Passes, Placement, ProxyKey, Vec3, brute, geom};
+use broadleaf::{
+    Aabb, BodyKind, BroadPhase, Config, Pair, Passes, Placement, ProxyKey, Vec3, brute, geom,
+};
 use plotters::prelude::*;
 use rapier3d::math::Pose;
 use rapier3d::parry::bounding_volume::BoundingVolume;
@@ -126,13 +149,15 @@ struct Args {
     queries: bool,
     /// Round-robin collision groups of every scene (0: none).
     groups: u32,
+    /// `fall`: send every ball each frame, not only the ones that moved.
+    every: bool,
 }
 
-const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|idle|far|open|sparse|\
-                     large|flying|all] [--n N] [--steps 30] [--warmup 5] \
+const USAGE: &str = "usage: vs_rapier [--scene gas|clustered|bodies|churn|pile|fall|idle|far|open|\
+                     sparse|large|flying|all] [--n N] [--steps 30] [--warmup 5] \
                      [--placement strict|loose] [--skin 0] [--passes adaptive|full|incremental] [--seed 1] \
                      [--sizes N1,N2,...] [--moving P1,P2,...] [--plot PATH.svg] [--interleave] \
-                     [--per-object] [--queries] [--groups G]";
+                     [--per-object] [--queries] [--groups G] [--every]";
 
 fn parse_args(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
     let mut args = Args {
@@ -152,6 +177,7 @@ fn parse_args(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
         per_object: false,
         queries: false,
         groups: 0,
+        every: false,
     };
     let mut flags = Flags::new(argv);
     while let Some(flag) = flags.next_flag()? {
@@ -159,6 +185,7 @@ fn parse_args(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
             "--interleave" => args.interleave = true,
             "--per-object" => args.per_object = true,
             "--queries" => args.queries = true,
+            "--every" => args.every = true,
             "--scene" => {
                 args.scene = flags.value(&flag)?;
                 args.scene_given = true;
@@ -201,6 +228,9 @@ fn parse_args(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
     if args.moving.len() > 1 && !args.scene_given {
         args.scene = "idle".into();
     }
+    if args.every && !matches!(args.scene.as_str(), "fall" | "all") {
+        return Err(format!("--every applies to fall, not {}", args.scene).into());
+    }
     Ok(args)
 }
 
@@ -208,12 +238,13 @@ fn parse_args(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
 const PILE_SETTLE_STEPS: usize = 240;
 
 /// `--scene all` runs these scenes, then `idle` at each of [`ALL_IDLE_MOVING`].
-const ALL_SCENES: [&str; 10] = [
+const ALL_SCENES: [&str; 11] = [
     "gas",
     "clustered",
     "bodies",
     "churn",
     "pile",
+    "fall",
     "far",
     "open",
     "sparse",
@@ -274,10 +305,10 @@ fn label(scene: &str, moving: Option<f64>) -> String {
 }
 
 fn default_n(scene: &str) -> usize {
-    if scene == "bodies" || scene == "pile" {
-        10_000
-    } else {
-        100_000
+    match scene {
+        "fall" => 4000,
+        "bodies" | "pile" => 10_000,
+        _ => 100_000,
     }
 }
 
@@ -345,6 +376,8 @@ struct Row {
     ours_ns: f64,
     rapier_ns: f64,
     cmp: Comparison,
+    /// More to print after the table (the `fall` scene's phases).
+    detail: Option<String>,
 }
 
 /// Both engines with `scene`'s objects inserted and one step taken; also the spawns.
@@ -365,6 +398,9 @@ fn spawn_both(scene: &dyn Scene, args: &Args) -> (Ours, SceneWorld, Vec<Spawn>) 
 }
 
 fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
+    if name == "fall" {
+        return run_fall(n, args);
+    }
     let steps = args.warmup + args.steps;
     let mut scene =
         make_scene(name, n, args.seed, steps, moving.unwrap_or(100.0)).expect("known scene");
@@ -390,15 +426,18 @@ fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
     let trace = std::env::var_os("BROADLEAF_TRACE").is_some();
     let live_now = scene.len().max(1) as f64;
     let mut ours_step = |frame: &Frame| {
+        // The frame's batches (keys, centres, boxes) are built before the timer starts, as an
+        // engine's arrays are ready before its broadphase runs and as rapier's pose writes
+        // happen outside its counter; the timer covers the library's calls only.
+        ours.feed.stage(frame).expect("scene frames are valid");
         let t = Instant::now();
         ours.feed
-            .apply(&mut ours.bp, frame)
+            .commit(&mut ours.bp, frame)
             .expect("scene frames are valid");
         ours.bp.step();
-        let pairs = ours.bp.pairs();
         let ns = t.elapsed().as_nanos() as f64;
         last_pairs.clear();
-        last_pairs.extend_from_slice(pairs);
+        last_pairs.extend_from_slice(ours.bp.pairs());
         if trace {
             eprintln!("{:.1} ns/object {:?}", ns / live_now, ours.bp.stats());
         }
@@ -457,7 +496,177 @@ fn run(name: &str, n: usize, moving: Option<f64>, args: &Args) -> Row {
         ours_ns: median(&mut ours_ns),
         rapier_ns: median(&mut rapier_ns),
         cmp,
+        detail: None,
     }
+}
+
+/// Steps in the `fall` scene's sliding window, for its worst-window ratio.
+const FALL_WINDOW: usize = 30;
+
+/// `fall`: rapier's recorded drop of `n` balls replayed through broadleaf. Per frame the batch
+/// (the keys and centres of the changed balls, or with `--every` of all balls) is built
+/// first; the timer covers `update_centers` and `step()` only. Frame 0 times inserting the
+/// balls (the walls are in from the start) and the first step, as rapier's first step builds
+/// its tree. Every frame's pairs are checked against brute force, untimed. The row holds the
+/// whole run's means; its phase table is the row's `detail`.
+fn run_fall(n: usize, args: &Args) -> Row {
+    let rec = record_fall(&DropConfig::new(n, GAS_RADIUS, args.seed), fall_steps(n))
+        .unwrap_or_else(|e| cli::fail(USAGE, &format!("--n {n}: {e}")));
+    let mut bp = BroadPhase::new(args.config());
+    let walls: Vec<ProxyKey> = rec
+        .walls
+        .iter()
+        .map(|&w| bp.insert_body(w, BodyKind::Static).expect("finite walls"))
+        .collect();
+    let objects = rec.balls() + walls.len();
+    let mut balls: Vec<ProxyKey> = Vec::with_capacity(rec.balls());
+    let (mut centers, mut keys, mut batch) = (Vec::new(), Vec::new(), Vec::new());
+    let mut ours_ns = Vec::with_capacity(rec.frames());
+    let (mut missed, mut extra, mut differ, mut cmp) = (0, 0, 0, Comparison::default());
+    let trace = std::env::var_os("BROADLEAF_TRACE").is_some();
+    for k in 0..rec.frames() {
+        let (ids, moved) = rec.changed(k);
+        let ns = if k == 0 {
+            centers.extend_from_slice(moved);
+            let t = Instant::now();
+            for &c in moved {
+                balls.push(bp.insert_sphere(c, rec.radius).expect("finite balls"));
+            }
+            bp.step();
+            t.elapsed()
+        } else {
+            for (&i, &c) in ids.iter().zip(moved) {
+                centers[i as usize] = c;
+            }
+            keys.clear();
+            batch.clear();
+            if args.every {
+                keys.extend_from_slice(&balls);
+                batch.extend_from_slice(&centers);
+            } else {
+                keys.extend(ids.iter().map(|&i| balls[i as usize]));
+                batch.extend_from_slice(moved);
+            }
+            let t = Instant::now();
+            bp.update_centers(&keys, &batch).expect("valid batches");
+            bp.step();
+            t.elapsed()
+        };
+        ours_ns.push(ns.as_nanos() as f64 / objects as f64);
+        if trace {
+            eprintln!("{k}: {:.1} ns/object {:?}", ours_ns[k], bp.stats());
+        }
+        let exact = fall_exact(&bp, &rec, &balls, &walls, &centers);
+        // Against brute force alone (rapier's pairs of its dynamic run are not recorded):
+        // `missed` = exact \ ours, `extra` = ours \ exact.
+        cmp = Comparison::new(bp.pairs(), &exact, &exact);
+        missed += cmp.missed;
+        extra += cmp.extra;
+        differ += usize::from(!cmp.ours_equals_exact);
+    }
+    eprintln!("fall: broadleaf's last step: {:?}", bp.stats());
+    let rapier_ns: Vec<f64> = rec
+        .broad_phase_time
+        .iter()
+        .map(|t| t.as_nanos() as f64 / objects as f64)
+        .collect();
+    let detail = fall_table(&rec, &ours_ns, &rapier_ns, args.every)
+        + &format!(
+            "pairs checked against brute force at every frame ({} frames): missed {missed}, \
+             extra {extra}, frames that differ {differ}\n",
+            rec.frames()
+        );
+    (cmp.missed, cmp.extra) = (missed, extra);
+    Row {
+        scene: if args.every { "fall --every" } else { "fall" }.to_string(),
+        name: "fall".to_string(),
+        moving: None,
+        n: objects,
+        ours_ns: mean(&ours_ns),
+        rapier_ns: mean(&rapier_ns),
+        cmp,
+        detail: Some(detail),
+    }
+}
+
+/// The exact pairs of a `fall` frame from the recorded centres and walls (each grown by the
+/// margin), not from the broadphase.
+fn fall_exact(
+    bp: &BroadPhase,
+    rec: &FallRecording,
+    balls: &[ProxyKey],
+    walls: &[ProxyKey],
+    centers: &[Vec3],
+) -> Vec<Pair> {
+    let margin = bp.config().margin;
+    let ball = |(&key, &c): (&ProxyKey, &Vec3)| {
+        brute::Proxy::new(key, Aabb::from_center_radius(c, rec.radius + margin))
+    };
+    let wall = |(&key, w): (&ProxyKey, &Aabb)| brute::Proxy {
+        key,
+        aabb: w.grown(margin),
+        is_static: true,
+    };
+    let proxies: Vec<brute::Proxy> = balls
+        .iter()
+        .zip(centers)
+        .map(ball)
+        .chain(walls.iter().zip(&rec.walls).map(wall))
+        .collect();
+    brute::sweep_pairs(&proxies)
+}
+
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len().max(1) as f64
+}
+
+/// The `fall` scene's phase table (means of ns/object/step over each phase's frames) and its
+/// worst [`FALL_WINDOW`]-step window.
+fn fall_table(rec: &FallRecording, ours: &[f64], rapier: &[f64], every: bool) -> String {
+    use std::fmt::Write;
+    let mut out = format!(
+        "fall: {} balls (r = {} m) and {} walls, {} frames recorded from rapier (dynamic balls, \
+         default parameters, sleeping on); broadleaf sent {} each frame; times: mean \
+         ns/object/step over each phase\n\n\
+         | phase | frames | steps | broadleaf ns/object/step | rapier ns/object/step | speed-up |\n\
+         |---|---|---:|---:|---:|---:|\n",
+        rec.balls(),
+        rec.radius,
+        rec.walls.len(),
+        rec.frames(),
+        if every {
+            "every ball"
+        } else {
+            "the balls that moved"
+        },
+    );
+    for (phase, range) in rec.phases().rows() {
+        let (a, b) = (mean(&ours[range.clone()]), mean(&rapier[range.clone()]));
+        let _ = writeln!(
+            out,
+            "| {phase} | {}–{} | {} | {a:.1} | {b:.1} | {:.2} |",
+            range.start,
+            range.end,
+            range.len(),
+            b / a
+        );
+    }
+    let window = FALL_WINDOW.min(ours.len());
+    let worst = (0..=ours.len() - window)
+        .map(|s| {
+            let (a, b) = (mean(&ours[s..s + window]), mean(&rapier[s..s + window]));
+            (s, b / a, a, b)
+        })
+        .min_by(|x, y| x.1.total_cmp(&y.1));
+    if let Some((s, ratio, a, b)) = worst {
+        let _ = writeln!(
+            out,
+            "\nworst {window}-step window: frames {s}–{}, speed-up {ratio:.2} (broadleaf {a:.1}, \
+             rapier {b:.1} ns/object/step)",
+            s + window
+        );
+    }
+    out
 }
 
 fn main() {
@@ -473,7 +682,7 @@ fn main() {
             .into_iter()
             .chain(ALL_IDLE_MOVING.map(|p| ("idle", Some(p))))
             .collect(),
-        s if make_scene(s, 0, 0, 0, 0.0).is_some() => {
+        s if s == "fall" || make_scene(s, 0, 0, 0, 0.0).is_some() => {
             let moving = moving_for(s, &args).unwrap_or_else(|e| cli::fail(USAGE, &e));
             moving.into_iter().map(|p| (s, p)).collect()
         }
@@ -533,6 +742,9 @@ fn main() {
         rows.push(r);
     }
     println!();
+    for detail in rows.iter().filter_map(|r| r.detail.as_ref()) {
+        println!("{detail}");
+    }
     if args.groups > 0 {
         println!(
             "groups: every object of a scene in group (scene id mod {g}) of {g}, pairing only \

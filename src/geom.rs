@@ -133,6 +133,14 @@ impl Aabb {
     /// ray sliding along a face hits the closed box. (glam's `min`/`max` are comparisons, so
     /// an unreplaced NaN would propagate and turn a miss into a hit.) The result is monotone:
     /// a box containing another is entered no later and left no earlier.
+    ///
+    /// Nothing cancels: each slab time is one subtraction and one product, each rounded once
+    /// and monotone in the corner, and the answer only compares them; no difference of nearly
+    /// equal products is formed. It is a function of the floats given (`inv_dir` is already
+    /// rounded) and the crate's one definition of a ray meeting a box: a body's cast answers
+    /// with it, and the BVH prunes by the same operations on boxes holding their children's,
+    /// which by the monotony never prunes a box this enters. (Spheres are tested in `f64`
+    /// instead, by [`ray_sphere`], and their boxes pruned with a pad.)
     #[must_use]
     #[inline]
     pub fn ray_entry(&self, origin: Vec3, inv_dir: Vec3, max_t: f32) -> Option<f32> {
@@ -293,25 +301,22 @@ pub(crate) fn from_ordered_bits(k: u32) -> f32 {
 
 /// The smallest `t ∈ [0, max_t]` with `|origin + t·dir − center| ≤ radius`, or `None`.
 /// `dir` need not be unit length (`t` is in units of `dir`); a zero `dir` hits only when the
-/// origin is inside. An origin inside the sphere gives `t = 0`.
+/// origin is inside. An origin inside the sphere gives `t = 0`. Computed in `f64` from the
+/// `f32` inputs and rounded once, by [`first_touch`]'s cancellation-free form.
+///
+/// The textbook discriminant `b² − a·c` (`a = |dir|²`, `b = m·dir`, `c = |m|² − r²`,
+/// `m = origin − center`) subtracts two nearly equal squares for a ray grazing the sphere far
+/// from its start: `b²` and `a·|m|²` agree in every bit the answer depends on, and the
+/// difference left is rounding noise, in `f32` and in `f64` alike. Lagrange's identity
+/// `|m|²·|dir|² − (m·dir)² = |m × dir|²` rewrites it as `a·r² − |m × dir|²`, a comparison of
+/// the squared radius with the squared distance from the centre to the line, whose terms are
+/// each computed to a few `f64` roundings of their own size (*Ray Tracing Gems*, ch. 7). `f64`
+/// also keeps the fourth powers of subnormal and huge `f32` inputs inside its range, where
+/// `f32` squares underflow to 0 or overflow to `∞`.
 #[must_use]
 pub fn ray_sphere(origin: Vec3, dir: Vec3, center: Vec3, radius: f32, max_t: f32) -> Option<f32> {
-    let m = origin - center;
-    let c = m.length_squared() - radius * radius;
-    if c <= 0.0 {
-        return Some(0.0);
-    }
-    let a = dir.length_squared();
-    let b = m.dot(dir);
-    if a == 0.0 || b >= 0.0 {
-        return None;
-    }
-    let disc = b * b - a * c;
-    if disc < 0.0 {
-        return None;
-    }
-    let t = (-b - disc.sqrt()) / a;
-    (t <= max_t).then_some(t.max(0.0))
+    let m = origin.as_dvec3() - center.as_dvec3();
+    first_touch(m, dir.as_dvec3(), f64::from(radius)).and_then(|t| at_most(t, max_t))
 }
 
 /// `1 / dir` per component, with `±∞` for zero components (sign kept from `-0.0`).
@@ -417,6 +422,11 @@ const QUERY_PAD: f32 = 1e-5;
 /// overflows, and it never decreases as `b` shrinks. An infinite face is fine; a NaN anywhere
 /// or a non-finite `p` gives `+∞`, and an inverted box (such as [`Aabb::EMPTY`]) is at a
 /// positive distance from every point.
+///
+/// Nothing cancels: each axis' gap is one subtraction of two `f32` values (exact in `f64`
+/// unless their exponents differ by more than 29, and then correctly rounded), and the rest
+/// sums non-negative squares, which `f64` neither underflows (the square of the smallest
+/// subnormal `f32` is about `2e-90`) nor overflows.
 #[must_use]
 pub fn point_aabb_distance(p: Vec3, b: &Aabb) -> f32 {
     if !p.is_finite() || b.min.is_nan() || b.max.is_nan() {
@@ -431,6 +441,12 @@ pub fn point_aabb_distance(p: Vec3, b: &Aabb) -> f32 {
 /// compared in `f64` (squares of `f32` values neither overflow nor lose the small terms there),
 /// so that centres far apart are not taken for touching when the `f32` squares would overflow
 /// to `+∞`. Finite inputs expected.
+///
+/// A comparison of two non-negative sums, not a difference: the answer can be wrong only for
+/// spheres whose gap is below the `f64` rounding of the squares (`2⁻⁵²` of the distance),
+/// far below the `f32` spacing of the inputs. On an axis where the spheres are aligned the
+/// test is exact, which is what keeps it inside the boxes' overlap: `a.x + ra >= b.x − rb`
+/// then holds, and rounding both sides to `f32` keeps it.
 #[must_use]
 pub fn spheres_touch(a: Vec3, ra: f32, b: Vec3, rb: f32) -> bool {
     let r = f64::from(ra) + f64::from(rb);
@@ -439,13 +455,25 @@ pub fn spheres_touch(a: Vec3, ra: f32, b: Vec3, rb: f32) -> bool {
 
 /// The distance from `p` to the solid sphere, `max(|p − center| − radius, 0)`, computed in
 /// `f64` and rounded once; `+∞` if an input is not finite or the radius is negative.
+///
+/// `|m| − r` (`m = p − center`) cancels for a point near the surface: `|m|` carries the
+/// rounding of its square root, `2⁻⁵³·|m|`, which can be all of a small difference. The
+/// product form `(|m|² − r²) / (|m| + r)` has no square root in the numerator: for `f32`
+/// coordinates the differences, their squares and `r²` are exact in `f64` (up to 48 bits
+/// each, unless the exponents are far apart), so the numerator is exact or nearly so and the
+/// quotient carries a few relative roundings only.
 #[must_use]
 pub fn point_sphere_distance(p: Vec3, center: Vec3, radius: f32) -> f32 {
     if !(p.is_finite() && check_sphere(center, radius).is_ok()) {
         return f32::INFINITY;
     }
-    let d = (p.as_dvec3() - center.as_dvec3()).length() - f64::from(radius);
-    d.max(0.0) as f32 + 0.0
+    let m2 = (p.as_dvec3() - center.as_dvec3()).length_squared();
+    let r = f64::from(radius);
+    let excess = m2 - r * r;
+    if excess <= 0.0 {
+        return 0.0;
+    }
+    (excess / (m2.sqrt() + r)) as f32
 }
 
 /// The first `t ∈ [0, max_t]` at which the sphere `center + t·dir`, `radius` touches the
@@ -490,7 +518,13 @@ pub fn sphere_cast_sphere(
 /// the rest of the rounded box only through that capsule or through the corner spheres at its
 /// ends, so the capsule decides. Three: a corner's region, and the ray can go on only through
 /// the regions of the three edges meeting there, so their three capsules decide. All of it is
-/// done in `f64` from the `f32` inputs, so no intermediate overflows.
+/// done in `f64` from the `f32` inputs, so no intermediate overflows or underflows.
+///
+/// Where it could cancel: the slab times are one difference and one quotient each (as in
+/// [`Aabb::ray_entry`], no cancellation); the capsules' sides and end spheres are
+/// [`first_touch`], whose discriminant is Lagrange's `a·r² − |m × d|²`, not `b² − ac`. The
+/// entry point's region is read from a rounded point, so a path entering within an `f64`
+/// rounding of an edge's region may be answered as a face (at `t0`), off by that rounding.
 #[must_use]
 pub fn sphere_cast_aabb(center: Vec3, radius: f32, dir: Vec3, max_t: f32, b: &Aabb) -> Option<f32> {
     if !cast_is_valid(center, radius, dir, max_t) || check_aabb(b).is_err() {
@@ -535,9 +569,17 @@ pub fn sphere_cast_aabb(center: Vec3, radius: f32, dir: Vec3, max_t: f32, b: &Aa
 
 /// The first `t >= 0` at which `|m + t·d| <= r` (`m` is the start relative to the centre), in
 /// `f64`. With `c = |m|² − r²`, `b = m·d`, `a = |d|²`, the roots of `a t² + 2 b t + c` are
-/// `(−b ± √(b² − ac)) / a`; the smaller one is computed as `c / (−b + √(b² − ac))`, which does
-/// not cancel when `b < 0` (a ray moving towards the centre, the only case that can touch
-/// later). `c <= 0` touches at once; `b >= 0` never touches later (this includes `d = 0`).
+/// `(−b ± √(b² − ac)) / a`. `c <= 0` touches at once; `b >= 0` never touches later (this
+/// includes `d = 0`). The discriminant is taken as `a·r² − |m × d|²` (Lagrange's identity,
+/// see [`ray_sphere`]): `b² − ac` cancels catastrophically for a grazing path that starts far
+/// away, while each term here has its own magnitude's rounding only (a cross product's
+/// components cancel only when `m` is nearly parallel to `d`, where `a·r²` dominates unless
+/// `r` is tiny, and then the sign is that of a difference of two products of `f32`-derived
+/// values, within a few `f64` roundings). The smaller root is computed as
+/// `c / (−b + √disc)`, which does not cancel when `b < 0` (a path moving towards the centre,
+/// the only case that can touch later). With `m` the `f64` difference of `f32` coordinates
+/// (exact unless their exponents differ by more than 29), the answer is the exact one up to a
+/// few `f64` roundings relative to `|m|` and `|d|`, far below the `f32` rounding of the result.
 fn first_touch(m: DVec3, d: DVec3, r: f64) -> Option<f64> {
     let c = m.length_squared() - r * r;
     if c <= 0.0 {
@@ -547,7 +589,7 @@ fn first_touch(m: DVec3, d: DVec3, r: f64) -> Option<f64> {
     if b >= 0.0 {
         return None;
     }
-    let disc = b * b - d.length_squared() * c;
+    let disc = d.length_squared() * (r * r) - m.cross(d).length_squared();
     (disc >= 0.0).then(|| c / (-b + disc.sqrt()))
 }
 
@@ -592,11 +634,23 @@ pub(crate) fn cast_is_valid(center: Vec3, radius: f32, dir: Vec3, max_t: f32) ->
     check_sphere(center, radius).is_ok() && dir.is_finite() && max_t.is_finite() && max_t >= 0.0
 }
 
-/// What the structures add to `radius` when they look for the boxes a sphere cast may touch
-/// ([`QUERY_PAD`] times the magnitude of the coordinates along the cast); `+∞` for a cast too
-/// long for `f32`, which then tests every candidate.
+/// What the structures add to `radius` when they look for the boxes a sphere cast (or a ray,
+/// `radius = 0`) may touch, so that no box holding a touch the exact `f64` test finds is
+/// pruned by the `f32` slab tests (and the `f32` boxes) that rounded the other way. `+∞` for a
+/// cast too long for `f32`, which then tests every candidate.
+///
+/// Three terms. [`QUERY_PAD`] times the magnitude of the coordinates along the cast covers
+/// the relative rounding of the box corners (`center ± radius`), of the slab differences and
+/// of their products with `1 / dir`. A direction component below `2⁻¹²⁷` has an infinite
+/// inverse, and the slab test takes the segment as not moving along that axis, though it
+/// moves up to `2⁻¹²⁷·max_t`: `max_t · 2⁻¹²⁶` covers that, however small the component is
+/// next to the others (the relative term would not). And a slab time in the subnormal range
+/// rounds by up to `2⁻¹⁵⁰` absolutely, a distance of `|dir|·2⁻¹⁵⁰`: `|dir| · 2⁻¹²⁶` covers
+/// that where the coordinates are too small for the relative term to.
 pub(crate) fn cast_pad(center: Vec3, radius: f32, dir: Vec3, max_t: f32) -> f32 {
-    (center.abs().max_element() + dir.abs().max_element() * max_t + radius) * QUERY_PAD
+    let reach = dir.abs().max_element();
+    (center.abs().max_element() + reach * max_t + radius) * QUERY_PAD
+        + (max_t + reach) * f32::MIN_POSITIVE
 }
 
 /// What the structures add to `radius` when they look for the shapes within `radius` of `p`

@@ -203,10 +203,10 @@ impl World {
             }
         };
         let err = got.expect_err("bad input is refused");
-        let expected = match err {
-            Error::NonFinite { .. } | Error::NegativeRadius(_) | Error::InvertedAabb { .. } => true,
-            _ => false,
-        };
+        let expected = matches!(
+            err,
+            Error::NonFinite { .. } | Error::NegativeRadius(_) | Error::InvertedAabb { .. }
+        );
         assert!(expected, "{context}: bad input refused with {err:?}");
         assert_eq!(
             self.bp.len(),
@@ -235,7 +235,7 @@ impl World {
         for (c, r) in spheres {
             let (x, y) = (a.insert_sphere_with(c, r, g), b.insert_sphere(c, r));
             assert!(x.is_err(), "sphere {c} {r} accepted");
-            // Compared as text: the errors carry the NaN they refused.
+            // Compared as text: the errors carry the NaN they refused, which equals nothing.
             assert_eq!(
                 format!("{x:?}"),
                 format!("{y:?}"),

@@ -13,7 +13,8 @@
 //!   exactly the bad ones), both placements, margins 0–0.75, skins, all three `Passes` (after
 //!   a step, `stats().pass` must be one the forced choice allows);
 //! - inserts, updates, removes, small lattice moves, `set_groups` (stale keys refused), and
-//!   the batches `update_spheres` / `update_bodies` with bad entries mixed in: a batch with a
+//!   the batches `update_spheres` / `update_bodies` / `update_centers` (also with slices of
+//!   different lengths) with bad entries mixed in: a batch with a
 //!   bad entry must be refused whole, `BatchError.index` naming the first bad entry by the
 //!   driver's own rule and its error the kind that rule gives, nothing applied;
 //! - after every step: `pairs` equals the model's sorted O(n²) set (static × static and
@@ -28,11 +29,7 @@
 //!   shape functions (`ray_sphere`, `Aabb::ray_entry`, `sphere_cast_sphere`,
 //!   `sphere_cast_aabb`, `point_sphere_distance`, `point_aabb_distance`) — the same `f32`
 //!   (or `f64`, rounded once) computation the broadphase promises its answers equal, so the
-//!   comparison needs no tolerance — ties to the smaller key, as `tests/bp_queries.rs` does.
-//!   One exception: `ray_sphere`'s "starts inside" test squares in `f32`, which underflows
-//!   for subnormal offsets (a ray starting `3.6e-43` from a sphere of radius 0 "hits" it at
-//!   `t = 0`); for a sphere where that test and the same test in `f64` disagree, the driver
-//!   accepts an answer that differs only by that sphere ([`check_cast`]);
+//!   comparison needs no tolerance — ties to the smaller key, as `tests/bp_queries.rs` does;
 //! - serde snapshots (JSON and postcard): a clean one must restore, pass `validate()`, and
 //!   carry on as the original would (the driver continues with the restored copy against the
 //!   same model); a damaged one (a byte changed, or cut short) must give `Err` or a
@@ -101,6 +98,9 @@ pub enum Op {
     /// decoded length would eat the rest of the input).
     UpdateSpheres(u8, [(u8, [F; 3], F); MAX_BATCH]),
     UpdateBodies(u8, [(u8, [F; 3], [F; 3]); MAX_BATCH]),
+    /// `update_centers` with the first `n % (MAX_BATCH + 1)` keys and, one time in four, a
+    /// different number of centres (`m / 4 % (MAX_BATCH + 1)`, for `m % 4 == 0`).
+    UpdateCenters(u8, u8, [(u8, [F; 3]); MAX_BATCH]),
     /// A box query, with a visitor that stops after this many matches if given.
     QueryAabb([F; 3], [F; 3], Filter, Option<u8>),
     QuerySphere([F; 3], F, Filter, Option<u8>),
@@ -608,6 +608,7 @@ fn apply(bp: &mut BroadPhase, m: &mut Model, op: &Op, passes: Passes) {
                 (got, want) => panic!("update_spheres: {got:?}, expected {want:?}"),
             }
         }
+        Op::UpdateCenters(n, centers, entries) => update_centers(bp, m, *n, *centers, entries),
         Op::UpdateBodies(n, entries) => {
             let batch: Vec<(ProxyKey, Aabb)> = entries
                 .iter()
@@ -679,25 +680,16 @@ fn apply(bp: &mut BroadPhase, m: &mut Model, op: &Op, passes: Passes) {
                 Shape::Sphere { center, radius } => ray_sphere(o, d, center, radius, max_t),
                 Shape::Body { aabb, .. } => aabb.ray_entry(o, inv, max_t),
             };
-            // `ray_sphere` tests "starts inside" as `|o − c|² − r² <= 0` in `f32`, whose
-            // squares underflow for subnormal offsets (and overflow for huge ones): where
-            // that test and the same test in `f64` disagree, the broadphase may rightly
-            // prune a sphere `ray_sphere` would accept, so such a sphere is in doubt.
-            let doubtful = |s: &Shape| match *s {
-                Shape::Sphere { center, radius } => {
-                    let m32 = (o - center).length_squared() - radius * radius <= 0.0;
-                    let d = o.as_dvec3() - center.as_dvec3();
-                    let r = f64::from(radius);
-                    m32 != (d.dot(d) <= r * r)
-                }
-                Shape::Body { .. } => false,
-            };
             let pred = predicate(m, f);
             let filter = m.filter(f, &pred);
-            let got = bp.cast_ray_with(o, d, max_t, &filter);
-            check_cast(m, valid, Some(f), got, &t_of, &doubtful, "cast_ray_with");
-            let got = bp.cast_ray(o, d, max_t);
-            check_cast(m, valid, None, got, &t_of, &doubtful, "cast_ray");
+            let want = valid.then(|| first_hit(m, Some(f), &t_of)).flatten();
+            assert_eq!(
+                bp.cast_ray_with(o, d, max_t, &filter),
+                want,
+                "cast_ray_with"
+            );
+            let want = valid.then(|| first_hit(m, None, &t_of)).flatten();
+            assert_eq!(bp.cast_ray(o, d, max_t), want, "cast_ray");
         }
         Op::CastSphere(c, r, d, max_t, f) => {
             let (c, r, d, max_t) = (v(*c), r.get(), v(*d), max_t.get());
@@ -752,6 +744,57 @@ fn apply(bp: &mut BroadPhase, m: &mut Model, op: &Op, passes: Passes) {
     }
 }
 
+/// [`Op::UpdateCenters`]: the batch refused whole when the slices' lengths differ (at the
+/// first index only one has) or at its first bad entry by the driver's own rule (a
+/// non-finite centre, then a stale key, then a body's key); else every named sphere moved,
+/// keeping its radius.
+fn update_centers(
+    bp: &mut BroadPhase,
+    m: &mut Model,
+    n: u8,
+    centers: u8,
+    entries: &[(u8, [F; 3]); MAX_BATCH],
+) {
+    let n = usize::from(n) % (MAX_BATCH + 1);
+    let count = if centers % 4 == 0 {
+        usize::from(centers / 4) % (MAX_BATCH + 1)
+    } else {
+        n
+    };
+    let keys: Vec<ProxyKey> = entries[..n].iter().filter_map(|e| m.pick(e.0)).collect();
+    let cs: Vec<Vec3> = entries[..count].iter().map(|e| v(e.1)).collect();
+    let first_bad = if keys.len() == cs.len() {
+        keys.iter()
+            .zip(&cs)
+            .enumerate()
+            .find_map(|(i, (&k, &c))| Some((i, m.sphere_refusal(k, c, 0.0)?)))
+    } else {
+        let (keys, values) = (keys.len(), cs.len());
+        Some((keys.min(values), Error::LengthMismatch { keys, values }))
+    };
+    let before: Vec<Option<Shape>> = keys.iter().map(|&k| bp.shape(k)).collect();
+    match (bp.update_centers(&keys, &cs), first_bad) {
+        (Ok(()), None) => {
+            for (k, &c) in keys.iter().zip(&cs) {
+                let Some(Shape::Sphere { center, .. }) = m.shapes.get_mut(k) else {
+                    unreachable!("the model said a live sphere")
+                };
+                *center = c;
+            }
+        }
+        (Err(BatchError { index, error }), Some((i, want))) => {
+            assert_eq!(index, i, "the first bad entry");
+            assert!(same_kind(&error, &want), "{error:?} for {want:?}");
+            if let Error::LengthMismatch { .. } = want {
+                assert_eq!(error, want, "the lengths named");
+            }
+            let after: Vec<Option<Shape>> = keys.iter().map(|&k| bp.shape(k)).collect();
+            assert_eq!(after, before, "a refused batch changed a shape");
+        }
+        (got, want) => panic!("update_centers: {got:?}, expected {want:?}"),
+    }
+}
+
 /// The predicate the input describes: rejects by the model's serials, and checks it is shown
 /// the model's shape of a live proxy.
 fn predicate<'a>(m: &'a Model, f: &Filter) -> impl Fn(ProxyKey, &Shape) -> bool + 'a {
@@ -775,43 +818,6 @@ fn first_hit(
         .filter_map(|key| Some((t_of(&m.shapes[&key])?, key)))
         .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
         .map(|(t, k)| (k, t))
-}
-
-/// A cast's answer against the model: the nearest accepted hit over the model's shapes,
-/// exactly. Where they differ, only the shapes in `doubt` (whose reference answer rests on an
-/// `f32` rounding the contract does not promise) may explain it: the answer must then be a
-/// hit of the reference that the filter passes, no later than the nearest hit among the
-/// shapes not in doubt, and `None` only if every reference hit is in doubt.
-fn check_cast(
-    m: &Model,
-    valid: bool,
-    filter: Option<&Filter>,
-    got: Option<(ProxyKey, f32)>,
-    t_of: &dyn Fn(&Shape) -> Option<f32>,
-    doubt: &dyn Fn(&Shape) -> bool,
-    what: &str,
-) {
-    let want = valid.then(|| first_hit(m, filter, t_of)).flatten();
-    if got == want {
-        return;
-    }
-    assert!(valid, "{what}: {got:?} for an invalid cast");
-    let firm = |s: &Shape| if doubt(s) { None } else { t_of(s) };
-    let firm = first_hit(m, filter, &firm);
-    match got {
-        Some((k, t)) => {
-            assert!(
-                filter.is_none_or(|f| m.passes(f, k)),
-                "{what}: {k:?} filtered"
-            );
-            assert_eq!(t_of(&m.shapes[&k]), Some(t), "{what}: not a hit of {k:?}");
-            assert!(
-                firm.is_none_or(|(fk, ft)| (t, k) <= (ft, fk)),
-                "{what}: {got:?} behind {firm:?}"
-            );
-        }
-        None => assert_eq!(firm, None, "{what}: missed"),
-    }
 }
 
 /// Runs a filtered visiting query through `query` and checks it against the model's

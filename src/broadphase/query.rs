@@ -185,12 +185,22 @@ impl BroadPhase {
         }
         let inv = geom::inverse_dir(dir);
         let hit = FirstHit::new(max_t);
-        self.first_hit(hit, origin, dir, 0.0, filter, |shape, limit| match *shape {
-            Shape::Sphere { center, radius } => {
-                geom::ray_sphere(origin, dir, center, radius, limit)
-            }
-            Shape::Body { aabb, .. } => aabb.ray_entry(origin, inv, limit),
-        })
+        // Spheres are re-tested in `f64` ([`geom::ray_sphere`]), so their `f32` boxes are
+        // padded; a body's exact test is the slab test its box is pruned by, unpadded.
+        let inflate = (geom::cast_pad(origin, 0.0, dir, max_t), 0.0);
+        self.first_hit(
+            hit,
+            origin,
+            dir,
+            inflate,
+            filter,
+            |shape, limit| match *shape {
+                Shape::Sphere { center, radius } => {
+                    geom::ray_sphere(origin, dir, center, radius, limit)
+                }
+                Shape::Body { aabb, .. } => aabb.ray_entry(origin, inv, limit),
+            },
+        )
     }
 
     /// The first proxy touched by the sphere `center + t·dir` of radius `radius`, for `t` in
@@ -225,7 +235,7 @@ impl BroadPhase {
             hit,
             center,
             dir,
-            inflate,
+            (inflate, inflate),
             filter,
             |shape, limit| match *shape {
                 Shape::Sphere {
@@ -240,7 +250,7 @@ impl BroadPhase {
     }
 
     /// The smallest `(t, key)` of `hit_of(shape, limit)` over the proxies `filter` passes whose
-    /// held boxes, grown by `inflate`, the segment `origin + t·dir` meets before the best `t`
+    /// held boxes, grown by `inflate` (the spheres', the bodies'), the segment `origin + t·dir` meets before the best `t`
     /// so far: each structure is walked nearer subtrees first and prunes what lies behind
     /// that `t`, the two BVHs in one walk ([`Bvh::ray_candidates_both`]), so that a hit in
     /// either prunes the other. A rejected proxy does not shorten the segment.
@@ -249,7 +259,7 @@ impl BroadPhase {
         mut hit: FirstHit,
         origin: Vec3,
         dir: Vec3,
-        inflate: f32,
+        (sphere_inflate, body_inflate): (f32, f32),
         filter: &QueryFilter<'_>,
         hit_of: impl Fn(&Shape, f32) -> Option<f32>,
     ) -> Option<(ProxyKey, f32)> {
@@ -269,7 +279,7 @@ impl BroadPhase {
         // A world of bodies alone skips the octree's setup.
         if !self.octree.is_empty() {
             self.octree
-                .ray_candidates(origin, dir, max_t, inflate, |k, _| {
+                .ray_candidates(origin, dir, max_t, sphere_inflate, |k, _| {
                     hit.offer(k, t_of(k, max_t))
                 });
         }
@@ -280,7 +290,7 @@ impl BroadPhase {
             origin,
             dir,
             limit,
-            inflate,
+            body_inflate,
             |k, _| hit.offer(k, t_of(k, max_t)),
         );
         // The stale slots the structures skipped, at their latest shapes.

@@ -509,8 +509,6 @@ impl Runs<'_> {
     }
 }
 
-/// Tests every sphere of `own` against the spheres at the walk positions `listed` of `boxes`
-
 #[cfg(all(test, feature = "parallel"))]
 mod tests {
     use super::super::Placement;

@@ -248,7 +248,9 @@ impl Octree {
             return None;
         }
         let mut hit = FirstHit::new(max_t);
-        self.ray_ids(origin, dir, max_t, 0.0, |id, limit| {
+        // The `f64` sphere test may hit where the `f32` node tests round the other way.
+        let pad = geom::cast_pad(origin, 0.0, dir, max_t);
+        self.ray_ids(origin, dir, max_t, pad, |id, limit| {
             let (c, r) = self.sphere_of(id);
             let t = geom::ray_sphere(origin, dir, c, r, limit);
             hit.offer(self.key_of(id), t)
@@ -288,7 +290,7 @@ impl Octree {
             return;
         }
         let inv = geom::inverse_dir(dir);
-        let slack = self.lattice.slack();
+        let slack = self.lattice.slack() + geom::cast_pad(origin, 0.0, dir, max_t);
         let _ = self.traverse(
             |cell| {
                 self.lattice

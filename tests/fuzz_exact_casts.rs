@@ -1,0 +1,160 @@
+//! Casts the whole-API fuzz target found answered wrongly (issue 43), replayed as the
+//! operations their inputs decode to: a cast's answer is exactly the nearest hit of the public
+//! shape functions (`geom::ray_sphere`, ...) over the shapes given, and those functions give
+//! the exact geometric answer for these inputs, however close the ray passes and however small
+//! the offsets: a point sphere of radius 0 is hit only by a ray through the point. The
+//! expectations come from the tests' own `f64` reasoning about rays along one axis, never
+//! from the functions under test.
+#![cfg(feature = "serde")]
+
+use broadleaf::geom::{ray_sphere, sphere_cast_sphere};
+use broadleaf::{BroadPhase, Config, Error, Passes, Placement, QueryFilter, Vec3};
+
+/// The hit of the segment `o + t·(0, 0, dz)`, `t ∈ [0, max_t]`, on the sphere `(c, r)`, by
+/// the tests' own reasoning: the line is at squared distance `(o.x − c.x)² + (o.y − c.y)²`
+/// from the centre (exact in `f64` for the inputs below: their differences and squares fit
+/// its 53 bits); it meets the sphere iff that is at most `r²`, first at
+/// `t = ((c.z − o.z) − sign(dz)·√(r² − dist²)) / dz`, or at 0 from inside.
+fn hit_along_z(o: Vec3, dz: f32, c: Vec3, r: f32, max_t: f32) -> Option<f32> {
+    let (dx, dy) = (
+        f64::from(o.x) - f64::from(c.x),
+        f64::from(o.y) - f64::from(c.y),
+    );
+    let dist2 = dx * dx + dy * dy;
+    let r = f64::from(r);
+    if dist2 > r * r {
+        return None;
+    }
+    let half = (r * r - dist2).sqrt();
+    let dz = f64::from(dz);
+    let t = ((f64::from(c.z) - f64::from(o.z)) - dz.signum() * half) / dz;
+    let inside = (f64::from(o.z) - f64::from(c.z)).abs() <= half;
+    let t = if inside { 0.0 } else { t };
+    (t >= 0.0 && t as f32 <= max_t).then_some(t as f32)
+}
+
+/// Issue 43's first input, about 90 seconds into a run from an empty corpus: a ray passing
+/// `1.3e-9` beside a sphere of radius 0 was a hit at `t = 2.269` for `ray_sphere`, whose
+/// discriminant `b² − a·c` cancelled in `f32` (`b ≈ −95.9`, `a·c ≈ 9192`, their true
+/// difference `−1.65e-18`), while the broadphase's box test rightly missed it.
+///
+/// Config: no hint, strict placement, margin 0, skin 0, `Passes::Adaptive`.
+#[test]
+fn grazing_ray_beside_a_point_sphere_misses() {
+    let mut bp = BroadPhase::new(Config {
+        margin: 0.0,
+        skin: 0.0,
+        passes: Passes::Adaptive,
+        octree_placement: Placement::Strict,
+        ..Config::default()
+    });
+    let center = Vec3::new(0.0, 8.5e-44, -23.0);
+    let point = bp.insert_sphere(center, 0.0).expect("a valid sphere");
+    assert_eq!(
+        bp.insert_sphere(Vec3::ZERO, -1.285_590_3e-9),
+        Err(Error::NegativeRadius(-1.285_590_3e-9))
+    );
+    let (o, dz, max_t) = (Vec3::new(-1.285_590_3e-9, 2.47e-43, -8.25), -6.5, 15.25);
+    let dir = Vec3::new(0.0, 0.0, dz);
+    assert_eq!(hit_along_z(o, dz, center, 0.0, max_t), None);
+    assert_eq!(ray_sphere(o, dir, center, 0.0, max_t), None);
+    assert_eq!(bp.cast_ray_with(o, dir, max_t, &QueryFilter::new()), None);
+    assert_eq!(bp.cast_ray(o, dir, max_t), None);
+    // The same ray moved onto the point hits it, at the same `t` for both.
+    let on = Vec3::new(center.x, center.y, o.z);
+    let want = hit_along_z(on, dz, center, 0.0, max_t);
+    assert_eq!(want, Some((14.75f64 / 6.5) as f32));
+    assert_eq!(bp.cast_ray(on, dir, max_t), want.map(|t| (point, t)));
+    bp.step();
+    assert!(bp.pairs().is_empty());
+    bp.validate();
+}
+
+/// Issue 43's second input, found once the discriminant had Lagrange's form in `f32`: a ray
+/// missing a point by `5.9e-39` was a hit at `t = 0.687`, as `|m × d|²` squared `9.8e-38`
+/// to 0 in `f32`; the box test missed it. A clean JSON snapshot is restored before the cast.
+///
+/// Config: no hint, loose placement, margin 0, skin 0, `Passes::Adaptive`.
+#[test]
+fn ray_a_subnormal_offset_beside_a_point_sphere_misses() {
+    let config = Config {
+        margin: 0.0,
+        skin: 0.0,
+        passes: Passes::Adaptive,
+        octree_placement: Placement::Loose,
+        ..Config::default()
+    };
+    let mut bp = BroadPhase::new(config);
+    let center = Vec3::new(5.877_472e-39, 0.0, 11.5);
+    let point = bp.insert_sphere(center, 0.0).expect("a valid sphere");
+    let json = serde_json::to_vec(&bp).expect("a broadphase serialises");
+    let bp: BroadPhase = serde_json::from_slice(&json).expect("its own snapshot restores");
+    bp.validate();
+    let (o, dz, max_t) = (Vec3::ZERO, 16.75, 11.5);
+    let dir = Vec3::new(0.0, 0.0, dz);
+    assert_eq!(hit_along_z(o, dz, center, 0.0, max_t), None);
+    assert_eq!(ray_sphere(o, dir, center, 0.0, max_t), None);
+    assert_eq!(bp.cast_ray_with(o, dir, max_t, &QueryFilter::new()), None);
+    assert_eq!(bp.cast_ray(o, dir, max_t), None);
+    // Started beside the point by that offset, the ray hits it.
+    let on = Vec3::new(center.x, 0.0, 0.0);
+    let want = hit_along_z(on, dz, center, 0.0, max_t);
+    assert_eq!(want, Some((11.5f64 / 16.75) as f32));
+    assert_eq!(bp.cast_ray(on, dir, max_t), want.map(|t| (point, t)));
+}
+
+/// The smallest `f32` radius whose sphere about `c` reaches the line through `o` along `z`,
+/// and the largest that does not, from the squared distance in `f64` (exact here).
+fn radii_around(o: Vec3, c: Vec3) -> (f32, f32) {
+    let (dx, dy) = (
+        f64::from(o.x) - f64::from(c.x),
+        f64::from(o.y) - f64::from(c.y),
+    );
+    let dist2 = dx * dx + dy * dy;
+    let reaches = |r: f32| f64::from(r) * f64::from(r) >= dist2;
+    let mut r = dist2.sqrt() as f32;
+    while !reaches(r) {
+        r = f32::from_bits(r.to_bits() + 1);
+    }
+    while r > 0.0 && reaches(f32::from_bits(r.to_bits() - 1)) {
+        r = f32::from_bits(r.to_bits() - 1);
+    }
+    (r, f32::from_bits(r.to_bits() - 1))
+}
+
+/// `ray_sphere` and `sphere_cast_sphere` (a ray is a cast of radius 0) on the issue's numbers
+/// and their neighbours: beside the point, through it, and grazing spheres whose radius is
+/// the offset (tangent: a hit) or just under it (a miss).
+#[test]
+fn shape_functions_on_the_issue_numbers() {
+    let cases = [
+        (
+            Vec3::new(-1.285_590_3e-9, 2.47e-43, -8.25),
+            -6.5,
+            Vec3::new(0.0, 8.5e-44, -23.0),
+            15.25,
+        ),
+        (Vec3::ZERO, 16.75, Vec3::new(5.877_472e-39, 0.0, 11.5), 11.5),
+    ];
+    for (o, dz, c, max_t) in cases {
+        let dir = Vec3::new(0.0, 0.0, dz);
+        let (offset, under) = radii_around(o, c);
+        let on = Vec3::new(c.x, c.y, o.z);
+        for (o, r) in [(o, 0.0), (o, offset), (o, under), (on, 0.0), (on, offset)] {
+            let want = hit_along_z(o, dz, c, r, max_t);
+            assert_eq!(ray_sphere(o, dir, c, r, max_t), want, "ray {o} {r}");
+            assert_eq!(
+                sphere_cast_sphere(o, 0.0, dir, max_t, c, r),
+                want,
+                "cast {o} {r}"
+            );
+            assert_eq!(
+                sphere_cast_sphere(c, r, -dir, max_t, o, 0.0),
+                want,
+                "reversed cast {o} {r}"
+            );
+        }
+        assert!(hit_along_z(o, dz, c, offset, max_t).is_some());
+        assert!(hit_along_z(o, dz, c, under, max_t).is_none());
+    }
+}
