@@ -216,3 +216,86 @@ impl<T: Copy> Gapped<T> {
         self.buf.capacity()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `patch_in` (from start 0 without room to move, and from other starts with room) against the obvious
+    /// rebuild, on random removals and insertions.
+    #[test]
+    fn patch_equals_rebuild() {
+        let mut seed = 7u64;
+        let mut next = |n: u64| {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 33) % n.max(1)
+        };
+        let mut scratch = Scratch::default();
+        let mut moved_less = 0;
+        for round in 0..4000 {
+            let n = next(40) as u32;
+            let old: Vec<u32> = (0..n).map(|i| 10 * i).collect();
+            let gone: Vec<u32> = (0..n).filter(|_| next(4) == 0).collect();
+            let mut at: Vec<u32> = (0..next(6))
+                .map(|_| next(u64::from(n) + 1) as u32)
+                .collect();
+            at.sort_unstable();
+            let new: Vec<u32> = at
+                .iter()
+                .enumerate()
+                .map(|(k, &a)| 10 * a + 1 + k as u32)
+                .collect();
+            let mut want: Vec<u32> = Vec::new();
+            for i in 0..=n {
+                for (k, &a) in at.iter().enumerate() {
+                    if a == i {
+                        want.push(new[k]);
+                    }
+                }
+                if i < n && !gone.contains(&i) {
+                    want.push(old[i as usize]);
+                }
+            }
+            if round % 2 == 0 {
+                let mut v = old.clone();
+                patch_in(&mut v, 0, 0, &gone, &at, &new, &mut scratch);
+                assert_eq!(v, want, "round {round}: gone {gone:?} at {at:?}");
+            } else {
+                let start = next(8) as usize;
+                let max_start = start + next(8) as usize;
+                let mut buf: Vec<u32> = vec![u32::MAX; start];
+                buf.extend_from_slice(&old);
+                // Old entries found at their old place, the list starting at `buf`'s index
+                // `-from` (entries are distinct).
+                let stay = |buf: &[u32], from: isize| {
+                    (0..n as usize)
+                        .filter(|&j| {
+                            let p = from + j as isize;
+                            p >= 0 && buf.get(p as usize) == Some(&old[j])
+                        })
+                        .count()
+                };
+                let at_zero = {
+                    let mut v = old.clone();
+                    patch_in(&mut v, 0, 0, &gone, &at, &new, &mut scratch);
+                    stay(&v, 0)
+                };
+                let new_start =
+                    patch_in(&mut buf, start, max_start, &gone, &at, &new, &mut scratch);
+                assert!(new_start <= max_start, "round {round}: start {new_start}");
+                assert_eq!(
+                    &buf[new_start..],
+                    &want[..],
+                    "round {round}: start {start} max {max_start} gone {gone:?} at {at:?}"
+                );
+                // Entries that kept their place: never fewer than with the start fixed.
+                let kept = stay(&buf[new_start..], start as isize - new_start as isize);
+                assert!(kept >= at_zero, "round {round}: kept {kept} < {at_zero}");
+                moved_less += usize::from(kept > at_zero);
+            }
+        }
+        assert!(moved_less > 0, "the start never moved");
+    }
+}
