@@ -66,7 +66,8 @@
 //! still see every latest shape: the structures skip the proxies updated since the last step
 //! and the query tests those proxies' new shapes one by one, so it costs one test per proxy
 //! updated since then (nothing once the step has run). Query after the step where you can.
-//! [`Octree`] and [`Bvh`] have the stopping form too (`try_query_aabb`, `try_query_sphere`).
+//! [`Octree`] and [`Bvh`] have the stopping form too, without a filter (`query_aabb_with`,
+//! `query_sphere_with`).
 //! ```
 //! use broadleaf::{BroadPhase, Config, QueryFilter, Vec3};
 //! use core::ops::ControlFlow;

@@ -148,9 +148,9 @@ impl BroadPhase {
                 ControlFlow::Continue(())
             }
         };
-        self.octree.try_query_aabb_unchecked(aabb, &mut test)?;
-        self.dynamic.try_query_aabb_unchecked(aabb, &mut test)?;
-        self.statics.try_query_aabb_unchecked(aabb, &mut test)?;
+        self.octree.query_aabb_with_unchecked(aabb, &mut test)?;
+        self.dynamic.query_aabb_with_unchecked(aabb, &mut test)?;
+        self.statics.query_aabb_with_unchecked(aabb, &mut test)?;
         self.for_each_stale(|s| {
             let k = self.store.key(s as u32);
             if self.exact_box(&self.store.shape[s]).overlaps(&q) && self.passes(filter, k, s) {

@@ -70,12 +70,12 @@ impl Bvh {
     /// counts), each once, in no particular order. A non-finite or inverted query box matches
     /// nothing, as in `Octree::query_aabb` and `BroadPhase::query_aabb`.
     pub fn query_aabb(&self, aabb: &Aabb, f: impl FnMut(ProxyKey)) {
-        let _ = self.try_query_aabb(aabb, every(f));
+        let _ = self.query_aabb_with(aabb, every(f));
     }
 
     /// [`Bvh::query_aabb`] with a visitor that can stop: the first [`ControlFlow::Break`]
     /// ends the query and is returned; `Continue` if every match was visited.
-    pub fn try_query_aabb(
+    pub fn query_aabb_with(
         &self,
         aabb: &Aabb,
         f: impl FnMut(ProxyKey) -> ControlFlow<()>,
@@ -83,24 +83,24 @@ impl Bvh {
         if check_aabb(aabb).is_err() {
             return ControlFlow::Continue(());
         }
-        self.try_query_aabb_unchecked(aabb, f)
+        self.query_aabb_with_unchecked(aabb, f)
     }
 
     /// [`Bvh::query_aabb`] without the input check, for boxes the crate made itself: a sphere
     /// or body near `f32::MAX` has a box that overflows to ±∞ from finite input, and it must
     /// still find what it overlaps.
     pub(crate) fn query_aabb_unchecked(&self, aabb: &Aabb, f: impl FnMut(ProxyKey)) {
-        let _ = self.try_query_aabb_unchecked(aabb, every(f));
+        let _ = self.query_aabb_with_unchecked(aabb, every(f));
     }
 
-    /// [`Bvh::try_query_aabb`] without the input check.
-    pub(crate) fn try_query_aabb_unchecked(
+    /// [`Bvh::query_aabb_with`] without the input check.
+    pub(crate) fn query_aabb_with_unchecked(
         &self,
         aabb: &Aabb,
         mut f: impl FnMut(ProxyKey) -> ControlFlow<()>,
     ) -> ControlFlow<()> {
         let q = SimdBox::new(aabb);
-        self.try_query_tree(&q, |i| f(self.keys[i]))?;
+        self.query_tree_with(&q, |i| f(self.keys[i]))?;
         for (b, &key) in self.pending_boxes().iter().zip(self.pending_keys()) {
             if b.overlaps(&q) {
                 f(key)?;
@@ -112,14 +112,14 @@ impl Bvh {
     /// The index of every tree primitive (tombstones excluded: their box is empty) whose
     /// box overlaps `aabb`.
     pub(super) fn query_tree(&self, aabb: &SimdBox, mut f: impl FnMut(usize)) {
-        let _ = self.try_query_tree(aabb, |i| {
+        let _ = self.query_tree_with(aabb, |i| {
             f(i);
             ControlFlow::Continue(())
         });
     }
 
     /// [`Bvh::query_tree`] until `f` breaks.
-    fn try_query_tree(
+    fn query_tree_with(
         &self,
         aabb: &SimdBox,
         mut f: impl FnMut(usize) -> ControlFlow<()>,
@@ -302,12 +302,12 @@ impl Bvh {
     /// counts), each once, in no particular order. Nothing for a non-finite `center` or
     /// `radius`, or a negative `radius`.
     pub fn query_sphere(&self, center: Vec3, radius: f32, f: impl FnMut(ProxyKey)) {
-        let _ = self.try_query_sphere(center, radius, every(f));
+        let _ = self.query_sphere_with(center, radius, every(f));
     }
 
     /// [`Bvh::query_sphere`] with a visitor that can stop: the first [`ControlFlow::Break`]
     /// ends the query and is returned; `Continue` if every match was visited.
-    pub fn try_query_sphere(
+    pub fn query_sphere_with(
         &self,
         center: Vec3,
         radius: f32,
