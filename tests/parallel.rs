@@ -15,7 +15,7 @@ mod common;
 
 use broadleaf::fixtures::scene::{Feed, Frame, Gas, Scene};
 use broadleaf::octree::Placement;
-use broadleaf::{BodyKind, BroadPhase, CollisionGroups, Config, Pass, Passes, ProxyKey, Vec3};
+use broadleaf::{BroadPhase, CollisionGroups, Config, Pass, Passes, ProxyKey, Vec3};
 use common::{Fnv, KeyPair, Model, ModelShape, Rng};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::collections::{BTreeSet, HashMap};

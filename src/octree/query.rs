@@ -2,7 +2,7 @@
 //! `BroadPhase` re-tests exactly, and the occupied-cell iterator. They follow the node lists
 //! through occupied subtrees ([`Nodes::walk`](super::nodes::Nodes::walk)), entering a node only
 //! if the region its spheres can reach meets the query; none allocates but
-//! [`Octree::nearest`], for its result. The `try_` queries stop as soon as their visitor
+//! [`Octree::nearest`], for its result. The `_with` queries stop as soon as their visitor
 //! returns [`ControlFlow::Break`], and say whether it did.
 
 use super::cell::{Cell, morton, node_index};
