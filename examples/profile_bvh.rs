@@ -185,7 +185,7 @@ fn step(args: &Args) {
     );
     println!(
         "last step: {:?}, updated {}, enlarged {}, candidates {} (tested {})",
-        s.pass, s.updated, s.enlarged, s.candidates, s.candidates_tested
+        s.pass, s.updated, s.escaped, s.candidates, s.candidates_tested
     );
 }
 

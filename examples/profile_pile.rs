@@ -150,7 +150,7 @@ fn main() {
         if i >= WARMUP {
             times.push(t.elapsed().as_nanos() as f64 / n);
             tested += bp.stats().candidates_tested;
-            enlarged += bp.stats().enlarged;
+            enlarged += bp.stats().escaped;
         }
     }
     times.sort_by(f64::total_cmp);

@@ -11,11 +11,9 @@
 //!   [`Bvh`] ([`BroadPhase::bvh`]), all under the broadphase's keys. One sorted pair list per
 //!   [`BroadPhase::step`], plus `added` / `removed` events, collision groups
 //!   ([`CollisionGroups`]), and queries of the shapes as given: boxes, spheres, rays, sphere
-//!   casts and the nearest proxies. It adapts by itself to how much of the world moves: a step either runs the
-//!   structures' own pair passes over exact boxes, or has them hold fat boxes (whose margin
-//!   follows each proxy's own motion, stretched along it for a proxy that keeps moving) and re-tests only the candidates of what moved, whichever
-//!   its work estimate says is cheaper; [`BroadPhase::stats`] says which ran. Nothing in
-//!   [`Config`] needs tuning for speed.
+//!   casts and the nearest proxies. It adapts by itself to how much of the world moves: each
+//!   step runs the cheaper of [two passes](BroadPhase#the-passes-and-the-incremental-regime);
+//!   [`BroadPhase::stats`] says which ran. Nothing in [`Config`] needs tuning for speed.
 //! - **[`Octree`]** — many moving spheres, on their own. A top-down preallocated octree
 //!   (Ericson, *Real-Time Collision Detection* 7.3), and a move that keeps the node costs one
 //!   store. [`Octree::growing`] (the [`BroadPhase`]'s) follows its spheres: its region and
@@ -68,7 +66,8 @@
 //! still see every latest shape: the structures skip the proxies updated since the last step
 //! and the query tests those proxies' new shapes one by one, so it costs one test per proxy
 //! updated since then (nothing once the step has run). Query after the step where you can.
-//! [`Octree`] and [`Bvh`] have the stopping form too (`try_query_aabb`, `try_query_sphere`).
+//! [`Octree`] and [`Bvh`] have the stopping form too, without a filter (`query_aabb_with`,
+//! `query_sphere_with`).
 //! ```
 //! use broadleaf::{BroadPhase, Config, QueryFilter, Vec3};
 //! use core::ops::ControlFlow;

@@ -1,4 +1,4 @@
-//! The step follows what moves, and the lists stay exact (issue 18, "Tests"): with the default
+//! The step follows what moves, and the lists stay exact: with the default
 //! `Config`, worlds where each step only a subset of the proxies is updated — some never
 //! touched for many steps, some nudged by 0.01–1 mm, some moving a few cm per step (they leave
 //! any fat box after a few steps), some teleported, some woken after a long rest, inserts and

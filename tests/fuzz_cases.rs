@@ -79,5 +79,5 @@ fn boxes_touching_at_3e38_pair_incrementally() {
         "the move ran {:?}",
         stats.pass
     );
-    assert_eq!(stats.enlarged, 1, "the flat body's escape was not counted");
+    assert_eq!(stats.escaped, 1, "the flat body's escape was not counted");
 }

@@ -88,7 +88,7 @@ fn insert_with(
 fn comparable(s: StepStats) -> String {
     format!(
         "pass {:?}, updated {}, escaped {}, candidates {}/{}, pairs {}",
-        s.pass, s.updated, s.enlarged, s.candidates_tested, s.candidates, s.pairs
+        s.pass, s.updated, s.escaped, s.candidates_tested, s.candidates, s.pairs
     )
 }
 

@@ -5,29 +5,24 @@
 //! and every step's lists must be the brute force of the model in `common`, filtered by the
 //! groups rule.
 //!
-//! The worlds keep more spheres than the broadphase's parallel threshold
-//! (`PARALLEL_MIN_SPHERES`, 10 000), or for the worlds of bodies alone more dynamic bodies than
-//! its other threshold (`PARALLEL_MIN_BODIES`, 16 384), and enough pairs for its pair sort and
-//! diff to split (4096 per part), so the split passes are the ones checked: with bodies alone,
-//! the BVH descents handed out in items to many tasks.
+//! The worlds are large enough (over ten thousand spheres, or for the worlds of bodies alone
+//! over twenty thousand bodies) for the broadphase to split its full passes, and with more
+//! than one thread every full pass must report through `StepStats` that it ran split, and
+//! with one thread that it ran serially: the split passes are the ones checked (with bodies
+//! alone, the BVH descents handed out in items to many tasks), whatever the crate's thresholds.
 
 mod common;
 
 use broadleaf::fixtures::scene::{Feed, Frame, Gas, Scene};
 use broadleaf::octree::Placement;
-use broadleaf::{BodyKind, BroadPhase, CollisionGroups, Config, Passes, ProxyKey, Vec3};
+use broadleaf::{BroadPhase, CollisionGroups, Config, Pass, Passes, ProxyKey, Vec3};
 use common::{Fnv, KeyPair, Model, ModelShape, Rng};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::collections::{BTreeSet, HashMap};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// The broadphase's `PARALLEL_MIN_SPHERES`: the worlds below never have fewer spheres.
-const THRESHOLD: usize = 10_000;
 /// Proxies at the start of every world: four in five are spheres.
 const START: usize = 13_500;
-/// The broadphase's `PARALLEL_MIN_BODIES`: the worlds of bodies alone never have fewer
-/// dynamic bodies.
-const BODY_THRESHOLD: usize = 16_384;
 /// Bodies at the start of a world of bodies alone (about 85 % dynamic).
 const BODY_START: usize = 22_000;
 
@@ -43,7 +38,7 @@ struct World {
     placement: Placement,
     passes: Passes,
     margin: f32,
-    /// Bodies only (smaller boxes, no spheres), checked against `BODY_THRESHOLD`.
+    /// Bodies only (smaller boxes, no spheres).
     bodies_only: bool,
 }
 
@@ -138,8 +133,15 @@ impl Checked {
     }
 }
 
-/// Runs `world` on the current rayon pool through four phases and returns its digest.
-fn run(world: World) -> u64 {
+/// What a run gives: its digest, its full passes, and how many of them ran split over the pool.
+struct Ran {
+    digest: u64,
+    full: usize,
+    split: usize,
+}
+
+/// Runs `world` on the current rayon pool through four phases.
+fn run(world: World) -> Ran {
     let mut rng = Rng::new(world.seed);
     let mut bp = BroadPhase::new(Config {
         bounds: Some(broadleaf::Aabb::new(
@@ -174,20 +176,14 @@ fn run(world: World) -> u64 {
             }
         }
     };
-    let mut steps = 0;
+    let (mut steps, mut full, mut split) = (0, 0, 0);
     let mut step = |c: &mut Checked, bp: &mut BroadPhase, phase: &str| {
-        if world.bodies_only {
-            assert!(
-                bp.bvh(BodyKind::Dynamic).len() >= BODY_THRESHOLD,
-                "the world's dynamic bodies fell below the threshold"
-            );
-        } else {
-            assert!(
-                bp.len() >= THRESHOLD,
-                "the world shrank below the threshold"
-            );
-        }
         c.step(bp, &format!("{world:?} step {steps} ({phase})"));
+        let stats = bp.stats();
+        if matches!(stats.pass, Pass::Full | Pass::FullFat) {
+            full += 1;
+            split += usize::from(stats.split_tasks >= 2);
+        }
         steps += 1;
     };
     step(&mut c, &mut bp, "first");
@@ -232,7 +228,11 @@ fn run(world: World) -> u64 {
         moves(&mut c, &mut bp, &mut rng, 1.0, 0.3);
         step(&mut c, &mut bp, "grow");
     }
-    c.digest.0
+    Ran {
+        digest: c.digest.0,
+        full,
+        split,
+    }
 }
 
 /// Runs `world` at every thread count; all digests must be equal.
@@ -246,7 +246,15 @@ fn same_at_every_thread_count(world: World) {
                 .num_threads(t)
                 .build()
                 .expect("a thread pool");
-            pool.install(|| run(world))
+            let ran = pool.install(|| run(world));
+            assert!(ran.full > 0, "{world:?}: no full pass ran");
+            let want = if t > 1 { ran.full } else { 0 };
+            assert_eq!(
+                ran.split, want,
+                "{world:?}, {t} threads: {} of {} full passes ran split",
+                ran.split, ran.full
+            );
+            ran.digest
         })
         .collect();
     for (t, d) in THREADS.iter().zip(&digests) {
@@ -356,11 +364,15 @@ static GLOBAL: Counting = Counting;
 /// The counter is process-wide: the test that reads it runs alone.
 static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
-/// Allocations per step of a `gas` world above the threshold, after a warm-up, stepped in a
+/// Spheres of the `gas` world whose allocations are counted: as many as the worlds above,
+/// and more.
+const GAS_SPHERES: usize = 20_000;
+
+/// Allocations per step of a `gas` world, after a warm-up, stepped in a
 /// pool of `threads` (from inside it) or, with `None`, from outside the global pool.
 fn allocations_per_step(threads: Option<usize>) -> Vec<usize> {
     let run = || {
-        let mut gas = Gas::new(2 * THRESHOLD, 7);
+        let mut gas = Gas::new(GAS_SPHERES, 7);
         let mut bp = BroadPhase::new(Config {
             ..Config::default()
         });

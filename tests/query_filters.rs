@@ -346,25 +346,25 @@ fn a_breaking_visitor_stops_every_query() {
     check_early_exit("BroadPhase::query_sphere_with", |f| {
         bp.query_sphere_with(Vec3::ZERO, 6.0, &all, f)
     });
-    check_early_exit("Octree::try_query_aabb", |f| tree.try_query_aabb(&q, f));
-    check_early_exit("Octree::try_query_sphere", |f| {
-        tree.try_query_sphere(Vec3::ZERO, 6.0, f)
+    check_early_exit("Octree::query_aabb_with", |f| tree.query_aabb_with(&q, f));
+    check_early_exit("Octree::query_sphere_with", |f| {
+        tree.query_sphere_with(Vec3::ZERO, 6.0, f)
     });
     // A query box large enough for the octree's walk rather than its direct cell lists.
     let wide = Aabb::new(Vec3::splat(-40.0), Vec3::splat(40.0));
-    check_early_exit("Octree::try_query_aabb (wide)", |f| {
-        tree.try_query_aabb(&wide, f)
+    check_early_exit("Octree::query_aabb_with (wide)", |f| {
+        tree.query_aabb_with(&wide, f)
     });
-    check_early_exit("Bvh::try_query_aabb", |f| bvh.try_query_aabb(&q, f));
-    check_early_exit("Bvh::try_query_sphere", |f| {
-        bvh.try_query_sphere(Vec3::ZERO, 6.0, f)
+    check_early_exit("Bvh::query_aabb_with", |f| bvh.query_aabb_with(&q, f));
+    check_early_exit("Bvh::query_sphere_with", |f| {
+        bvh.query_sphere_with(Vec3::ZERO, 6.0, f)
     });
     // A bvh with pending boxes (inserted since the last refit) stops in them too.
     for _ in 0..20 {
         bvh.insert(Aabb::new(Vec3::ZERO, Vec3::ONE)).unwrap();
     }
-    check_early_exit("Bvh::try_query_aabb (pending)", |f| {
-        bvh.try_query_aabb(&q, f)
+    check_early_exit("Bvh::query_aabb_with (pending)", |f| {
+        bvh.query_aabb_with(&q, f)
     });
 }
 

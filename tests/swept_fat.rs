@@ -131,7 +131,7 @@ fn constant_velocity_escapes_at_most_once_in_six_steps() {
         assert_eq!(bp.stats().pass, Pass::Incremental);
         // The centred fat boxes of the entering pass last at most six steps.
         if step >= 6 {
-            escapes += bp.stats().enlarged;
+            escapes += bp.stats().escaped;
             counted += 1;
         }
     }
@@ -181,7 +181,7 @@ fn escapes_of_movers_at(speed: f32, along_x: bool) -> Vec<usize> {
         }
         model.check_step(&mut bp, &format!("speed {speed} step {step}"));
         if bp.stats().pass == Pass::Incremental {
-            escapes.push(bp.stats().enlarged);
+            escapes.push(bp.stats().escaped);
         }
     }
     assert!(escapes.len() > 40, "stayed incremental: {escapes:?}");

@@ -36,10 +36,8 @@ use crate::radix::sort_bits_by;
 /// The stale slots are applied by walking every slot's flags once at least one slot in this
 /// many is stale, and by sorting the mover list below that.
 const DENSE_FRACTION: usize = 8;
-/// Tasks per thread of the parallel apply, so that a thread that finishes its ranges early
-/// takes over part of a slower one's.
 #[cfg(feature = "parallel")]
-const TASKS_PER_THREAD: usize = 4;
+use super::step::TASKS_PER_THREAD;
 
 impl BroadPhase {
     /// Applies every update since the last step, in slot order (see the module docs).
@@ -66,7 +64,7 @@ impl BroadPhase {
         if self.stale >= slots / DENSE_FRACTION {
             // Most slots are stale: one streaming walk over the flags is cheaper than sorting
             // the mover list (whose order then stays the caller's).
-            if self.cached && self.apply_spheres_fat(true) == 0 {
+            if self.incremental && self.apply_spheres_fat(true) == 0 {
                 return;
             }
             for s in 0..slots {
@@ -88,7 +86,7 @@ impl BroadPhase {
                     bits,
                 );
             }
-            if self.cached && self.apply_spheres_fat(false) == 0 {
+            if self.incremental && self.apply_spheres_fat(false) == 0 {
                 return;
             }
             for i in 0..self.movers.len() {
@@ -111,11 +109,13 @@ impl BroadPhase {
         match self.store.shape[s] {
             Shape::Sphere { center, radius } => {
                 let grown = fat::grown_sphere(center, radius, self.config.margin);
-                if self.cached {
+                if self.incremental {
                     let old = self.store.exact[s];
                     let motion = self.note_motion(s, &old, &grown.aabb);
                     self.store.exact[s] = grown.aabb;
-                    self.refresh_fat(slot, &grown.aabb, motion);
+                    if self.refresh_fat(slot, &grown.aabb, motion) {
+                        slack::settle(&mut self.store, &mut self.loud, slot);
+                    }
                 } else {
                     // The octree's record holds the exact box it was last applied at.
                     let old = self.octree.held_box_of(slot);
@@ -132,8 +132,10 @@ impl BroadPhase {
                 let old = self.store.exact[s];
                 let motion = self.note_motion(s, &old, &exact);
                 self.store.exact[s] = exact;
-                if self.cached {
-                    self.refresh_fat(slot, &exact, motion);
+                if self.incremental {
+                    if self.refresh_fat(slot, &exact, motion) {
+                        slack::settle(&mut self.store, &mut self.loud, slot);
+                    }
                 } else {
                     let key = self.store.key(slot);
                     let placed = self.tree_mut(kind).update_box_deferred(key, &exact);
@@ -191,7 +193,7 @@ impl BroadPhase {
         use rayon::prelude::*;
         let slots = self.store.slots();
         let threads = rayon::current_num_threads();
-        if self.cached
+        if self.incremental
             || threads < 2
             || self.octree.len() < super::step::PARALLEL_MIN_SPHERES
             || self.stale < slots / DENSE_FRACTION
@@ -343,9 +345,7 @@ fn fat_walk(
         // time the incremental regime reads it.
         (exact[s], stamp[s]) = (new, now);
         // Still in its fat box: quiet or loud (see `slack::settle`; nothing is loud yet).
-        if slack::within(&new, &anchor[s], slk[s])
-            || slack::quiet(slack::drift(&new, &anchor[s]), slk[s])
-        {
+        if slack::stays_quiet(&new, &anchor[s], slk[s]) {
             flags[s] = f & !flag::STALE | flag::DRIFTED;
         } else {
             flags[s] = f & !(flag::STALE | flag::DRIFTED) | flag::LOUD;

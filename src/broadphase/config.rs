@@ -35,13 +35,11 @@ pub struct Config {
 /// Which passes [`BroadPhase::step`](super::BroadPhase::step) may run. The pair lists are the same whichever runs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Passes {
-    /// Each step runs whichever pass its work estimate says is cheaper. The full pass costs
-    /// about the same per proxy whatever moves; the incremental pass costs per candidate
-    /// carried, per candidate re-tested and per escape (a proxy leaving its fat box), and an
-    /// escape costs more the more candidates per proxy the world has. So a world where few
-    /// proxies move, or a sparse one in motion (its escapes find few neighbours), runs the
-    /// incremental pass; a dense world in motion runs the full pass; a world at rest runs
-    /// none.
+    /// Each step runs whichever pass (see
+    /// [`BroadPhase`](super::BroadPhase#the-passes-and-the-incremental-regime)) its work
+    /// estimate says is cheaper: a world where few proxies move, or a sparse one in motion,
+    /// runs the incremental pass; a dense world in motion runs the full pass; a world at rest
+    /// runs none.
     #[default]
     Adaptive,
     /// Every step runs the full pass (no fat boxes, no candidates).

@@ -17,6 +17,15 @@ pub(super) const LOOKAHEAD_STEPS: f32 = 3.0;
 /// next escape comes about twice as late as from a box of the same size centred where the
 /// proxy is.
 pub(super) const PREDICT_STEPS: f32 = 6.0;
+/// Steps after entering the incremental regime in which two steps over the full pass's
+/// estimate do not leave it, and one leaves at once only much further over it:
+/// the entry gives every proxy a fat box at once, centred (no motion is known yet) with a
+/// margin of up to `2·LOOKAHEAD_STEPS` steps of its speed, so the fast movers leave them
+/// within that many steps, together, in a burst that says nothing of the steps after it; the
+/// boxes they get then are swept along their motion and jittered, and their escapes spread
+/// out.
+pub(super) const ENTRY_BURST_STEPS: u32 = 2 * LOOKAHEAD_STEPS as u32 + 1;
+
 /// The predicted fat box is grown on every side by this many steps of the speed, so that a
 /// proxy that turns does not leave it at once.
 const PREDICT_SIDE_STEPS: f32 = 1.0;
@@ -33,9 +42,14 @@ const MAX_MARGIN: f32 = 0.5;
 /// The fat margin of a box of largest extent `size` moving `speed` metres per step.
 #[inline]
 fn margin(speed: f32, size: f32) -> f32 {
-    (speed * LOOKAHEAD_STEPS)
-        .min(size * MAX_MARGIN)
-        .max(size * MIN_MARGIN)
+    clamp_margin(speed * LOOKAHEAD_STEPS, size)
+}
+
+/// A margin `m` for a box of largest extent `size`, kept between [`MIN_MARGIN`] and
+/// [`MAX_MARGIN`] of that extent.
+#[inline]
+fn clamp_margin(m: f32, size: f32) -> f32 {
+    m.min(size * MAX_MARGIN).max(size * MIN_MARGIN)
 }
 
 /// A factor in `[1, 2)` on the fat margin, hashed from the slot and the step the box is made
@@ -53,6 +67,7 @@ fn jitter(slot: u32, now: u32) -> f32 {
 /// The speed (metres per step, largest axis) of a box that moved from `old` to `new` since
 /// step `stamp`, at step `now`.
 #[inline(always)]
+#[cfg(feature = "parallel")]
 pub(super) fn speed(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> f32 {
     displacement(old, new, stamp, now).abs().max_element()
 }
@@ -87,6 +102,13 @@ impl Motion {
                 self.slow_motion += f64::from(speed / size);
             }
         }
+    }
+
+    /// The escapes per step of one fast mover in the incremental regime: its fat box is swept
+    /// over [`PREDICT_STEPS`] of its motion, times a jitter of 1.5 on average, so one that
+    /// keeps its velocity escapes about once in that many steps.
+    pub(super) fn escapes_per_fast() -> f64 {
+        1.0 / (1.5 * f64::from(PREDICT_STEPS))
     }
 
     /// The motion of two sets of movers together.
@@ -130,17 +152,18 @@ impl BroadPhase {
         d
     }
 
-    /// In the incremental regime: keeps the fat box if it still holds `exact` (and classifies
-    /// the slot quiet or loud, see [`super::slack::settle`]), else gives the slot a new one
-    /// stretched along its `motion` per step, which its structure holds from now on.
+    /// In the incremental regime: keeps the fat box if it still holds `exact` (true: the
+    /// caller then classifies the slot quiet or loud), else gives the slot a new one stretched
+    /// along its `motion` per step, which its structure holds from now on (false).
     #[inline]
-    pub(super) fn refresh_fat(&mut self, slot: u32, exact: &SimdBox, motion: Vec3A) {
+    pub(super) fn refresh_fat(&mut self, slot: u32, exact: &SimdBox, motion: Vec3A) -> bool {
         if self.store.held[slot as usize].contains(exact) {
             self.mark(slot, flag::MOVED);
-            super::slack::settle(&mut self.store, &mut self.loud, slot);
+            true
         } else {
             self.hold_moving(slot, motion);
             self.mark(slot, flag::MOVED | flag::ESCAPED);
+            false
         }
     }
 
@@ -285,9 +308,7 @@ impl BroadPhase {
         } else {
             sweep
         } * jitter;
-        let side = (speed * PREDICT_SIDE_STEPS)
-            .min(size * MAX_MARGIN)
-            .max(size * MIN_MARGIN);
+        let side = clamp_margin(speed * PREDICT_SIDE_STEPS, size);
         let held = match self.store.shape[s] {
             Shape::Sphere { center, radius } => {
                 let r = grown_radius(radius, self.config.margin);
@@ -427,7 +448,7 @@ mod tests {
             })
             .collect();
         let mut entries = 0;
-        let mut was_cached = false;
+        let mut was_incremental = false;
         for step in 0..40u32 {
             // At rest for ten steps, then everyone far away and back for ten.
             let jump = (step / 10) % 2 == 1;
@@ -442,8 +463,8 @@ mod tests {
             }
             bp.step();
             bp.validate();
-            entries += usize::from(bp.cached && !was_cached);
-            was_cached = bp.cached;
+            entries += usize::from(bp.incremental && !was_incremental);
+            was_incremental = bp.incremental;
         }
         assert!(
             entries >= 2,

@@ -3,24 +3,23 @@
 //!
 //! Every proxy has a dense slot ([`store`]); the key is checked once, at the API boundary.
 //! Its box lives in exactly one structure, under its key: a sphere in the [`Octree`], a dynamic
-//! body in the dynamic [`Bvh`], a static body in the static one. A step is one of two passes,
-//! chosen from the work each would do ([`step`]): the *full pass* runs the structures' own pair
-//! passes (octree, BVH self and dynamic × static traversals, and sphere × body queries); the
-//! *incremental pass* has the structures hold, for every proxy, a fat box around its exact one,
-//! keeps the candidate pairs of overlapping fat boxes, re-tests only what moved, and queries
-//! the structures for the proxies that left their fat box.
+//! body in the dynamic [`Bvh`], a static body in the static one. An update stores the new
+//! shape and marks the slot; the step applies it ([`apply`]), then runs one of two passes,
+//! defined once on [`BroadPhase`] ("The passes and the incremental regime"), chosen by
+//! [`cost`] and run by [`step`].
 //!
-//! An update stores the new shape and marks the slot; the step applies it ([`apply`]).
-//!
-//! The files: this one holds the type and its public API; [`shape`] what a proxy is and
-//! whom it pairs with; [`config`] the settings,
-//! [`fat`] the fat-box layer (motion, fat boxes, the marks a step reads), [`slack`] what the
-//! incremental pass need not re-test, [`step`] the passes,
-//! [`query`] the queries, [`snapshot`] the serde form and [`validate`] the invariants.
+//! The files: this one holds the type and its public API; [`shape`] what a proxy is and whom
+//! it pairs with; [`config`] the settings; [`fat`] the fat-box layer (motion, fat boxes, the
+//! marks a step reads); [`slack`] what the incremental pass need not re-test; [`gapped`] the
+//! lists it patches; [`packed`] the packed pair the passes share; [`cost`] the cost model;
+//! [`step`] the passes; [`query`], [`snapshot`] (serde) and [`validate`] (the invariants).
 
 mod apply;
 mod config;
+mod cost;
 mod fat;
+mod gapped;
+mod packed;
 mod query;
 mod shape;
 mod slack;
@@ -64,15 +63,19 @@ pub struct StepStats {
     pub pass: Pass,
     /// Proxies updated, inserted or removed since the previous step.
     pub updated: usize,
-    /// Proxies given a new fat box (they left the old one, or are new): each one is one
-    /// query of the structures in an incremental step.
-    pub enlarged: usize,
+    /// Proxies that escaped: given a new fat box (they left the old one, or are new); each
+    /// one is one query of the structures in an incremental step.
+    pub escaped: usize,
     /// Candidate pairs whose exact boxes were tested.
     pub candidates_tested: usize,
     /// Candidate pairs held after the step (0 outside the incremental regime).
     pub candidates: usize,
     /// Pairs reported.
     pub pairs: usize,
+    /// The tasks each phase of the step's full pass was split into over rayon's pool (feature
+    /// `parallel`), 0 if no full pass ran split. For the tests that check the split ran.
+    #[doc(hidden)]
+    pub split_tasks: usize,
     /// Spheres per octree level (`[0]` is the root, with the spheres outside its region).
     pub octree_per_level: [u32; crate::octree::MAX_DEPTH as usize + 1],
     /// The dynamic BVH's SAH cost over its cost at its last build (1 when just built).
@@ -85,12 +88,36 @@ pub struct StepStats {
 
 /// The broadphase of a physics step: insert spheres and bodies, move them, and call
 /// [`BroadPhase::step`] once per frame for the overlapping pairs and the pair events.
+///
+/// # The passes and the incremental regime
+/// The **full pass** runs the structures' own pair passes over the boxes they hold: the
+/// octree's for sphere × sphere, the dynamic BVH's self traversal and its traversal against the
+/// static BVH for body × body, and sphere × body by queries from the smaller side into the
+/// other's structure. Its cost follows the number of proxies. The **incremental pass** needs
+/// the structures to hold *fat* boxes (each exact box grown by a margin that follows how far
+/// that proxy moves per step, or swept along its motion once it left one) and the sorted list of *candidates*, the pairs of overlapping fat
+/// boxes. Since an exact box lies in its fat box, every overlapping pair is a candidate. A step
+/// then
+/// 1. drops the candidates of proxies that were removed or left their fat box ("escaped"),
+/// 2. queries the octree and both BVHs with each escaped proxy's new fat box for its new
+///    candidates (a pair of two escaped proxies is found from both sides and kept once),
+/// 3. scans old and new candidates in one pass, re-testing the exact boxes of those that name
+///    a proxy that moved by half the least slack of its candidates (the least distance by
+///    which any of its candidates' overlap outcomes could change) and keeping the others' last outcome, and patches the lists in place with what changed.
+///
+/// Its cost follows what moved. While the structures hold fat boxes and the candidates are
+/// kept, the broadphase is in the *incremental regime*; a full pass over fat boxes enters it
+/// and a full pass over exact boxes leaves it. Each step estimates both costs from what it is
+/// about to do (movers, escapes, candidates) and runs the cheaper pass ([`Passes`]), so the
+/// cost never jumps when a world wakes up or settles; [`StepStats::pass`] says which ran. Collision groups are tested where a pair is first found (in the
+/// structures' passes and the escaped proxies' queries), so a filtered pair is never a
+/// candidate, never sorted and never diffed.
 #[derive(Clone, Debug)]
 pub struct BroadPhase {
     config: Config,
     store: Store,
-    /// The spheres, under their keys: each holds its `store.held` box as
-    /// `center ± held radius`.
+    /// The spheres, under their keys, each at its exact box (in the incremental regime, its
+    /// fat box `store.held`).
     octree: Octree,
     /// The dynamic and the static bodies, under their keys, each holding its `store.held` box.
     dynamic: Bvh,
@@ -101,7 +128,7 @@ pub struct BroadPhase {
     /// Dynamic bodies given a new fat box since the dynamic tree's last refit.
     dynamic_escapes: usize,
     /// True while the structures hold fat boxes and `cand` is complete.
-    cached: bool,
+    incremental: bool,
     /// True once any proxy was given groups other than the default: until then the pair
     /// passes skip the groups test.
     any_groups: bool,
@@ -125,11 +152,11 @@ pub struct BroadPhase {
     motion: fat::Motion,
     /// Candidate pairs (packed slot pairs, `HIT` set if their exact boxes overlapped at the
     /// last step), sorted.
-    cand: slack::Gapped<u64>,
+    cand: gapped::Gapped<u64>,
     /// The candidates' reverse index: `(higher slot, lower slot)` of each, sorted, so that a
     /// proxy's lower partners are found without a scan. Kept only while the incremental pass
     /// finds the loud proxies' candidates through it (see `rev_stale`).
-    rev: slack::Gapped<u64>,
+    rev: gapped::Gapped<u64>,
     /// True while `rev` is not the candidates' reverse index: a step that scans the
     /// candidates instead of looking them up leaves it, and the next lookup builds it again.
     rev_stale: bool,
@@ -144,14 +171,14 @@ pub struct BroadPhase {
     sort_buf: Vec<u64>,
     added_packed: Vec<u64>,
     removed_packed: Vec<u64>,
-    /// The lists handed out by `step` (the pair list behind a gap, see [`slack::Gapped`]).
-    pairs: slack::Gapped<Pair>,
+    /// The lists handed out by `step` (the pair list behind a gap, see [`gapped::Gapped`]).
+    pairs: gapped::Gapped<Pair>,
     added: Vec<Pair>,
     removed: Vec<Pair>,
     /// Steps taken: the clock of the per-proxy speed estimates.
     now: u32,
     /// The running work estimate of the incremental regime (see [`step`]).
-    costs: step::Costs,
+    costs: cost::Costs,
     stats: StepStats,
     /// The parallel full pass's buffers.
     #[cfg(feature = "parallel")]
@@ -209,7 +236,7 @@ impl BroadPhase {
             dynamic_changed: false,
             statics_changed: false,
             dynamic_escapes: 0,
-            cached: false,
+            incremental: false,
             any_groups: false,
             movers: Vec::new(),
             stale: 0,
@@ -220,8 +247,8 @@ impl BroadPhase {
             pending: Vec::new(),
             removals: 0,
             motion: fat::Motion::default(),
-            cand: slack::Gapped::default(),
-            rev: slack::Gapped::default(),
+            cand: gapped::Gapped::default(),
+            rev: gapped::Gapped::default(),
             rev_stale: false,
             hints: slack::Hints::default(),
             patch: slack::Patch::default(),
@@ -229,11 +256,11 @@ impl BroadPhase {
             sort_buf: Vec::new(),
             added_packed: Vec::new(),
             removed_packed: Vec::new(),
-            pairs: slack::Gapped::default(),
+            pairs: gapped::Gapped::default(),
             added: Vec::new(),
             removed: Vec::new(),
             now: 0,
-            costs: step::Costs::default(),
+            costs: cost::Costs::default(),
             stats: StepStats::default(),
             #[cfg(feature = "parallel")]
             par: step::Parallel::default(),
@@ -403,8 +430,8 @@ impl BroadPhase {
     /// both place proxies here.
     fn place(&mut self, slot: u32) {
         let key = self.store.key(slot);
-        let held = self.held_shape(slot, self.cached, glam::Vec3A::ZERO);
-        if self.cached {
+        let held = self.held_shape(slot, self.incremental, glam::Vec3A::ZERO);
+        if self.incremental {
             self.store.set_held(slot as usize, held.aabb);
         }
         match self.store.shape[slot as usize] {
@@ -667,7 +694,7 @@ impl BroadPhase {
         // at its end, the caller), and the split phases inside it (the apply's, the pass's)
         // start on a worker that is already awake.
         #[cfg(feature = "parallel")]
-        if self.tasks() >= 2 && !self.cached {
+        if self.tasks() >= 2 && !self.incremental {
             rayon::scope(|_| self.step_in());
             return;
         }

@@ -136,11 +136,11 @@ impl BroadPhase {
         let q = SimdBox::new(aabb);
         // Outside the incremental regime the structures hold the exact boxes, which their
         // walks have tested; inside it they hold fat ones.
-        let cached = self.cached;
+        let incremental = self.incremental;
         let mut test = |k: ProxyKey| {
             let s = crate::pair::slot(k) as usize;
             if !self.is_stale(s)
-                && (!cached || self.store.exact[s].overlaps(&q))
+                && (!incremental || self.store.exact[s].overlaps(&q))
                 && self.passes(filter, k, s)
             {
                 f(k)
@@ -148,9 +148,9 @@ impl BroadPhase {
                 ControlFlow::Continue(())
             }
         };
-        self.octree.try_query_aabb_unchecked(aabb, &mut test)?;
-        self.dynamic.try_query_aabb_unchecked(aabb, &mut test)?;
-        self.statics.try_query_aabb_unchecked(aabb, &mut test)?;
+        self.octree.query_aabb_with_unchecked(aabb, &mut test)?;
+        self.dynamic.query_aabb_with_unchecked(aabb, &mut test)?;
+        self.statics.query_aabb_with_unchecked(aabb, &mut test)?;
         self.for_each_stale(|s| {
             let k = self.store.key(s as u32);
             if self.exact_box(&self.store.shape[s]).overlaps(&q) && self.passes(filter, k, s) {

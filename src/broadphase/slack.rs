@@ -28,22 +28,24 @@
 //!
 //! The same pass keeps the lists exact in place: the candidates (minus those of escaped or
 //! removed proxies, plus the escaped proxies' new ones), their reverse index and the key pair
-//! list are patched by position ([`Gapped::patch`]) with the few pairs that started or stopped
+//! list are patched by position ([`Gapped::patch`](super::gapped::Gapped::patch)) with the few pairs that started or stopped
 //! overlapping, which are the step's `added` and `removed`. No packed pair list is kept beside
-//! them: the key pairs are read packed (see [`super::step::pack_pair`]) where the packed order
+//! them: the key pairs are read packed (see [`super::packed::pack_pair`]) where the packed order
 //! is needed, here and in a full pass's diff.
 
 use super::BroadPhase;
-use super::step::{HIT, unpack};
+use super::gapped::Scratch;
+use super::packed::{HIT, keys_into, pack_pair, sort_scratch, unpack};
 use super::store::{Store, flag};
 use crate::geom::SimdBox;
 use crate::radix::{PairBits, sort_bits_by, sort_u64, sort_u64_kept};
 use glam::Vec3A;
 
-/// Finding one proxy's candidates through the sorted list and the reverse index (a binary
-/// search per candidate it has, each a chain of cache misses) costs about as much as scanning
-/// this many candidates for a loud or removed side (the scan reads two flags per candidate,
-/// from an array that stays in the cache): past that many proxies to visit, the step scans.
+/// Finding one proxy's candidates through the sorted list and the reverse index (a galloping
+/// search from its hint per candidate it has, see [`Hints`]) is taken to cost about as much as
+/// scanning this many candidates for a loud or removed side (the scan reads two flags per
+/// candidate, from an array that stays in the cache): past that many proxies to visit, the
+/// step scans.
 pub(super) const CANDIDATES_PER_LOOKUP: usize = 300;
 
 /// The candidates to visit and the reverse entries that change are sorted by a radix sort
@@ -105,6 +107,14 @@ pub(super) fn within(exact: &SimdBox, anchor: &SimdBox, m: f32) -> bool {
     let lo = ((exact.min - anchor.min).abs() * ROUND_UP).cmplt(half);
     let hi = ((exact.max - anchor.max).abs() * ROUND_UP).cmplt(half);
     (lo & hi).all()
+}
+
+/// The quiet/loud rule: true if a mover whose exact box is now `exact`, anchored at `anchor`
+/// with least candidate slack `m`, stays quiet (keeps every candidate's status), false if it
+/// is loud. [`within`] first, the drift only where that cannot tell.
+#[inline(always)]
+pub(super) fn stays_quiet(exact: &SimdBox, anchor: &SimdBox, m: f32) -> bool {
+    within(exact, anchor, m) || quiet(drift(exact, anchor), m)
 }
 
 /// Where each proxy's candidates were last found, by slot: the index in `cand` of its first
@@ -257,8 +267,7 @@ impl Patch {
         let (index, keys) = self.lists();
         index.into_iter().for_each(|v| grow(v, floor));
         keys.into_iter().for_each(|v| grow(v, floor));
-        crate::radix::ahead(&mut self.scratch.runs);
-        crate::radix::ahead(&mut self.scratch.per_shift);
+        self.scratch.ahead();
     }
 
     /// Heap bytes held (capacities).
@@ -278,8 +287,7 @@ impl Patch {
                 + self.rev_new.capacity()
                 + self.keys_tmp.capacity())
                 * 8
-            + self.scratch.runs.capacity() * core::mem::size_of::<Run>()
-            + self.scratch.per_shift.capacity() * 4
+            + self.scratch.heap_bytes()
     }
 }
 
@@ -339,7 +347,7 @@ impl BroadPhase {
     fn rebuild_rev(&mut self) {
         let cand = &self.cand;
         let layout = PairBits::for_slots(self.store.slots());
-        let scratch = super::step::sort_scratch(&mut self.octree, &mut self.sort_buf);
+        let scratch = sort_scratch(&mut self.octree, &mut self.sort_buf);
         self.rev.refill(cand.len(), 0, |list| {
             let at = list.len();
             list.extend(cand.iter().map(|&c| {
@@ -373,72 +381,93 @@ impl BroadPhase {
         if lookup && self.rev_stale {
             self.rebuild_rev();
         }
-        let p = &mut self.patch;
-        p.clear();
-        let (cand, rev) = (&self.cand[..], &self.rev[..]);
+        self.patch.clear();
         if lookup {
-            let key_at = |i: usize| cand[i] & !HIT;
-            let hints = &mut self.hints;
-            // A proxy inserted since the hints were last set has none yet.
-            fit(&mut hints.cand, self.store.slots());
-            fit(&mut hints.rev, self.store.slots());
-            for &s in self.loud.iter().chain(self.store.freed()) {
-                let first = u64::from(s) << 32;
-                let hint = hints.cand[s as usize] as usize;
-                let mut i = seek(cand, hint, |c| c & !HIT < first);
-                debug_assert_eq!(i, cand.partition_point(|&c| c & !HIT < first));
-                hints.cand[s as usize] = i as u32;
-                while i < cand.len() && key_at(i) >> 32 == u64::from(s) {
-                    p.touched.push(i as u32);
-                    i += 1;
-                }
-                let hint = hints.rev[s as usize] as usize;
-                let mut r = seek(rev, hint, |e| e < first);
-                debug_assert_eq!(r, rev.partition_point(|&e| e < first));
-                hints.rev[s as usize] = r as u32;
-                while r < rev.len() && rev[r] >> 32 == u64::from(s) {
-                    let key = (rev[r] << 32) | u64::from(s);
-                    // The lower side's candidates start at its hint; this one is among them.
-                    let hint = hints.cand[(rev[r] & 0xffff_ffff) as usize] as usize;
-                    let i = seek(cand, hint, |c| c & !HIT < key);
-                    debug_assert_eq!(key_at(i), key, "reverse index");
-                    p.touched.push(i as u32);
-                    r += 1;
-                }
-            }
-            // A pair of two loud sides is listed twice.
-            if p.touched.len() < RADIX_FROM {
-                p.touched.sort_unstable();
-            } else {
-                let bits = u32::BITS - (cand.len() as u32).leading_zeros();
-                sort_bits_by(
-                    &mut p.touched,
-                    &mut p.touched_tmp,
-                    &mut p.counts,
-                    |&i| u64::from(i),
-                    0,
-                    bits,
-                );
-            }
-            p.touched.dedup();
+            self.touched_by_lookup();
         } else {
-            // In the candidates' order, each once: a mask per 64 candidates, built without a
-            // branch (whether a side is loud is a coin toss when many are), then its bits.
-            let flags = &self.store.flags;
-            for (k, chunk) in cand.chunks(64).enumerate() {
-                let mut bits = 0u64;
-                for (j, &c) in chunk.iter().enumerate() {
-                    let (a, b) = unpack(c);
-                    let hit = (flags[a] | flags[b]) & (flag::LOUD | flag::GONE) != 0;
-                    bits |= u64::from(hit) << j;
-                }
-                while bits != 0 {
-                    p.touched.push((k * 64) as u32 + bits.trailing_zeros());
-                    bits &= bits - 1;
-                }
+            self.touched_by_scan();
+        }
+        self.stats.candidates_tested = self.retest();
+        self.patch_lists(lookup);
+    }
+
+    /// Lists in `patch.touched`, sorted and each once, the candidates of the loud and removed
+    /// proxies, looked up through the candidates and their reverse index from the hints.
+    fn touched_by_lookup(&mut self) {
+        let p = &mut self.patch;
+        let (cand, rev) = (&self.cand[..], &self.rev[..]);
+        let key_at = |i: usize| cand[i] & !HIT;
+        let hints = &mut self.hints;
+        // A proxy inserted since the hints were last set has none yet.
+        fit(&mut hints.cand, self.store.slots());
+        fit(&mut hints.rev, self.store.slots());
+        for &s in self.loud.iter().chain(self.store.freed()) {
+            let first = u64::from(s) << 32;
+            let hint = hints.cand[s as usize] as usize;
+            let mut i = seek(cand, hint, |c| c & !HIT < first);
+            debug_assert_eq!(i, cand.partition_point(|&c| c & !HIT < first));
+            hints.cand[s as usize] = i as u32;
+            while i < cand.len() && key_at(i) >> 32 == u64::from(s) {
+                p.touched.push(i as u32);
+                i += 1;
+            }
+            let hint = hints.rev[s as usize] as usize;
+            let mut r = seek(rev, hint, |e| e < first);
+            debug_assert_eq!(r, rev.partition_point(|&e| e < first));
+            hints.rev[s as usize] = r as u32;
+            while r < rev.len() && rev[r] >> 32 == u64::from(s) {
+                let key = (rev[r] << 32) | u64::from(s);
+                // The lower side's candidates start at its hint; this one is among them.
+                let hint = hints.cand[(rev[r] & 0xffff_ffff) as usize] as usize;
+                let i = seek(cand, hint, |c| c & !HIT < key);
+                debug_assert_eq!(key_at(i), key, "reverse index");
+                p.touched.push(i as u32);
+                r += 1;
             }
         }
+        // A pair of two loud sides is listed twice.
+        if p.touched.len() < RADIX_FROM {
+            p.touched.sort_unstable();
+        } else {
+            let bits = u32::BITS - (cand.len() as u32).leading_zeros();
+            sort_bits_by(
+                &mut p.touched,
+                &mut p.touched_tmp,
+                &mut p.counts,
+                |&i| u64::from(i),
+                0,
+                bits,
+            );
+        }
+        p.touched.dedup();
+    }
 
+    /// [`BroadPhase::touched_by_lookup`] by one scan of every candidate.
+    fn touched_by_scan(&mut self) {
+        let p = &mut self.patch;
+        let cand = &self.cand[..];
+        // In the candidates' order, each once: a mask per 64 candidates, built without a
+        // branch (whether a side is loud is a coin toss when many are), then its bits.
+        let flags = &self.store.flags;
+        for (k, chunk) in cand.chunks(64).enumerate() {
+            let mut bits = 0u64;
+            for (j, &c) in chunk.iter().enumerate() {
+                let (a, b) = unpack(c);
+                let hit = (flags[a] | flags[b]) & (flag::LOUD | flag::GONE) != 0;
+                bits |= u64::from(hit) << j;
+            }
+            while bits != 0 {
+                p.touched.push((k * 64) as u32 + bits.trailing_zeros());
+                bits &= bits - 1;
+            }
+        }
+    }
+
+    /// Re-tests the touched candidates and tests the escaped proxies' new ones (in `fresh`,
+    /// sorted) in one walk, noting in `patch` the candidates that go and come, and in the
+    /// packed `added` / `removed` the pairs whose status changed; returns the pairs tested.
+    fn retest(&mut self) -> usize {
+        let p = &mut self.patch;
         let st = &mut self.store;
         let (flags, exact, anchor) = (&mut st.flags, &st.exact, &st.anchor);
         let slk = &mut st.slack;
@@ -470,25 +499,6 @@ impl BroadPhase {
         let fresh = &self.fresh;
         let cand: &mut [u64] = &mut self.cand;
         let mut j = 0;
-        // A new candidate: tested, and inserted where it sorts, which the walk over the
-        // touched candidates has narrowed to `cand[lo..hi]` (a search of the whole list would
-        // miss the cache at most of its steps).
-        fn insert(
-            f: u64,
-            cand: &[u64],
-            (lo, hi): (usize, usize),
-            p: &mut Patch,
-            flags: &mut [u8],
-            test: &mut impl FnMut(usize, usize, &mut [u8]) -> bool,
-        ) -> bool {
-            let (a, b) = unpack(f);
-            let hit = test(a, b, flags);
-            let at = lo + cand[lo..hi].partition_point(|&c| c & !HIT < f);
-            debug_assert_eq!(at, cand.partition_point(|&c| c & !HIT < f));
-            p.cand_at.push(at as u32);
-            p.cand_new.push(f | if hit { HIT } else { 0 });
-            hit
-        }
         // Where the next new candidate can sort from: past the last touched candidate (one
         // equal to it was that candidate found again).
         let mut lo = 0;
@@ -497,7 +507,7 @@ impl BroadPhase {
             let c = cand[i];
             let key = c & !HIT;
             while j < fresh.len() && fresh[j] < key {
-                if insert(fresh[j], cand, (lo, i), p, flags, &mut test) {
+                if insert_new(fresh[j], cand, (lo, i), p, flags, &mut test) {
                     added.push(fresh[j]);
                 }
                 j += 1;
@@ -530,12 +540,18 @@ impl BroadPhase {
             }
         }
         for &f in &fresh[j..] {
-            if insert(f, cand, (lo, cand.len()), p, flags, &mut test) {
+            if insert_new(f, cand, (lo, cand.len()), p, flags, &mut test) {
                 added.push(f);
             }
         }
-        self.stats.candidates_tested = tested;
+        tested
+    }
 
+    /// Patches the candidates, their reverse index (while the lookups read it) and the key
+    /// pairs with what [`BroadPhase::retest`] noted, and maps the events to keys.
+    fn patch_lists(&mut self, lookup: bool) {
+        let p = &mut self.patch;
+        let (added, removed) = (&self.added_packed, &self.removed_packed);
         // The reverse index, kept while the lookups read it: a dropped candidate's entry
         // goes, a new one's comes. A step that scanned leaves it (moving most of its entries
         // costs about what rebuilding it does, and many loud proxies scan step after step).
@@ -564,18 +580,34 @@ impl BroadPhase {
         // The key pairs: the changed pairs' places in the old list, which is in the packed
         // pairs' order.
         let pairs = &self.pairs;
-        let at = |k: u64| pairs.partition_point(|q| super::step::pack_pair(q) < k) as u32;
+        let at = |k: u64| pairs.partition_point(|q| pack_pair(q) < k) as u32;
         p.pairs_gone.extend(removed.iter().map(|&k| at(k)));
         p.pairs_at.extend(added.iter().map(|&k| at(k)));
-        let store = &self.store;
-        let to_pair = |&q: &u64| super::step::key_pair(store, q);
-        self.added.clear();
-        self.added.extend(self.added_packed.iter().map(to_pair));
-        self.removed.clear();
-        self.removed.extend(self.removed_packed.iter().map(to_pair));
+        keys_into(&self.store, &self.added_packed, &mut self.added);
+        keys_into(&self.store, &self.removed_packed, &mut self.removed);
         self.pairs
             .patch(&p.pairs_gone, &p.pairs_at, &self.added, &mut p.scratch);
     }
+}
+
+// A new candidate: tested, and inserted where it sorts, which the walk over the
+// touched candidates has narrowed to `cand[lo..hi]` (a search of the whole list would
+// miss the cache at most of its steps).
+fn insert_new(
+    f: u64,
+    cand: &[u64],
+    (lo, hi): (usize, usize),
+    p: &mut Patch,
+    flags: &mut [u8],
+    test: &mut impl FnMut(usize, usize, &mut [u8]) -> bool,
+) -> bool {
+    let (a, b) = unpack(f);
+    let hit = test(a, b, flags);
+    let at = lo + cand[lo..hi].partition_point(|&c| c & !HIT < f);
+    debug_assert_eq!(at, cand.partition_point(|&c| c & !HIT < f));
+    p.cand_at.push(at as u32);
+    p.cand_new.push(f | if hit { HIT } else { 0 });
+    hit
 }
 
 /// Classifies the mover `slot`, whose new exact box still lies in its fat box: quiet (flagged
@@ -586,8 +618,7 @@ pub(super) fn settle(st: &mut Store, loud: &mut Vec<u32>, slot: u32) {
     if st.flags[s] & flag::LOUD != 0 {
         return;
     }
-    let d = drift(&st.exact[s], &st.anchor[s]);
-    if quiet(d, st.slack[s]) {
+    if stays_quiet(&st.exact[s], &st.anchor[s], st.slack[s]) {
         st.flags[s] |= flag::DRIFTED;
     } else {
         make_loud(st, loud, slot);
@@ -612,209 +643,6 @@ fn make_loud(st: &mut Store, loud: &mut Vec<u32>, slot: u32) {
     loud.push(slot);
     st.anchor[s] = st.exact[s];
     st.slack[s] = f32::MAX;
-}
-
-/// A stretch of old entries `[start, end)` that moves by `shift` places.
-#[derive(Clone, Copy, Debug)]
-struct Run {
-    start: u32,
-    end: u32,
-    shift: i32,
-}
-
-/// [`patch_in`]'s scratch: the runs and the length of old entries per shift.
-#[derive(Clone, Debug, Default)]
-pub(super) struct Scratch {
-    runs: Vec<Run>,
-    per_shift: Vec<u32>,
-}
-
-/// Removes `buf[start + i]` for every `i` of `gone` (ascending, distinct) and inserts `new[k]`
-/// before the old entry `at[k]` (`at` ascending, repeats allowed, the list's length appends),
-/// in place, moving only the entries whose index changes; the list `buf[start..]` may move to
-/// start anywhere in `0..=max_start`.
-/// Between two changes the old entries all move by the same shift, and their order is kept.
-/// The list's new start is chosen so that the longest total stretch of old entries stays
-/// where it is (with `max_start` 0, the start stays 0 and the entries before the first change
-/// stay): a change near the front then moves the few entries before it, not the many after
-/// it. No entry's new place is still held by an entry moving the other way, so the runs that
-/// move left are moved first, front to back, then those that move right, back to front, and
-/// the new entries are written last. Returns the list's new start.
-fn patch_in<T: Copy>(
-    buf: &mut Vec<T>,
-    start: usize,
-    max_start: usize,
-    gone: &[u32],
-    at: &[u32],
-    new: &[T],
-    scratch: &mut Scratch,
-) -> usize {
-    debug_assert_eq!(at.len(), new.len());
-    debug_assert!(start <= buf.len());
-    if gone.is_empty() && new.is_empty() {
-        return start;
-    }
-    let old = buf.len() - start;
-    let Scratch { runs, per_shift } = scratch;
-    runs.clear();
-    let (mut g, mut k, mut from, mut shift) = (0, 0, 0usize, 0i32);
-    loop {
-        let next_at = at.get(k).map_or(old, |&a| a as usize);
-        let next_gone = gone.get(g).map_or(old, |&i| i as usize);
-        let end = next_at.min(next_gone);
-        if end > from {
-            runs.push(Run {
-                start: from as u32,
-                end: end as u32,
-                shift,
-            });
-        }
-        from = from.max(end);
-        if k < at.len() && next_at <= next_gone {
-            shift += 1;
-            k += 1;
-        } else if g < gone.len() {
-            shift -= 1;
-            g += 1;
-            from = next_gone + 1;
-        } else {
-            break;
-        }
-    }
-    // The base shift `c`: an old entry at `j` goes to `start - c + j + shift_j`, so the
-    // entries whose shift is `c` stay. `c` keeps the new start in `0..=max_start`.
-    let lowest = -(gone.len() as i64);
-    let (lo, hi) = (start as i64 - max_start as i64, start as i64);
-    let mut c = 0i64.clamp(lo, hi);
-    if max_start > 0 {
-        per_shift.clear();
-        per_shift.resize(gone.len() + at.len() + 1, 0);
-        for r in runs.iter() {
-            per_shift[(i64::from(r.shift) - lowest) as usize] += r.end - r.start;
-        }
-        let mut best = 0;
-        for (i, &n) in per_shift.iter().enumerate() {
-            let shift = i as i64 + lowest;
-            if n > best && (lo..=hi).contains(&shift) {
-                (best, c) = (n, shift);
-            }
-        }
-    }
-    let new_start = (start as i64 - c) as usize;
-    let len = old + new.len() - gone.len();
-    let need = (new_start + len).max(buf.len());
-    if need > buf.len() {
-        let fill = new.first().copied().unwrap_or_else(|| buf[start]);
-        buf.resize(need, fill);
-    }
-    let place = |r: &Run| (new_start as i64 + i64::from(r.start) + i64::from(r.shift)) as usize;
-    for r in runs.iter().filter(|r| i64::from(r.shift) < c) {
-        let from = start + r.start as usize;
-        buf.copy_within(from..from + (r.end - r.start) as usize, place(r));
-    }
-    for r in runs.iter().rev().filter(|r| i64::from(r.shift) > c) {
-        let from = start + r.start as usize;
-        buf.copy_within(from..from + (r.end - r.start) as usize, place(r));
-    }
-    // The new entry `k` lands after the `k` new ones before it and the old ones before
-    // `at[k]` that stay.
-    let mut g = 0;
-    for (k, (&a, &x)) in at.iter().zip(new).enumerate() {
-        while g < gone.len() && gone[g] < a {
-            g += 1;
-        }
-        buf[new_start + a as usize + k - g] = x;
-    }
-    buf.truncate(new_start + len);
-    new_start
-}
-
-/// A list kept behind a gap at the front of its buffer, which [`Gapped::patch`] may grow or
-/// shrink to move fewer entries: a sorted list patched in place each step (the pair list)
-/// moves only the entries between the changes that do not cancel out, instead of every entry
-/// after the first change.
-#[derive(Clone, Debug)]
-pub(super) struct Gapped<T> {
-    buf: Vec<T>,
-    start: usize,
-}
-
-impl<T> Default for Gapped<T> {
-    fn default() -> Self {
-        Gapped {
-            buf: Vec::new(),
-            start: 0,
-        }
-    }
-}
-
-impl<T> core::ops::DerefMut for Gapped<T> {
-    #[inline]
-    fn deref_mut(&mut self) -> &mut [T] {
-        &mut self.buf[self.start..]
-    }
-}
-
-impl<T> core::ops::Deref for Gapped<T> {
-    type Target = [T];
-    #[inline]
-    fn deref(&self) -> &[T] {
-        &self.buf[self.start..]
-    }
-}
-
-/// The gap a list of `len` entries keeps at its front after a rebuild; patches keep it
-/// between none and twice this.
-fn gap_for(len: usize) -> usize {
-    (len / GAP_FRACTION).clamp(MIN_GAP, MAX_GAP)
-}
-
-/// A [`Gapped`] list of `len` entries keeps a gap of `len / GAP_FRACTION` entries, at least
-/// [`MIN_GAP`] and at most [`MAX_GAP`]: the changes of one step seldom shift the entries by more.
-const GAP_FRACTION: usize = 64;
-const MIN_GAP: usize = 16;
-const MAX_GAP: usize = 4096;
-
-impl<T: Copy> Gapped<T> {
-    /// Replaces the list by what `fill` appends to an empty one, behind a gap made of `filler`
-    /// for `len` entries (what the list is expected to hold).
-    pub(super) fn refill(&mut self, len: usize, filler: T, fill: impl FnOnce(&mut Vec<T>)) {
-        self.buf.clear();
-        self.start = gap_for(len);
-        self.buf.resize(self.start, filler);
-        fill(&mut self.buf);
-    }
-
-    /// [`patch_in`] of the list, moving its start within the gap.
-    fn patch(&mut self, gone: &[u32], at: &[u32], new: &[T], scratch: &mut Scratch) {
-        let len = self.buf.len() - self.start;
-        let max_start = 2 * gap_for(len);
-        self.start = patch_in(
-            &mut self.buf,
-            self.start,
-            max_start.max(self.start),
-            gone,
-            at,
-            new,
-            scratch,
-        );
-    }
-
-    /// Empties the list (and its gap).
-    pub(super) fn clear(&mut self) {
-        self.buf.clear();
-        self.start = 0;
-    }
-
-    /// Grows the buffer ahead of its peaks (see `radix::ahead`).
-    pub(super) fn ahead(&mut self) {
-        crate::radix::ahead(&mut self.buf);
-    }
-
-    /// Entries the buffer holds room for, the gap's included.
-    pub(super) fn capacity(&self) -> usize {
-        self.buf.capacity()
-    }
 }
 
 #[cfg(test)]
@@ -926,83 +754,5 @@ mod tests {
                 );
             }
         }
-    }
-
-    /// `patch_in` (from start 0 without room to move, and from other starts with room) against the obvious
-    /// rebuild, on random removals and insertions.
-    #[test]
-    fn patch_equals_rebuild() {
-        let mut seed = 7u64;
-        let mut next = |n: u64| {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 33) % n.max(1)
-        };
-        let mut scratch = Scratch::default();
-        let mut moved_less = 0;
-        for round in 0..4000 {
-            let n = next(40) as u32;
-            let old: Vec<u32> = (0..n).map(|i| 10 * i).collect();
-            let gone: Vec<u32> = (0..n).filter(|_| next(4) == 0).collect();
-            let mut at: Vec<u32> = (0..next(6))
-                .map(|_| next(u64::from(n) + 1) as u32)
-                .collect();
-            at.sort_unstable();
-            let new: Vec<u32> = at
-                .iter()
-                .enumerate()
-                .map(|(k, &a)| 10 * a + 1 + k as u32)
-                .collect();
-            let mut want: Vec<u32> = Vec::new();
-            for i in 0..=n {
-                for (k, &a) in at.iter().enumerate() {
-                    if a == i {
-                        want.push(new[k]);
-                    }
-                }
-                if i < n && !gone.contains(&i) {
-                    want.push(old[i as usize]);
-                }
-            }
-            if round % 2 == 0 {
-                let mut v = old.clone();
-                patch_in(&mut v, 0, 0, &gone, &at, &new, &mut scratch);
-                assert_eq!(v, want, "round {round}: gone {gone:?} at {at:?}");
-            } else {
-                let start = next(8) as usize;
-                let max_start = start + next(8) as usize;
-                let mut buf: Vec<u32> = vec![u32::MAX; start];
-                buf.extend_from_slice(&old);
-                // Old entries found at their old place, the list starting at `buf`'s index
-                // `-from` (entries are distinct).
-                let stay = |buf: &[u32], from: isize| {
-                    (0..n as usize)
-                        .filter(|&j| {
-                            let p = from + j as isize;
-                            p >= 0 && buf.get(p as usize) == Some(&old[j])
-                        })
-                        .count()
-                };
-                let at_zero = {
-                    let mut v = old.clone();
-                    patch_in(&mut v, 0, 0, &gone, &at, &new, &mut scratch);
-                    stay(&v, 0)
-                };
-                let new_start =
-                    patch_in(&mut buf, start, max_start, &gone, &at, &new, &mut scratch);
-                assert!(new_start <= max_start, "round {round}: start {new_start}");
-                assert_eq!(
-                    &buf[new_start..],
-                    &want[..],
-                    "round {round}: start {start} max {max_start} gone {gone:?} at {at:?}"
-                );
-                // Entries that kept their place: never fewer than with the start fixed.
-                let kept = stay(&buf[new_start..], start as isize - new_start as isize);
-                assert!(kept >= at_zero, "round {round}: kept {kept} < {at_zero}");
-                moved_less += usize::from(kept > at_zero);
-            }
-        }
-        assert!(moved_less > 0, "the start never moved");
     }
 }

@@ -20,7 +20,7 @@
 //! broadphase whose invariants hold.
 
 use super::store::{Kind, MAX_SLOTS, flag};
-use super::{BodyKind, BroadPhase, CollisionGroups, Config, Passes, Shape, step};
+use super::{BodyKind, BroadPhase, CollisionGroups, Config, Passes, Shape};
 use crate::geom::{check_aabb, check_sphere};
 use crate::octree::Placement;
 use crate::pair::Pair;
@@ -310,12 +310,13 @@ impl Snapshot {
         }
         let st = &bp.store;
         let pairs = &self.pairs;
-        bp.pairs.refill(pairs.len(), step::null_pair(), |list| {
-            list.extend(pairs.iter().map(|&(lo, hi)| Pair {
-                a: st.key(lo),
-                b: st.key(hi),
-            }));
-        });
+        bp.pairs
+            .refill(pairs.len(), super::packed::null_pair(), |list| {
+                list.extend(pairs.iter().map(|&(lo, hi)| Pair {
+                    a: st.key(lo),
+                    b: st.key(hi),
+                }));
+            });
         Ok(bp)
     }
 

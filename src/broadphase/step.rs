@@ -1,26 +1,10 @@
-//! One step: which pass runs, and the passes.
+//! One step: the passes.
 //!
-//! The **full pass** runs the structures' own pair passes over the boxes they hold: the
-//! octree's for sphere × sphere, the dynamic BVH's self traversal and its traversal against the
-//! static BVH for body × body, and sphere × body by queries from the smaller side into the
-//! other's structure. Its cost follows the number of proxies. The **incremental pass** needs
-//! the structures to hold *fat* boxes (each exact box grown by a margin that follows how far
-//! that proxy moves per step, or swept along its motion once it left one, see
-//! [`super::fat`]) and the sorted list of *candidates*, the pairs of overlapping fat
-//! boxes. Since an exact box lies in its fat box, every overlapping pair is a candidate. A step
-//! then
-//! 1. drops the candidates of proxies that were removed or left their fat box ("escaped"),
-//! 2. queries the octree and both BVHs with each escaped proxy's new fat box for its new
-//!    candidates (a pair of two escaped proxies is found from both sides and kept once),
-//! 3. scans old and new candidates in one pass, re-testing the exact boxes of those that name
-//!    a proxy that moved by half the least slack of its candidates (see [`super::slack`]) and
-//!    keeping the others' last outcome, and patches the lists in place with what changed.
-//!
-//! Its cost follows what moved. Each step estimates both costs from what it is about to do
-//! (movers, escapes, candidates) and runs the cheaper pass, so the cost never jumps when a
-//! world wakes up or settles. Collision groups are tested where a pair is first found (in the
-//! structures' passes and the escaped proxies' queries), so a filtered pair is never a
-//! candidate, never sorted and never diffed.
+//! The two passes and the incremental regime are defined on
+//! [`BroadPhase`](super::BroadPhase#the-passes-and-the-incremental-regime); [`super::cost`]
+//! picks one each step. This file runs them: the full pass over the structures, the
+//! incremental pass's queries of the escaped proxies (its scan is [`super::slack`]'s), and the
+//! pair list's sort and diff.
 //!
 //! **Threads** (feature `parallel`). With more than one thread in rayon's current pool and at
 //! least [`PARALLEL_MIN_SPHERES`] spheres or [`PARALLEL_MIN_BODIES`] dynamic bodies, the step
@@ -37,81 +21,17 @@
 //! [`super::apply`]), the refits, the sphere × body queries (one task), and the incremental
 //! pass.
 
-use super::fat::{LOOKAHEAD_STEPS, PREDICT_STEPS};
+use super::packed::{
+    HIT, key_pair, keys_into, null_pair, pack_allowed, pack_pair, sort_scratch, unpack,
+};
 use super::*;
 #[cfg(feature = "parallel")]
 use crate::radix;
 use crate::radix::{PairBits, ahead, grow_to, sort_u64_kept};
 
-/// Set on a candidate whose exact boxes overlapped at the last step.
-pub(super) const HIT: u64 = 1 << 63;
-
-/// Estimated costs, in nanoseconds per unit of work on the machine the defaults were measured
-/// on; only their ratios matter.
-mod cost {
-    /// The full pass, per proxy (sort, sweep, lists).
-    pub(super) const FULL: f64 = 110.0;
-    /// The full pass, per pair found (its sort and the lists).
-    pub(super) const FULL_PAIR: f64 = 20.0;
-    /// Carrying one candidate through the step without testing it: the scan for loud sides
-    /// and the patches that move it. With few loud proxies the step looks their candidates up
-    /// instead of scanning (see `slack::CANDIDATES_PER_LOOKUP`), at the price of scanning that
-    /// many candidates per lookup.
-    pub(super) const CARRY: f64 = 7.0;
-    /// Re-testing one candidate's exact boxes (a branch per outcome), while the exact boxes
-    /// of every proxy fit in [`CACHE_BYTES`]: the partner's box is read from the cache.
-    pub(super) const TEST: f64 = 10.0;
-    /// Re-testing one candidate whose partner's box is a cache miss: in a world whose exact
-    /// boxes outgrow [`CACHE_BYTES`], the share of partners that miss costs this.
-    pub(super) const TEST_MISS: f64 = 33.0;
-    /// The cache the exact boxes of the re-tested partners are read from, in bytes.
-    pub(super) const CACHE_BYTES: f64 = 1024.0 * 1024.0;
-
-    /// One re-test in a world of `n` proxies (32-byte exact boxes each).
-    pub(super) fn test(n: f64) -> f64 {
-        let missing = (1.0 - CACHE_BYTES / (32.0 * n.max(1.0))).max(0.0);
-        TEST + (TEST_MISS - TEST) * missing
-    }
-    /// One escaped proxy in a world of about [`DENSE_CANDIDATES`] candidates per proxy or
-    /// more: its structure queries, its new fat box and relink, its new candidates' sort and
-    /// merge.
-    pub(super) const QUERY: f64 = 1850.0;
-    /// One escaped proxy in a world of no candidates (its queries find nothing to sort or
-    /// merge, and visit few neighbours); between the two, in proportion to the candidates.
-    pub(super) const QUERY_SPARSE: f64 = 400.0;
-    /// Candidates per proxy at which an escape costs [`QUERY`] (the `idle` scene's).
-    pub(super) const DENSE_CANDIDATES: f64 = 1.2;
-
-    /// One escaped proxy in a world of `per_proxy` candidates per proxy.
-    pub(super) fn query(per_proxy: f64) -> f64 {
-        QUERY_SPARSE + (QUERY - QUERY_SPARSE) * (per_proxy / DENSE_CANDIDATES).min(1.0)
-    }
-}
-
-/// The incremental regime is entered when its estimated cost is below this fraction of the
-/// full pass: the margin pays for the rebuild that enters it.
-const ENTER_FRACTION: f64 = 0.8;
-/// The incremental regime is left at once, without waiting for a second step over the full
-/// pass's estimate, when a step's estimate is this many times the full pass's: a burst that
-/// large (most proxies escaping) is a world in motion, not a passing spike.
-const LEAVE_AT_ONCE: f64 = 2.0;
-/// [`LEAVE_AT_ONCE`] while the regime settles after its entry ([`ENTRY_BURST_STEPS`]): the
-/// entry's burst spreads the fast movers' escapes over a few steps, a world waking up sends
-/// every mover out at once.
-const SETTLING_LEAVE_AT_ONCE: f64 = 4.0;
-/// Steps after entering the incremental regime in which two steps over the full pass's
-/// estimate do not leave it, and one leaves at once only past [`SETTLING_LEAVE_AT_ONCE`]:
-/// the entry gives every proxy a fat box at once, centred (no motion is known yet) with a
-/// margin of up to `2·LOOKAHEAD_STEPS` steps of its speed, so the fast movers leave them
-/// within that many steps, together, in a burst that says nothing of the steps after it; the
-/// boxes they get then are swept along their motion and jittered, and their escapes spread
-/// out.
-const ENTRY_BURST_STEPS: u32 = 2 * LOOKAHEAD_STEPS as u32 + 1;
-
 /// A full pass splits over rayon's current pool only with at least this many spheres or
 /// [`PARALLEL_MIN_BODIES`] dynamic bodies (and more than one thread): below this many spheres
-/// handing out the octree's chunks costs about what the second thread saves (measured on
-/// `gas`).
+/// handing out the octree's chunks costs about what the second thread saves.
 #[cfg(feature = "parallel")]
 pub(super) const PARALLEL_MIN_SPHERES: usize = 10_000;
 /// The dynamic bodies from which a full pass splits over the pool whatever the spheres: a
@@ -124,10 +44,10 @@ const PARALLEL_MIN_BODIES: usize = 16_384;
 /// (the sort's counters, handing out the task) outweigh the split below it.
 #[cfg(feature = "parallel")]
 const MIN_PART_PAIRS: usize = 4096;
-/// Tasks per thread in each split phase of a parallel pass, so that a thread that finishes its
-/// share early takes over part of a slower one's.
+/// Tasks per thread in each split phase of a parallel pass and of the parallel apply, so that
+/// a thread that finishes its share early takes over part of a slower one's.
 #[cfg(feature = "parallel")]
-const TASKS_PER_THREAD: usize = 4;
+pub(super) const TASKS_PER_THREAD: usize = 4;
 /// The most tasks of one phase: the pair sort keeps a list per producer and part, so their
 /// number grows with its square.
 #[cfg(feature = "parallel")]
@@ -192,242 +112,43 @@ impl Parallel {
     }
 }
 
-/// What fills the pair list's gap (see [`super::slack::Gapped`]): never read.
-pub(super) fn null_pair() -> Pair {
-    Pair {
-        a: ProxyKey::default(),
-        b: ProxyKey::default(),
-    }
-}
-
-/// The key pair of a packed slot pair (slots live, or quarantined since their removal).
-#[inline]
-pub(super) fn key_pair(store: &Store, p: u64) -> Pair {
-    let (a, b) = unpack(p);
-    Pair {
-        a: store.key(a as u32),
-        b: store.key(b as u32),
-    }
-}
-
-/// The packed pair of two distinct slots: the smaller in the high half.
-#[inline]
-pub(super) fn pack(a: u32, b: u32) -> u64 {
-    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-    (u64::from(lo) << 32) | u64::from(hi)
-}
-
-/// The packed pair of a key pair (both keys live, or quarantined since their removal), the
-/// inverse of [`key_pair`]: the key pairs are sorted as their packed pairs are. The pair is
-/// canonical (`a < b`, so `a`'s slot is the smaller), which spares [`pack`]'s ordering on the
-/// hot reads of the pair list.
-#[inline]
-pub(super) fn pack_pair(p: &Pair) -> u64 {
-    let (a, b) = (crate::pair::slot(p.a), crate::pair::slot(p.b));
-    debug_assert!(a < b, "a key pair is canonical");
-    (u64::from(a) << 32) | u64::from(b)
-}
-
-#[inline]
-pub(super) fn unpack(p: u64) -> (usize, usize) {
-    (((p >> 32) as u32 & !(1 << 31)) as usize, p as u32 as usize)
-}
-
 /// The incremental pass's patch lists keep room for at least one entry per this many
 /// proxies: their lengths follow the escapes and the pairs that change, which swing.
 const PATCH_FLOOR: usize = 32;
-
-/// What a step will do.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Plan {
-    Unchanged,
-    Full,
-    FullFat,
-    Incremental,
-}
-
-/// Before the incremental regime has run, a slow mover (one that stays in its fat box) is
-/// taken to re-test its candidates once in the steps it takes to drift half the smallest fat
-/// margin, `1/64` of its size (see `fat::MIN_MARGIN`): per step, its speed as a fraction of its
-/// size times this. Once the regime has run and been left, the estimate follows what it saw
-/// instead ([`Costs::loud_per_motion`]).
-const LOUD_PER_MOTION: f64 = 2.0 * 64.0;
-/// Per step outside the incremental regime, what the regime's last steps taught the estimate
-/// ([`Costs::loud_per_motion`]) keeps this share of its distance from [`LOUD_PER_MOTION`]: a
-/// world left in a burst (a landing, a wake-up) is tried again once it has calmed, instead of
-/// being priced by that burst for good.
-const RELEARN_KEEP: f64 = 0.9;
 
 /// An incremental step refits the dynamic BVH once this fraction of its bodies got new fat
 /// boxes since its last refit: until then the boxes enlarged on update keep it exact, only
 /// looser.
 const REFIT_FRACTION: f64 = 0.125;
 
-/// What the cost estimates learn from the steps they watch.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Costs {
-    /// Candidates per proxy at the last count.
-    cand_per_proxy: Option<f64>,
-    /// Of the movers of the last incremental step, the fraction that re-tested their
-    /// candidates (see [`super::slack`]).
-    loud_per_mover: f64,
-    /// Of the movers of the last incremental step that stayed in their fat boxes, the
-    /// fraction that re-tested their candidates.
-    loud_per_slow: f64,
-    /// Outside the incremental regime, the slow movers expected to re-test their candidates
-    /// per unit of their summed motion (`fat::Motion::slow_motion`): [`LOUD_PER_MOTION`] until
-    /// the regime is left, then what the regime's last step saw, over the motion of the first
-    /// step after it, returning towards [`LOUD_PER_MOTION`] by [`RELEARN_KEEP`] a step.
-    loud_per_motion: f64,
-    /// The incremental regime was left at the last step: this step's motion, with the
-    /// regime's last `loud_per_slow`, gives `loud_per_motion`.
-    just_left: bool,
-    /// The last incremental step's estimate was over the full pass's.
-    over: bool,
-    /// The step that last entered the incremental regime.
-    entered: u32,
-    /// Some pass has listed the pairs since this broadphase was made or restored: until one
-    /// has, the pairs say nothing of how many candidates an escape will find.
-    pairs_seen: bool,
-}
-
-impl Default for Costs {
-    fn default() -> Self {
-        Costs {
-            cand_per_proxy: None,
-            loud_per_mover: 1.0,
-            loud_per_slow: 1.0,
-            loud_per_motion: LOUD_PER_MOTION,
-            just_left: false,
-            over: false,
-            entered: 0,
-            pairs_seen: false,
-        }
-    }
-}
-
 impl BroadPhase {
-    /// Chooses the pass from the work at hand.
-    pub(super) fn plan(&mut self) -> Plan {
-        let movers = self.movers.len();
-        if movers == 0 && self.removals == 0 {
-            return Plan::Unchanged;
-        }
-        match self.config.passes {
-            Passes::Full => return Plan::Full,
-            Passes::Incremental if self.cached => return Plan::Incremental,
-            Passes::Incremental => return Plan::FullFat,
-            Passes::Adaptive => {}
-        }
-        let n = self.store.len() as f64;
-        let full = n * cost::FULL + self.pairs.len() as f64 * cost::FULL_PAIR;
-        if self.cached {
-            // Leaving drops the candidates, which a later return rebuilds with a full pass of
-            // its own: a single step over the full pass's cost (a burst of escapes) does not
-            // leave, two in a row do, and so does one step far over it (a world waking up).
-            let escapes = self.escaped.len() as f64;
-            let inc = self.incremental_cost(movers as f64 * self.costs.loud_per_mover, escapes);
-            let over = inc > full;
-            let was_over = core::mem::replace(&mut self.costs.over, over);
-            let settling = self.now.wrapping_sub(self.costs.entered) <= ENTRY_BURST_STEPS;
-            let at_once = if settling {
-                SETTLING_LEAVE_AT_ONCE
-            } else {
-                LEAVE_AT_ONCE
-            };
-            if over && ((was_over && !settling) || inc > full * at_once) {
-                self.costs.just_left = true;
-                Plan::Full
-            } else {
-                Plan::Incremental
-            }
-        } else {
-            // The regime is priced from the motion just applied: a fast mover's fat box is
-            // swept over `PREDICT_STEPS` of its motion, times a jitter of 1.5 on average, so
-            // one that keeps its velocity escapes about once in that many steps; a slow one
-            // stays in its fat box and re-tests its candidates in proportion to its motion
-            // (zero for a proxy sent where it already was). An insert or a regroup (listed as
-            // escaped) would query the structures like an escape.
-            let m = self.motion;
-            let escapes =
-                m.fast as f64 / (1.5 * f64::from(PREDICT_STEPS)) + self.escaped.len() as f64;
-            let c = &mut self.costs;
-            c.loud_per_motion =
-                LOUD_PER_MOTION + (c.loud_per_motion - LOUD_PER_MOTION) * RELEARN_KEEP;
-            if core::mem::take(&mut c.just_left) && m.slow_motion > 0.0 {
-                c.loud_per_motion = c.loud_per_slow * m.slow as f64 / m.slow_motion;
-            }
-            let slow_loud = (self.costs.loud_per_motion * m.slow_motion).min(m.slow as f64);
-            let inc = self.incremental_cost(slow_loud + escapes, escapes);
-            if inc < full * ENTER_FRACTION {
-                self.costs.entered = self.now;
-                Plan::FullFat
-            } else {
-                Plan::Full
-            }
-        }
-    }
-
-    /// The estimated cost of an incremental step in which `loud` proxies re-test their
-    /// candidates, `escapes` of them after leaving their fat boxes.
-    fn incremental_cost(&self, loud: f64, escapes: f64) -> f64 {
-        let n = self.store.len().max(1) as f64;
-        // Before any count, fat boxes are taken to double the pairs.
-        let per_proxy = self
-            .costs
-            .cand_per_proxy
-            .unwrap_or(2.0 * self.pairs.len() as f64 / n);
-        let cands = if self.cached {
-            self.cand.len() as f64
-        } else {
-            n * per_proxy
-        };
-        // Before any pass an escape is priced as a dense world's: the first step of a gas
-        // has no pairs yet.
-        let density = if self.costs.pairs_seen {
-            per_proxy
-        } else {
-            cost::DENSE_CANDIDATES
-        };
-        // The loud proxies' candidates are looked up, or found by one scan of them all.
-        let visited = cands.min(loud * super::slack::CANDIDATES_PER_LOOKUP as f64);
-        visited * cost::CARRY
-            + (loud * per_proxy * 2.0).min(cands) * cost::test(n)
-            + escapes * cost::query(density)
-    }
-
-    /// Runs `plan`, then clears the step's marks.
-    pub(super) fn run(&mut self, plan: Plan) {
+    /// Runs `pass`, then clears the step's marks.
+    pub(super) fn run(&mut self, pass: Pass) {
         let updated = self.movers.len() + self.removals;
-        let enlarged = self.escaped.len();
+        let escaped = self.escaped.len();
         self.stats = StepStats {
-            pass: match plan {
-                Plan::Unchanged => Pass::Unchanged,
-                Plan::Full => Pass::Full,
-                Plan::FullFat => Pass::FullFat,
-                Plan::Incremental => Pass::Incremental,
-            },
+            pass,
             updated,
-            enlarged: if self.cached { enlarged } else { 0 },
+            escaped: if self.incremental { escaped } else { 0 },
             ..StepStats::default()
         };
-        match plan {
-            Plan::Unchanged => {
+        match pass {
+            Pass::Unchanged => {
                 self.added.clear();
                 self.removed.clear();
             }
-            Plan::Full => self.full(false),
-            Plan::FullFat => self.full(true),
-            Plan::Incremental => self.incremental(),
+            Pass::Full => self.full(false),
+            Pass::FullFat => self.full(true),
+            Pass::Incremental => self.incremental_pass(),
         }
-        self.costs.pairs_seen |= !matches!(plan, Plan::Unchanged);
+        self.costs.pairs_seen |= pass != Pass::Unchanged;
         self.stats.pairs = self.pairs.len();
         self.stats.octree_per_level = self.octree.stats().per_level;
         let (d, st) = (self.dynamic.refit_stats(), self.statics.refit_stats());
         self.stats.dynamic_cost_ratio = d.0;
         self.stats.dynamic_rebuilds = d.1;
         self.stats.static_rebuilds = st.1;
-        self.stats.candidates = if self.cached { self.cand.len() } else { 0 };
+        self.stats.candidates = if self.incremental { self.cand.len() } else { 0 };
         for &s in &self.movers {
             self.store.flags[s as usize] &= !(flag::MOVED | flag::ESCAPED);
         }
@@ -436,7 +157,7 @@ impl BroadPhase {
         }
         self.loud.clear();
         self.movers.clear();
-        if !self.cached {
+        if !self.incremental {
             // Outside the incremental regime only inserts and regroups are listed as escaped:
             // the list gives back the room a burst of inserts (the first step's) left far
             // above that. Inside it the escapes swing from step to step, and it keeps its room.
@@ -456,7 +177,7 @@ impl BroadPhase {
         ahead(&mut self.fresh);
         self.pairs.ahead();
         let n = self.store.len();
-        if self.cached {
+        if self.incremental {
             ahead(&mut self.loud);
             ahead(&mut self.pending);
             self.patch.keep_headroom(n / PATCH_FLOOR);
@@ -503,10 +224,10 @@ impl BroadPhase {
     /// sorted list in `fresh` replaces them.
     #[inline(always)]
     fn full_in(&mut self, fat: bool, tasks: usize) {
-        if fat && !self.cached {
+        if fat && !self.incremental {
             self.fill_exact();
         }
-        if self.cached || fat {
+        if self.incremental || fat {
             for s in 0..self.store.slots() as u32 {
                 if self.store.kind[s as usize] != Kind::Free {
                     self.hold(s, fat);
@@ -516,7 +237,10 @@ impl BroadPhase {
         self.refit(true);
         match tasks {
             #[cfg(feature = "parallel")]
-            2.. => self.sorted_pairs_par(tasks, PairBits::for_slots(self.store.slots())),
+            2.. => {
+                self.stats.split_tasks = tasks;
+                self.sorted_pairs_par(tasks, PairBits::for_slots(self.store.slots()));
+            }
             _ => {
                 self.fresh.clear();
                 self.structure_pairs();
@@ -543,12 +267,12 @@ impl BroadPhase {
             self.stats.candidates_tested = tested;
             let n = self.store.len().max(1) as f64;
             self.costs.cand_per_proxy = Some(self.cand.len() as f64 / n);
-            self.cached = true;
+            self.incremental = true;
         } else {
             self.cand.clear();
             self.rev.clear();
             self.rev_stale = false;
-            self.cached = false;
+            self.incremental = false;
             self.costs.over = false;
             self.clear_pending();
         }
@@ -608,8 +332,8 @@ impl BroadPhase {
         let (store, fresh, groups) = (&self.store, &mut self.fresh, self.any_groups);
         let mut push = |a: ProxyKey, b: ProxyKey| {
             let (a, b) = (crate::pair::slot(a), crate::pair::slot(b));
-            if !groups || store.group(a as usize).allows(store.group(b as usize)) {
-                fresh.push(pack(a, b));
+            if let Some(p) = pack_allowed(store, groups, a, b) {
+                fresh.push(p);
             }
         };
         self.octree.for_each_pair(&mut push);
@@ -648,8 +372,7 @@ impl BroadPhase {
         let (store, groups, splitters) = (&self.store, self.any_groups, &par.splitters[..]);
         let emit = |found: &mut Vec<Vec<u64>>, a: ProxyKey, b: ProxyKey| {
             let (a, b) = (crate::pair::slot(a), crate::pair::slot(b));
-            if !groups || store.group(a as usize).allows(store.group(b as usize)) {
-                let p = pack(a, b);
+            if let Some(p) = pack_allowed(store, groups, a, b) {
                 found[radix::part_of(splitters, p)].push(p);
             }
         };
@@ -682,7 +405,7 @@ impl BroadPhase {
 
     /// The incremental pass (see the module docs and [`super::slack`]): the pair list and the
     /// key pairs are patched in place, so the previous step's are not kept.
-    fn incremental(&mut self) {
+    fn incremental_pass(&mut self) {
         self.refit(false);
         self.fresh.clear();
         self.query_escaped();
@@ -710,8 +433,10 @@ impl BroadPhase {
             let held = store.held[es].aabb();
             let mut push = |k: ProxyKey| {
                 let s = crate::pair::slot(k);
-                if s != e && (!groups || store.group(es).allows(store.group(s as usize))) {
-                    fresh.push(pack(e, s));
+                if s != e
+                    && let Some(p) = pack_allowed(store, groups, e, s)
+                {
+                    fresh.push(p);
                 }
             };
             self.octree.query_aabb_unchecked(&held, &mut push);
@@ -781,12 +506,8 @@ impl BroadPhase {
         self.pairs.refill(fresh.len(), null_pair(), |pairs| {
             pairs.par_extend(fresh.par_iter().map(to_pair));
         });
-        self.added.clear();
-        self.added
-            .par_extend(self.added_packed.par_iter().map(to_pair));
-        self.removed.clear();
-        self.removed
-            .par_extend(self.removed_packed.par_iter().map(to_pair));
+        super::packed::keys_into_par(store, &self.added_packed, &mut self.added);
+        super::packed::keys_into_par(store, &self.removed_packed, &mut self.removed);
     }
 
     /// `added` / `removed` from the previous step's key pairs (read packed) and this step's
@@ -805,22 +526,8 @@ impl BroadPhase {
         self.pairs.refill(fresh.len(), null_pair(), |pairs| {
             pairs.extend(fresh.iter().map(to_pair));
         });
-        self.added.clear();
-        self.added.extend(self.added_packed.iter().map(to_pair));
-        self.removed.clear();
-        self.removed.extend(self.removed_packed.iter().map(to_pair));
-    }
-}
-
-/// The second buffer of the pair sorts: while the octree holds spheres, its buffer that sits
-/// idle between its passes ([`Octree::idle_buffer`]), so the pair sort and the octree's
-/// walk-order sort share one (sized for the larger); else the broadphase's own, so that a
-/// world of bodies leaves the octree empty.
-pub(super) fn sort_scratch<'a>(octree: &'a mut Octree, own: &'a mut Vec<u64>) -> &'a mut Vec<u64> {
-    if octree.is_empty() {
-        own
-    } else {
-        octree.idle_buffer()
+        keys_into(store, &self.added_packed, &mut self.added);
+        keys_into(store, &self.removed_packed, &mut self.removed);
     }
 }
 

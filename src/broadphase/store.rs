@@ -49,10 +49,10 @@ pub(super) mod flag {
 /// The highest slot index: slots are packed two to a `u64` pair with the top bit spare.
 pub(super) const MAX_SLOTS: u32 = 1 << 31;
 
-/// The proxies, by slot.
 // The per-slot byte counts of `Store`'s fields.
 const _: () = assert!(core::mem::size_of::<Shape>() == 28);
 
+/// The proxies, by slot.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Store {
     /// Odd while live, even while free. 4 bytes per slot.

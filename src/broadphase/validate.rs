@@ -1,7 +1,7 @@
 //! The whole-structure invariant check of a [`BroadPhase`].
 
+use super::packed::{HIT, pack, pack_pair, unpack};
 use super::slack::{distance, drift, slack};
-use super::step::HIT;
 use super::store::{Kind, flag};
 use super::{BodyKind, BroadPhase, Pair, Shape};
 use crate::geom::SimdBox;
@@ -39,7 +39,7 @@ impl BroadPhase {
         self.octree.validate();
         self.dynamic.validate();
         self.statics.validate();
-        if self.cached && self.movers.is_empty() && self.removals == 0 {
+        if self.incremental && self.movers.is_empty() && self.removals == 0 {
             self.validate_candidates();
         }
         self.validate_pairs();
@@ -63,7 +63,7 @@ impl BroadPhase {
         if is_stale {
             *stale += 1;
             assert_ne!(st.flags[s] & flag::MOVED, 0, "slot {s}: stale, not moved");
-        } else if self.cached || st.kind[s] != Kind::Sphere {
+        } else if self.incremental || st.kind[s] != Kind::Sphere {
             assert_eq!(
                 st.exact[s],
                 self.exact_box(&st.shape[s]),
@@ -74,7 +74,7 @@ impl BroadPhase {
         // Outside the incremental regime the structure holds the exact box, which the
         // store keeps only inside it: a stale slot's, the last applied, is known only to
         // its structure there.
-        let held = if self.cached {
+        let held = if self.incremental {
             Some(st.held[s])
         } else if is_stale {
             None
@@ -111,7 +111,7 @@ impl BroadPhase {
             1,
             "slot {s}: held by more than one structure"
         );
-        if self.cached {
+        if self.incremental {
             assert!(
                 st.held[s].contains(&st.exact[s]),
                 "slot {s}: outside its fat box"
@@ -134,7 +134,7 @@ impl BroadPhase {
             self.pairs.iter().all(|p| p.a < p.b),
             "pair list holds a pair out of order"
         );
-        let packed: Vec<u64> = self.pairs.iter().map(super::step::pack_pair).collect();
+        let packed: Vec<u64> = self.pairs.iter().map(pack_pair).collect();
         assert!(
             packed.windows(2).all(|w| w[0] < w[1]),
             "pair list not strictly increasing"
@@ -165,7 +165,7 @@ impl BroadPhase {
             let (a, b) = (fat[i].1 as usize, fat[j].1 as usize);
             let both_static = st.kind[a] == Kind::Static && st.kind[b] == Kind::Static;
             if !both_static && st.group(a).allows(st.group(b)) {
-                want.push(super::step::pack(a as u32, b as u32));
+                want.push(pack(a as u32, b as u32));
             }
         });
         want.sort_unstable();
@@ -182,7 +182,7 @@ impl BroadPhase {
             .filter(|&&c| c & HIT != 0)
             .map(|&c| c & !HIT)
             .collect();
-        let packed: Vec<u64> = self.pairs.iter().map(super::step::pack_pair).collect();
+        let packed: Vec<u64> = self.pairs.iter().map(pack_pair).collect();
         assert_eq!(hits, packed, "pairs are not the overlapping candidates");
         for &c in &hits {
             let (a, b) = ((c >> 32) as usize, c as u32 as usize);
@@ -217,7 +217,7 @@ impl BroadPhase {
             );
         }
         for &c in self.cand.iter() {
-            let (a, b) = super::step::unpack(c & !HIT);
+            let (a, b) = unpack(c & !HIT);
             let s = slack(&st.anchor[a], &st.anchor[b]);
             assert!(
                 st.slack[a] <= s && st.slack[b] <= s,

@@ -48,6 +48,7 @@ mod pairs;
 #[cfg(feature = "parallel")]
 mod pairs_split;
 mod query;
+mod ray;
 mod refit;
 mod split;
 mod validate;

@@ -234,6 +234,7 @@ fn expand_cross(
 #[cfg(test)]
 mod tests {
     use super::super::BvhConfig;
+    use super::super::pairs::PairScratch;
     use super::*;
     use crate::geom::Aabb;
     use crate::pair::Pair;

@@ -495,7 +495,7 @@ impl Lattice {
     }
 
     /// The box that holds the spheres placed in `cell`: its cell (strict) or its loose bounds
-    /// (loose); rounded, so a sphere placed in it may poke out by [`Lattice::slack`].
+    /// (loose); rounded, so a sphere placed in it may poke out by [`Lattice::rounding`].
     pub(super) fn reach_box(&self, cell: &Cell) -> Aabb {
         let size = self.bounds.extent() / (1u32 << cell.level) as f32;
         let min = self.bounds.min
@@ -507,11 +507,12 @@ impl Lattice {
         }
     }
 
-    /// How far a sphere placed in a cell may poke out of [`Lattice::reach_box`]: the cell map and
+    /// The lattice's rounding tolerance: how far a sphere placed in a cell may poke out of
+    /// [`Lattice::reach_box`]: the cell map and
     /// the box corners each round by a few ulps of the coordinates involved, which this covers
     /// with a relative margin of the coordinates' magnitude (`1e-5`) and of the extent (`1e-6`),
     /// both far above `f32`'s `6e-8`.
-    pub(super) fn slack(&self) -> f32 {
+    pub(super) fn rounding(&self) -> f32 {
         let mag = self
             .bounds
             .min

@@ -2,7 +2,7 @@
 //! `BroadPhase` re-tests exactly, and the occupied-cell iterator. They follow the node lists
 //! through occupied subtrees ([`Nodes::walk`](super::nodes::Nodes::walk)), entering a node only
 //! if the region its spheres can reach meets the query; none allocates but
-//! [`Octree::nearest`], for its result. The `try_` queries stop as soon as their visitor
+//! [`Octree::nearest`], for its result. The `_with` queries stop as soon as their visitor
 //! returns [`ControlFlow::Break`], and say whether it did.
 
 use super::cell::{Cell, morton, node_index};
@@ -24,6 +24,26 @@ const ROW: u32 = 4;
 /// A ray is cut into pieces no longer than the deepest occupied level's cells; one longer than
 /// this many pieces walks the occupied subtrees instead.
 const MAX_RAY_PIECES: f32 = 65_536.0;
+
+/// How a ray reads the spheres below the root ([`Octree::ray_plan`]).
+enum RayPlan {
+    /// The segment misses the region they lie in (or there are none).
+    Miss,
+    /// By walking the occupied subtrees.
+    Walk,
+    /// By pieces in order of `t`, each reading the cells the previous one did not.
+    Pieces(RayPieces),
+}
+
+/// A ray cut into pieces: `t0..t1` (within the region) in steps of `dt` (about a deepest
+/// occupied cell), each piece's box grown by `slack`.
+#[derive(Clone, Copy)]
+struct RayPieces {
+    t0: f32,
+    t1: f32,
+    dt: f32,
+    slack: f32,
+}
 
 /// Relative widening of a ray piece's box against the rounding of its end points.
 const RAY_PIECE_SLACK: f32 = 1e-5;
@@ -170,13 +190,13 @@ impl Octree {
     /// Calls `f` with the key of every sphere whose AABB overlaps `aabb` (closed), once each,
     /// in no particular order. A non-finite or inverted `aabb` finds nothing.
     pub fn query_aabb(&self, aabb: &Aabb, f: impl FnMut(ProxyKey)) {
-        let _ = self.try_query_aabb(aabb, every(f));
+        let _ = self.query_aabb_with(aabb, every(f));
     }
 
     /// [`Octree::query_aabb`] with a visitor that can stop: the first
     /// [`ControlFlow::Break`] ends the query and is returned; `Continue` if every match was
     /// visited.
-    pub fn try_query_aabb(
+    pub fn query_aabb_with(
         &self,
         aabb: &Aabb,
         f: impl FnMut(ProxyKey) -> ControlFlow<()>,
@@ -184,18 +204,18 @@ impl Octree {
         if geom::check_aabb(aabb).is_err() {
             return ControlFlow::Continue(());
         }
-        self.try_query_aabb_unchecked(aabb, f)
+        self.query_aabb_with_unchecked(aabb, f)
     }
 
     /// [`Octree::query_aabb`] without the input check, for boxes the crate made itself: a
     /// sphere or body near `f32::MAX` has a box that overflows to ±∞ from finite input, and it
     /// must still find what it overlaps.
     pub(crate) fn query_aabb_unchecked(&self, aabb: &Aabb, f: impl FnMut(ProxyKey)) {
-        let _ = self.try_query_aabb_unchecked(aabb, every(f));
+        let _ = self.query_aabb_with_unchecked(aabb, every(f));
     }
 
-    /// [`Octree::try_query_aabb`] without the input check.
-    pub(crate) fn try_query_aabb_unchecked(
+    /// [`Octree::query_aabb_with`] without the input check.
+    pub(crate) fn query_aabb_with_unchecked(
         &self,
         aabb: &Aabb,
         mut f: impl FnMut(ProxyKey) -> ControlFlow<()>,
@@ -213,13 +233,13 @@ impl Octree {
     /// `<= r1 + r2`, so touching spheres count), once each, in no particular order. A
     /// non-finite centre or radius, or a negative radius, finds nothing.
     pub fn query_sphere(&self, center: Vec3, radius: f32, f: impl FnMut(ProxyKey)) {
-        let _ = self.try_query_sphere(center, radius, every(f));
+        let _ = self.query_sphere_with(center, radius, every(f));
     }
 
     /// [`Octree::query_sphere`] with a visitor that can stop: the first
     /// [`ControlFlow::Break`] ends the query and is returned; `Continue` if every match was
     /// visited.
-    pub fn try_query_sphere(
+    pub fn query_sphere_with(
         &self,
         center: Vec3,
         radius: f32,
@@ -290,12 +310,12 @@ impl Octree {
             return;
         }
         let inv = geom::inverse_dir(dir);
-        let slack = self.lattice.slack() + geom::cast_pad(origin, 0.0, dir, max_t);
+        let pad = self.lattice.rounding() + geom::cast_pad(origin, 0.0, dir, max_t);
         let _ = self.traverse(
             |cell| {
                 self.lattice
                     .reach_box(cell)
-                    .grown(slack)
+                    .grown(pad)
                     .ray_entry(origin, inv, max_t)
                     .is_some()
             },
@@ -310,11 +330,11 @@ impl Octree {
     }
 
     /// Calls `visit(id, best)`, once each, for the spheres of the root and of every node whose
-    /// reach the segment `origin + t·dir`, `t ∈ [0, best]` may meet (grown by the slack and by
+    /// reach the segment `origin + t·dir`, `t ∈ [0, best]` may meet (grown by the rounding tolerance and by
     /// `inflate`; nearer nodes first, a few beside the segment too), where `best` starts at
     /// `max_t` and becomes `min(best, returned value)` after each visit (a NaN return leaves
     /// it). Every sphere whose box grown by `inflate` the segment enters is among them: below
-    /// the root a sphere's box lies in its node's reach box grown by the slack.
+    /// the root a sphere's box lies in its node's reach box grown by the rounding tolerance.
     fn ray_ids(
         &self,
         origin: Vec3,
@@ -330,15 +350,28 @@ impl Octree {
             best = best.min(visit(i, best));
             i = self.next_in_list(i);
         }
+        match self.ray_plan(origin, dir, best, inflate) {
+            RayPlan::Miss => {}
+            RayPlan::Walk => self.ray_ids_walk(origin, dir, best, inflate, |id, b| {
+                if self.in_root(id) { b } else { visit(id, b) }
+            }),
+            RayPlan::Pieces(p) => self.ray_ids_pieces(origin, dir, &p, best, visit),
+        }
+    }
+
+    /// How [`Octree::ray_ids`] reads the spheres below the root along the segment
+    /// `t ∈ [0, best]`: not at all if it misses the region they lie in, by pieces of about a
+    /// deepest occupied cell, or by walking the tree where pieces would not pay.
+    fn ray_plan(&self, origin: Vec3, dir: Vec3, best: f32, inflate: f32) -> RayPlan {
         let Some(deepest) = (1..=self.lattice.depth)
             .rev()
             .find(|&l| self.per_level[l as usize] > 0)
         else {
-            return;
+            return RayPlan::Miss;
         };
-        // Spheres below the root lie in their cells' reach boxes grown by the slack: within
+        // Spheres below the root lie in their cells' reach boxes grown by the rounding tolerance: within
         // the bounds (strict), or within them grown by half a cell of the shallowest occupied
-        // level (loose); twice the slack covers the rounding of the region's own corners.
+        // level (loose); twice it covers the rounding of the region's own corners.
         let extent = self.lattice.bounds.extent();
         let reach = match self.lattice.placement {
             Placement::Strict => 0.0,
@@ -352,10 +385,10 @@ impl Octree {
         let region = self
             .lattice
             .bounds
-            .grown(reach + 2.0 * self.lattice.slack() + inflate);
+            .grown(reach + 2.0 * self.lattice.rounding() + inflate);
         let inv = geom::inverse_dir(dir);
         let Some(t0) = region.ray_entry(origin, inv, best) else {
-            return;
+            return RayPlan::Miss;
         };
         let t1 = region.ray_exit(origin, inv, best);
         let cell = extent.min_element() / (1u32 << deepest) as f32;
@@ -372,11 +405,22 @@ impl Octree {
             && pieces <= MAX_RAY_PIECES
             && piece_cells <= MAX_PIECE_CELLS)
         {
-            self.ray_ids_walk(origin, dir, best, inflate, |id, b| {
-                if self.in_root(id) { b } else { visit(id, b) }
-            });
-            return;
+            return RayPlan::Walk;
         }
+        RayPlan::Pieces(RayPieces { t0, t1, dt, slack })
+    }
+
+    /// The spheres below the root along the ray, piece by piece (see [`RayPlan::Pieces`]),
+    /// `best` shrinking to what `visit` returns.
+    fn ray_ids_pieces(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        p: &RayPieces,
+        mut best: f32,
+        mut visit: impl FnMut(u32, f32) -> f32,
+    ) {
+        let RayPieces { t0, t1, dt, slack } = *p;
         // Pieces in order of `t`, each a box around its stretch of the segment grown by
         // `inflate` and a slack fixed for the whole ray. Each axis' piece intervals only move
         // forward, and so do the cell ranges that reach them at every level: the pieces a
@@ -460,13 +504,13 @@ impl Octree {
         mut visit: impl FnMut(u32, f32) -> f32,
     ) {
         let inv = geom::inverse_dir(dir);
-        let slack = self.lattice.slack();
+        let rounding = self.lattice.rounding();
         let best = core::cell::Cell::new(max_t);
         let _ = self.traverse(
             |cell| {
                 self.lattice
                     .reach_box(cell)
-                    .grown(slack)
+                    .grown(rounding)
                     .grown(inflate)
                     .ray_entry(origin, inv, best.get())
                     .is_some()
@@ -507,7 +551,7 @@ impl Octree {
         });
     }
 
-    /// Calls `visit(id)` for every sphere of every node whose reach box, grown by the slack, is
+    /// Calls `visit(id)` for every sphere of every node whose reach box, grown by the rounding tolerance, is
     /// within `radius` of `p` ([`geom::point_aabb_distance`]): a superset of the spheres whose
     /// box is within `radius`, since that box lies in the grown reach box and the distance
     /// does not decrease as a box shrinks.
