@@ -283,6 +283,7 @@ mod tests {
     use super::super::ray::{RAY_STACK, RayStack};
     use super::*;
     use crate::bvh::BvhConfig;
+    use crate::geom::inverse_dir;
     use crate::rng::Rng;
     use crate::test_geom::segment_in_box;
     use std::collections::BTreeMap;
