@@ -8,7 +8,7 @@ use super::fat::ENTRY_BURST_STEPS;
 use super::{BroadPhase, Pass, Passes};
 
 /// Estimated costs of a unit of work, in nanoseconds; only their ratios matter.
-mod cost {
+mod unit {
     /// The full pass, per proxy (sort, sweep, lists).
     pub(super) const FULL: f64 = 110.0;
     /// The full pass, per pair found (its sort and the lists).
@@ -123,7 +123,7 @@ impl BroadPhase {
             Passes::Adaptive => {}
         }
         let n = self.store.len() as f64;
-        let full = n * cost::FULL + self.pairs.len() as f64 * cost::FULL_PAIR;
+        let full = n * unit::FULL + self.pairs.len() as f64 * unit::FULL_PAIR;
         if self.incremental {
             // Leaving drops the candidates, which a later return rebuilds with a full pass of
             // its own: a single step over the full pass's cost (a burst of escapes) does not
@@ -186,12 +186,12 @@ impl BroadPhase {
         let density = if self.costs.pairs_seen {
             per_proxy
         } else {
-            cost::DENSE_CANDIDATES
+            unit::DENSE_CANDIDATES
         };
         // The loud proxies' candidates are looked up, or found by one scan of them all.
         let visited = cands.min(loud * super::slack::CANDIDATES_PER_LOOKUP as f64);
-        visited * cost::CARRY
-            + (loud * per_proxy * 2.0).min(cands) * cost::test(n)
-            + escapes * cost::query(density)
+        visited * unit::CARRY
+            + (loud * per_proxy * 2.0).min(cands) * unit::test(n)
+            + escapes * unit::query(density)
     }
 }

@@ -82,7 +82,9 @@ use crate::geom::{self, Aabb};
 use crate::pair::{Pair, ProxyKey};
 use cell::level_of;
 use glam::Vec3;
-use lists::{Deferred, relink_all};
+use lists::Deferred;
+#[cfg(feature = "parallel")]
+use lists::relink_all;
 use nodes::Nodes;
 use placement::Lattice;
 use region::Regrow;
