@@ -302,7 +302,7 @@ pub(crate) fn from_ordered_bits(k: u32) -> f32 {
 /// The smallest `t ∈ [0, max_t]` with `|origin + t·dir − center| ≤ radius`, or `None`.
 /// `dir` need not be unit length (`t` is in units of `dir`); a zero `dir` hits only when the
 /// origin is inside. An origin inside the sphere gives `t = 0`. Computed in `f64` from the
-/// `f32` inputs and rounded once, by [`first_touch`]'s cancellation-free form.
+/// `f32` inputs and rounded once, in the cancellation-free form below.
 ///
 /// The textbook discriminant `b² − a·c` (`a = |dir|²`, `b = m·dir`, `c = |m|² − r²`,
 /// `m = origin − center`) subtracts two nearly equal squares for a ray grazing the sphere far
@@ -521,10 +521,11 @@ pub fn sphere_cast_sphere(
 /// done in `f64` from the `f32` inputs, so no intermediate overflows or underflows.
 ///
 /// Where it could cancel: the slab times are one difference and one quotient each (as in
-/// [`Aabb::ray_entry`], no cancellation); the capsules' sides and end spheres are
-/// [`first_touch`], whose discriminant is Lagrange's `a·r² − |m × d|²`, not `b² − ac`. The
-/// entry point's region is read from a rounded point, so a path entering within an `f64`
-/// rounding of an edge's region may be answered as a face (at `t0`), off by that rounding.
+/// [`Aabb::ray_entry`], no cancellation); the capsules' sides and end spheres are the same
+/// first-touch test as [`ray_sphere`], whose discriminant is Lagrange's `a·r² − |m × d|²`,
+/// not `b² − ac`. The entry point's region is read from a rounded point, so a path entering
+/// within an `f64` rounding of an edge's region may be answered as a face (at `t0`), off by
+/// that rounding.
 #[must_use]
 pub fn sphere_cast_aabb(center: Vec3, radius: f32, dir: Vec3, max_t: f32, b: &Aabb) -> Option<f32> {
     if !cast_is_valid(center, radius, dir, max_t) || check_aabb(b).is_err() {
@@ -651,6 +652,24 @@ pub(crate) fn cast_pad(center: Vec3, radius: f32, dir: Vec3, max_t: f32) -> f32 
     let reach = dir.abs().max_element();
     (center.abs().max_element() + reach * max_t + radius) * QUERY_PAD
         + (max_t + reach) * f32::MIN_POSITIVE
+}
+
+/// The factor by which the queries grow a sphere's radius for the box they prune it by:
+/// `1 + 2⁻²⁰`, so the radius grows by at least `2⁻²¹` of itself after rounding.
+const SPHERE_PRUNE: f32 = 1.0 + 1.0 / (1u32 << 20) as f32;
+
+/// The box the queries prune a sphere by before its exact `f64` test: `center ± radius`, the
+/// radius grown by `2⁻²⁰` of itself. The `f64` sphere tests ([`first_touch`],
+/// [`point_sphere_distance`], [`spheres_touch`]) are exact for a sphere moved by a few `2⁻⁵²`
+/// of `|center − start|` and of `radius`. The query's pad ([`cast_pad`], [`distance_pad`])
+/// covers what is relative to the query's own coordinates; this covers what is relative to
+/// the radius, which is far larger for a huge sphere whose surface passes near a small query
+/// (a sphere of radius `1e30` about `(1e30, 0, 0)` and a ray by the origin). The structures'
+/// nodes hold this box: their slack exceeds `2⁻²⁰` of any radius they place.
+/// `grow` is added to the grown radius (a cast's inflation), one rounding per corner.
+#[inline]
+pub(crate) fn sphere_prune_box(center: Vec3, radius: f32, grow: f32) -> SimdBox {
+    SimdBox::from_center_radius(center, radius * SPHERE_PRUNE + grow)
 }
 
 /// What the structures add to `radius` when they look for the shapes within `radius` of `p`

@@ -120,6 +120,19 @@ impl Slab {
         enters.then_some(t)
     }
 
+    /// The segment's entry `t` into the sphere's pruning box grown by `inflate`
+    /// ([`geom::sphere_prune_box`]), if it enters it by `limit`: the growths are added to the
+    /// radius before the corners are rounded, so the box is built once.
+    #[inline(always)]
+    pub(crate) fn sphere_entry(&self, center: Vec3, radius: f32, limit: f32) -> Option<f32> {
+        let b = geom::sphere_prune_box(center, radius, self.inflate);
+        if !self.finite {
+            return b.ray_entry(self.origin, self.inv, limit);
+        }
+        let (t, enters) = self.finite_entry(&b, limit);
+        enters.then_some(t)
+    }
+
     /// [`Slab::entry`] of `b` by `limit` as its `t` and whether the segment enters (the `t`
     /// of a miss is unspecified). `FINITE` (iff [`Slab::finite`]) takes the NaN-free test,
     /// without a branch on the answer; `INFLATED` false skips the growth by zero.
@@ -136,6 +149,13 @@ impl Slab {
                 .map_or((f32::INFINITY, false), |t| (t, true));
         }
         let b = if INFLATED { b.grown(self.inflate) } else { *b };
+        self.finite_entry(&b, limit)
+    }
+
+    /// The NaN-free slab test of `b` itself, for a segment with no zero direction component
+    /// (see [`Slab`]): its entry `t` by `limit` and whether it enters.
+    #[inline(always)]
+    fn finite_entry(&self, b: &SimdBox, limit: f32) -> (f32, bool) {
         let t1 = (b.min - self.origin) * self.inv;
         let t2 = (b.max - self.origin) * self.inv;
         // Never NaN (see [`Slab`]): plain compares clamp them.

@@ -158,3 +158,60 @@ fn shape_functions_on_the_issue_numbers() {
         assert!(hit_along_z(o, dz, c, under, max_t).is_none());
     }
 }
+
+/// Found by reading, not by the fuzzer: a sphere of radius `x` about `(x, 0, 0)` has its
+/// surface through the origin, and for a huge `x` the `f64` difference `start − centre`
+/// drops a start `0.25` beside it, so the shape functions answer as for a start on the
+/// surface (exact for a sphere moved by a few `2⁻⁵²` of its radius, as documented), while the
+/// sphere's `f32` box, `0.25` away, pruned it: the broadphase must answer as the functions
+/// do, for a ray, a sphere cast and `nearest` alike, beside a small sphere `0.5` away.
+#[test]
+fn a_huge_sphere_grazed_by_a_small_query_answers_as_the_shape_functions() {
+    use broadleaf::geom::point_sphere_distance;
+    for x in [1e30f32, 3e20, 1e10, 7e7] {
+        for passes in [Passes::Full, Passes::Incremental] {
+            let mut bp = BroadPhase::new(Config {
+                passes,
+                ..Config::default()
+            });
+            let huge_center = Vec3::new(x, 0.0, 0.0);
+            let small_center = Vec3::new(-1.0, 0.0, 0.0);
+            let huge = bp.insert_sphere(huge_center, x).expect("a valid sphere");
+            let small = bp
+                .insert_sphere(small_center, 0.25)
+                .expect("a valid sphere");
+            for step in [false, true] {
+                if step {
+                    bp.step();
+                    bp.validate();
+                }
+                for ox in [-0.25f32, -1e-3, -1e-6] {
+                    let (o, dir, max_t) = (Vec3::new(ox, -1.0, 0.0), Vec3::Y, 2.0);
+                    let first = |t_huge: Option<f32>, t_small: Option<f32>| match (t_huge, t_small)
+                    {
+                        (Some(a), Some(b)) if b < a => Some((small, b)),
+                        (Some(a), _) => Some((huge, a)),
+                        (None, b) => b.map(|b| (small, b)),
+                    };
+                    let want = first(
+                        ray_sphere(o, dir, huge_center, x, max_t),
+                        ray_sphere(o, dir, small_center, 0.25, max_t),
+                    );
+                    assert_eq!(bp.cast_ray(o, dir, max_t), want, "ray {x} {ox}");
+                    let want = first(
+                        sphere_cast_sphere(o, 0.0, dir, max_t, huge_center, x),
+                        sphere_cast_sphere(o, 0.0, dir, max_t, small_center, 0.25),
+                    );
+                    assert_eq!(bp.cast_sphere(o, 0.0, dir, max_t), want, "cast {x} {ox}");
+                    let mut want = [
+                        (point_sphere_distance(o, huge_center, x), huge),
+                        (point_sphere_distance(o, small_center, 0.25), small),
+                    ];
+                    want.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                    let want = want.map(|(d, k)| (k, d));
+                    assert_eq!(bp.nearest(o, 1), want[..1], "nearest {x} {ox}");
+                }
+            }
+        }
+    }
+}

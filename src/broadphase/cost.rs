@@ -4,7 +4,7 @@
 //! [`Motion`](super::fat::Motion)) and runs the cheaper one, with some hysteresis around the regime's entry
 //! and exit, so the cost never jumps when a world wakes up or settles.
 
-use super::fat::ENTRY_BURST_STEPS;
+use super::fat::{ENTRY_BURST_STEPS, Motion};
 use super::{BroadPhase, Pass, Passes};
 
 /// Estimated costs of a unit of work, in nanoseconds; only their ratios matter.
@@ -65,6 +65,16 @@ const SETTLING_LEAVE_AT_ONCE: f64 = 4.0;
 /// size times this. Once the regime has run and been left, the estimate follows what it saw
 /// instead ([`Costs::loud_per_motion`]).
 const LOUD_PER_MOTION: f64 = 2.0 * 64.0;
+/// Per step outside the incremental regime, what the regime's last steps taught the estimate
+/// ([`Costs::loud_per_motion`]) keeps this share of its distance from [`LOUD_PER_MOTION`]: a
+/// world left in a burst (a landing, a wake-up) is tried again once it has calmed, instead of
+/// being priced by that burst for good.
+const RELEARN_KEEP: f64 = 0.9;
+/// [`RELEARN_KEEP`] for the escapes per fast mover ([`Costs::escapes_per_fast`]): they follow
+/// the number of fast movers already, so what was learned fades slower, and a world whose
+/// fast movers keep escaping (a free fall, whose accelerating movers leave their swept boxes)
+/// is not tried again every few steps.
+const ESCAPE_KEEP: f64 = 0.98;
 
 /// What the cost estimates learn from the steps they watch.
 #[derive(Clone, Copy, Debug)]
@@ -80,11 +90,17 @@ pub(super) struct Costs {
     /// Outside the incremental regime, the slow movers expected to re-test their candidates
     /// per unit of their summed motion (`fat::Motion::slow_motion`): [`LOUD_PER_MOTION`] until
     /// the regime is left, then what the regime's last step saw, over the motion of the first
-    /// step after it.
+    /// step after it, returning towards [`LOUD_PER_MOTION`] by [`RELEARN_KEEP`] a step.
     loud_per_motion: f64,
-    /// The incremental regime was left at the last step: this step's motion, with the
-    /// regime's last `loud_per_slow`, gives `loud_per_motion`.
-    just_left: bool,
+    /// Outside the incremental regime, the escapes expected per fast mover: one in the steps
+    /// a swept fat box lasts (`Motion::escapes_per_fast`), or what the regime's last step saw
+    /// over the fast movers of the first step after it, returning towards the former by
+    /// [`ESCAPE_KEEP`] a step.
+    escapes_per_fast: f64,
+    /// The incremental regime was left at the last step (with this many escapes): this
+    /// step's motion, with the regime's last `loud_per_slow`, gives `loud_per_motion` and
+    /// `escapes_per_fast`.
+    just_left: Option<f64>,
     /// The last incremental step's estimate was over the full pass's.
     pub(super) over: bool,
     /// The step that last entered the incremental regime.
@@ -101,11 +117,34 @@ impl Default for Costs {
             loud_per_mover: 1.0,
             loud_per_slow: 1.0,
             loud_per_motion: LOUD_PER_MOTION,
-            just_left: false,
+            escapes_per_fast: Motion::escapes_per_fast(),
+            just_left: None,
             over: false,
             entered: 0,
             pairs_seen: false,
         }
+    }
+}
+
+impl Costs {
+    /// Outside the incremental regime, the escapes and the loud slow movers an incremental
+    /// step would have with the movers of `m`; learns from the regime just left, and lets
+    /// what it learned fade.
+    fn expect_outside(&mut self, m: &Motion) -> (f64, f64) {
+        let swept = Motion::escapes_per_fast();
+        self.escapes_per_fast = swept + (self.escapes_per_fast - swept) * ESCAPE_KEEP;
+        self.loud_per_motion =
+            LOUD_PER_MOTION + (self.loud_per_motion - LOUD_PER_MOTION) * RELEARN_KEEP;
+        if let Some(escapes) = self.just_left.take() {
+            if m.fast > 0 {
+                self.escapes_per_fast = (escapes / m.fast as f64).max(swept);
+            }
+            if m.slow_motion > 0.0 {
+                self.loud_per_motion = self.loud_per_slow * m.slow as f64 / m.slow_motion;
+            }
+        }
+        let slow_loud = (self.loud_per_motion * m.slow_motion).min(m.slow as f64);
+        (self.escapes_per_fast * m.fast as f64, slow_loud)
     }
 }
 
@@ -139,24 +178,19 @@ impl BroadPhase {
                 LEAVE_AT_ONCE
             };
             if over && ((was_over && !settling) || inc > full * at_once) {
-                self.costs.just_left = true;
+                self.costs.just_left = Some(escapes);
                 Pass::Full
             } else {
                 Pass::Incremental
             }
         } else {
-            // The regime is priced from the motion just applied: the fast movers escape (see
-            // `Motion::fast_escapes`); a slow one stays in its fat box and re-tests its
-            // candidates in proportion to its motion (zero for a proxy sent where it already
-            // was). An insert or a regroup (listed as escaped) would query the structures
-            // like an escape.
-            let m = self.motion;
-            let escapes = m.fast_escapes() + self.escaped.len() as f64;
-            if core::mem::take(&mut self.costs.just_left) && m.slow_motion > 0.0 {
-                self.costs.loud_per_motion =
-                    self.costs.loud_per_slow * m.slow as f64 / m.slow_motion;
-            }
-            let slow_loud = (self.costs.loud_per_motion * m.slow_motion).min(m.slow as f64);
+            // The regime is priced from the motion just applied: the fast movers escape; a
+            // slow one stays in its fat box and re-tests its candidates in proportion to its
+            // motion (zero for a proxy sent where it already was); see
+            // [`Costs::expect_outside`]. An insert or a regroup (listed as escaped) would
+            // query the structures like an escape.
+            let (escapes, slow_loud) = self.costs.expect_outside(&self.motion);
+            let escapes = escapes + self.escaped.len() as f64;
             let inc = self.incremental_cost(slow_loud + escapes, escapes);
             if inc < full * ENTER_FRACTION {
                 self.costs.entered = self.now;
@@ -171,11 +205,15 @@ impl BroadPhase {
     /// candidates, `escapes` of them after leaving their fat boxes.
     fn incremental_cost(&self, loud: f64, escapes: f64) -> f64 {
         let n = self.store.len().max(1) as f64;
-        // Before any count, fat boxes are taken to double the pairs.
-        let per_proxy = self
-            .costs
-            .cand_per_proxy
-            .unwrap_or(2.0 * self.pairs.len() as f64 / n);
+        // Before any count, fat boxes are taken to double the pairs; outside the regime the
+        // last count may be of fat boxes grown for another motion (a landing's swept boxes),
+        // so it is taken only where it is below that.
+        let doubled = 2.0 * self.pairs.len() as f64 / n;
+        let per_proxy = match self.costs.cand_per_proxy {
+            Some(counted) if self.incremental => counted,
+            Some(counted) => counted.min(doubled),
+            None => doubled,
+        };
         let cands = if self.incremental {
             self.cand.len() as f64
         } else {

@@ -68,6 +68,7 @@ fn jitter(slot: u32, now: u32) -> f32 {
 /// step `stamp`, at step `now`.
 #[cfg(feature = "parallel")]
 #[inline(always)]
+#[cfg(feature = "parallel")]
 pub(super) fn speed(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> f32 {
     speed_of(displacement(old, new, stamp, now))
 }
@@ -110,11 +111,11 @@ impl Motion {
         }
     }
 
-    /// The escapes per step the fast movers would make in the incremental regime: each one's
-    /// fat box is swept over [`PREDICT_STEPS`] of its motion, times a jitter of 1.5 on
-    /// average, so one that keeps its velocity escapes about once in that many steps.
-    pub(super) fn fast_escapes(&self) -> f64 {
-        self.fast as f64 / (1.5 * f64::from(PREDICT_STEPS))
+    /// The escapes per step of one fast mover in the incremental regime: its fat box is swept
+    /// over [`PREDICT_STEPS`] of its motion, times a jitter of 1.5 on average, so one that
+    /// keeps its velocity escapes about once in that many steps.
+    pub(super) fn escapes_per_fast() -> f64 {
+        1.0 / (1.5 * f64::from(PREDICT_STEPS))
     }
 
     /// The motion of two sets of movers together.

@@ -431,13 +431,18 @@ impl BroadPhase {
         self.octree.near(p, radius, &mut fresh)?;
         self.dynamic.within_distance(p, radius, |k, _| fresh(k))?;
         self.statics.within_distance(p, radius, |k, _| fresh(k))?;
-        // The stale slots the structures skipped, whose latest box meets the cube `p ± radius`.
+        // The stale slots the structures skipped, whose latest box (a sphere's pruning box, as
+        // the octree's) meets the cube `p ± radius`.
         let cube = SimdBox::new(&Aabb {
             min: p - Vec3::splat(radius),
             max: p + Vec3::splat(radius),
         });
         self.for_each_stale(|s| {
-            if SimdBox::new(&self.store.shape[s].aabb()).overlaps(&cube) {
+            let held = match self.store.shape[s] {
+                Shape::Sphere { center, radius } => geom::sphere_prune_box(center, radius, 0.0),
+                Shape::Body { aabb, .. } => SimdBox::new(&aabb),
+            };
+            if held.overlaps(&cube) {
                 f(self.store.key(s as u32), s)
             } else {
                 ControlFlow::Continue(())

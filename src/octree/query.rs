@@ -522,9 +522,10 @@ impl Octree {
         );
     }
 
-    /// Calls `visit(key, aabb)` for every sphere whose stored box `aabb` (`center ± radius`),
-    /// grown by `inflate` on every side, the segment `origin + t·dir`, `t ∈ [0, best]` enters
-    /// ([`Aabb::ray_entry`], touching counts), once each; `best` starts at `max_t` and becomes
+    /// Calls `visit(key, aabb)`, `aabb` its stored box `center ± radius`, for every sphere
+    /// whose pruning box with `inflate` added to its radius, `center ± (radius·(1 + 2⁻²⁰) +
+    /// inflate)` ([`geom::sphere_prune_box`], for the `f64` re-tests), the segment
+    /// `origin + t·dir`, `t ∈ [0, best]` enters ([`Aabb::ray_entry`], touching counts), once each; `best` starts at `max_t` and becomes
     /// `min(best, returned value)` after each visit (a NaN return leaves it), so a sphere
     /// entered exactly at `best` is still visited. Nodes come in walk order, not by distance.
     /// Nothing for a non-finite origin or direction, a NaN or negative `max_t`, or a NaN or
@@ -542,9 +543,9 @@ impl Octree {
         }
         let slab = Slab::new(origin, dir, inflate);
         self.ray_ids(origin, dir, max_t, inflate, |id, best| {
-            let aabb = self.box_of(id);
-            match slab.entry(&SimdBox::new(&aabb), best) {
-                Some(_) => visit(self.key_of(id), &aabb),
+            let (c, r) = self.sphere_of(id);
+            match slab.sphere_entry(c, r, best) {
+                Some(_) => visit(self.key_of(id), &self.box_of(id)),
                 None => best,
             }
         });
@@ -564,7 +565,8 @@ impl Octree {
         self.candidates(&Aabb::from_center_radius(p, radius), visit)
     }
 
-    /// Calls `f(key)` for every sphere whose stored box overlaps the cube `p ± radius`, once
+    /// Calls `f(key)` for every sphere whose pruning box ([`geom::sphere_prune_box`])
+    /// overlaps the cube `p ± radius`, once
     /// each: a superset of those within `radius` of `p`, for callers that measure exact
     /// distances themselves. Nothing for a non-finite `p` or a NaN or negative `radius`. The
     /// first `Break` of `f` ends it and is returned.
@@ -578,8 +580,10 @@ impl Octree {
             return ControlFlow::Continue(());
         }
         let cube = Aabb::from_center_radius(p, radius);
+        let simd_cube = SimdBox::new(&cube);
         self.near_ids(p, radius, |id| {
-            if self.box_of(id).overlaps(&cube) {
+            let (c, r) = self.sphere_of(id);
+            if geom::sphere_prune_box(c, r, 0.0).overlaps(&simd_cube) {
                 f(self.key_of(id))
             } else {
                 ControlFlow::Continue(())
@@ -726,7 +730,10 @@ mod tests {
         (tree, shapes)
     }
 
-    fn own_box(c: Vec3, r: f32) -> (Vec3, Vec3) {
+    /// A sphere's box as the queries prune it: the radius grown by `2⁻²⁰` of itself and by
+    /// `inflate`.
+    fn own_box(c: Vec3, r: f32, inflate: f32) -> (Vec3, Vec3) {
+        let r = r * (1.0 + 2f32.powi(-20)) + inflate;
         (
             Vec3::new(c.x - r, c.y - r, c.z - r),
             Vec3::new(c.x + r, c.y + r, c.z + r),
@@ -756,18 +763,16 @@ mod tests {
                 assert!(seen.values().all(|&n| n == 1), "a sphere visited twice");
                 let inv = geom::inverse_dir(d);
                 for &(key, c, r) in &shapes {
-                    let (lo, hi) = own_box(c, r);
-                    let grown = Aabb::new(lo, hi).grown(inflate);
+                    let (lo, hi) = own_box(c, r, inflate);
                     // The contract, box by box.
-                    let hit = grown.ray_entry(o, inv, max_t).is_some();
+                    let hit = Aabb::new(lo, hi).ray_entry(o, inv, max_t).is_some();
                     assert_eq!(seen.contains_key(&key), hit, "query {q} key {key:?}");
                     // The test's own slab loop agrees wherever it is clear-cut.
-                    let m = Vec3::splat(inflate);
-                    let inside = segment_in_box(o, d, max_t, lo - m, hi + m);
+                    let inside = segment_in_box(o, d, max_t, lo, hi);
                     if inside.is_some_and(|(t0, t1)| t1 - t0 > 1e-3) {
                         assert!(hit, "query {q}: a box the segment crosses was skipped");
                     }
-                    let near = segment_in_box(o, d, max_t, lo - m - 1e-3, hi + m + 1e-3);
+                    let near = segment_in_box(o, d, max_t, lo - 1e-3, hi + 1e-3);
                     if near.is_none() {
                         assert!(!hit, "query {q}: a box the segment misses was visited");
                     }
@@ -799,8 +804,8 @@ mod tests {
             let (max_t, inflate) = (60.0, 0.25);
             let inv = geom::inverse_dir(d);
             let entry = |c: Vec3, r: f32| {
-                let (lo, hi) = own_box(c, r);
-                Aabb::new(lo, hi).grown(inflate).ray_entry(o, inv, max_t)
+                let (lo, hi) = own_box(c, r, inflate);
+                Aabb::new(lo, hi).ray_entry(o, inv, max_t)
             };
             let mut seen = Vec::new();
             let mut last = f32::INFINITY;
@@ -861,7 +866,7 @@ mod tests {
                 });
                 assert!(seen.values().all(|&n| n == 1), "a sphere visited twice");
                 for &(key, c, r) in &shapes {
-                    let (lo, hi) = own_box(c, r);
+                    let (lo, hi) = own_box(c, r, 0.0);
                     // The test's own distance: every box within the radius is visited.
                     if box_distance(p, lo, hi) <= f64::from(radius) - 1e-4 {
                         assert!(seen.contains_key(&key), "query {q}: a near box skipped");
