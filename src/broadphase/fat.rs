@@ -68,7 +68,6 @@ fn jitter(slot: u32, now: u32) -> f32 {
 /// step `stamp`, at step `now`.
 #[cfg(feature = "parallel")]
 #[inline(always)]
-#[cfg(feature = "parallel")]
 pub(super) fn speed(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> f32 {
     speed_of(displacement(old, new, stamp, now))
 }
