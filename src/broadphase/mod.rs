@@ -109,7 +109,12 @@ pub struct StepStats {
 /// kept, the broadphase is in the *incremental regime*; a full pass over fat boxes enters it
 /// and a full pass over exact boxes leaves it. Each step estimates both costs from what it is
 /// about to do (movers, escapes, candidates) and runs the cheaper pass ([`Passes`]), so the
-/// cost never jumps when a world wakes up or settles; [`StepStats::pass`] says which ran. Collision groups are tested where a pair is first found (in the
+/// cost never jumps when a world wakes up or settles; [`StepStats::pass`] says which ran.
+/// Outside the regime the estimate reads the motion just applied, not how many proxies were
+/// sent: a proxy moving more than its smallest fat margin a step would escape every few
+/// steps, a slower one would re-test in proportion to its motion over its size, and one sent
+/// where it already was would cost nothing; so a settling pile sent whole every frame enters
+/// the regime while its balls still move millimetres a step. Collision groups are tested where a pair is first found (in the
 /// structures' passes and the escaped proxies' queries), so a filtered pair is never a
 /// candidate, never sorted and never diffed.
 #[derive(Clone, Debug)]
