@@ -38,7 +38,8 @@ use crate::geom::{self, check_aabb, check_sphere};
 use crate::octree::Octree;
 use crate::pair::{Pair, ProxyKey};
 use crate::{Aabb, BatchError, Error, Vec3};
-use store::{Kind, Store, flag};
+use shape::write_sphere;
+use store::{Kind, Store, flag, mark_stale_in};
 
 /// Which pass a step ran.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -776,30 +777,3 @@ const TRIM_FLOOR: usize = 256;
 
 /// The most live proxies: the structures index their entries with `u32`.
 const MAX_PROXIES: usize = (u32::MAX - 2) as usize;
-
-/// Writes a sphere's new centre and radius into its shape. They arrive as values and are
-/// written field by field: a whole `Shape` built on the stack and copied with wide loads
-/// stalls on the store forwarding of its narrow stores.
-#[inline]
-fn write_sphere(shape: &mut Shape, center: Vec3, radius: f32) {
-    match shape {
-        Shape::Sphere {
-            center: c,
-            radius: r,
-        } => (*c, *r) = (center, radius),
-        other => *other = Shape::Sphere { center, radius },
-    }
-}
-
-/// Marks `slot` updated and not yet applied in `flags`, listing it in `movers` once (the
-/// first time it gets `MOVED`, which every stale slot has); true if it was not stale yet.
-#[inline]
-fn mark_stale_in(flags: &mut [u8], movers: &mut Vec<u32>, slot: u32) -> bool {
-    let f = &mut flags[slot as usize];
-    let old = *f;
-    *f = old | flag::MOVED | flag::STALE;
-    if old & flag::MOVED == 0 {
-        movers.push(slot);
-    }
-    old & flag::STALE == 0
-}
