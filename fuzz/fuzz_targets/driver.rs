@@ -9,6 +9,8 @@
 //! both `#[path]`-import this file and call [`run`].
 //!
 //! What it drives and checks:
+//! - `insert_sphere_with` / `insert_body_with` with groups beside the plain inserts, and
+//!   `contains` (live keys, removed keys, the null key) after every step;
 //! - every `Config` corner it can reach: a region hint (valid or not: `try_new` must refuse
 //!   exactly the bad ones), both placements, margins 0–0.75, skins, all three `Passes` (after
 //!   a step, `stats().pass` must be one the forced choice allows);
@@ -85,8 +87,9 @@ pub struct Filter {
 
 #[derive(Arbitrary, Debug)]
 pub enum Op {
-    InsertSphere([F; 3], F),
-    InsertBody([F; 3], [F; 3], bool),
+    /// An insert, with groups as two 4-bit masks through `insert_sphere_with` if given.
+    InsertSphere([F; 3], F, Option<(u8, u8)>),
+    InsertBody([F; 3], [F; 3], bool, Option<(u8, u8)>),
     UpdateSphere(u8, [F; 3], F),
     UpdateBody(u8, [F; 3], [F; 3]),
     Remove(u8),
@@ -187,12 +190,12 @@ impl Model {
         (!self.live.is_empty()).then(|| self.live[i % self.live.len()])
     }
 
-    fn add(&mut self, key: ProxyKey, shape: Shape) {
+    fn add(&mut self, key: ProxyKey, shape: Shape, groups: CollisionGroups) {
         assert!(
             self.shapes.insert(key, shape).is_none(),
             "a key issued twice"
         );
-        self.groups.insert(key, CollisionGroups::ALL);
+        self.groups.insert(key, groups);
         self.serial.insert(key, self.next_serial);
         self.next_serial += 1;
         self.live.push(key);
@@ -465,28 +468,43 @@ pub fn run(input: &Input) {
 
 fn apply(bp: &mut BroadPhase, m: &mut Model, op: &Op, passes: Passes) {
     match op {
-        Op::InsertSphere(c, r) => {
+        Op::InsertSphere(c, r, g) => {
             let (c, r) = (v(*c), r.get());
-            match bp.insert_sphere(c, r) {
+            let groups = g.map_or(CollisionGroups::ALL, |(a, b)| groups_of(a, b));
+            let len = bp.len();
+            let got = match g {
+                Some(_) => bp.insert_sphere_with(c, r, groups),
+                None => bp.insert_sphere(c, r),
+            };
+            match got {
                 Ok(k) => m.add(
                     k,
                     Shape::Sphere {
                         center: c,
                         radius: r,
                     },
+                    groups,
                 ),
-                Err(e) => assert!(!sphere_ok(c, r), "refused {e:?}"),
+                Err(e) => {
+                    assert!(!sphere_ok(c, r), "refused {e:?}");
+                    assert_eq!(bp.len(), len, "a refused insert changed the count");
+                }
             }
         }
-        Op::InsertBody(lo, hi, is_static) => {
+        Op::InsertBody(lo, hi, is_static, g) => {
             let aabb = Aabb::new(v(*lo), v(*hi));
             let kind = if *is_static {
                 BodyKind::Static
             } else {
                 BodyKind::Dynamic
             };
-            match (bp.insert_body(aabb, kind), box_refusal(&aabb)) {
-                (Ok(k), None) => m.add(k, Shape::Body { aabb, kind }),
+            let groups = g.map_or(CollisionGroups::ALL, |(a, b)| groups_of(a, b));
+            let got = match g {
+                Some(_) => bp.insert_body_with(aabb, kind, groups),
+                None => bp.insert_body(aabb, kind),
+            };
+            match (got, box_refusal(&aabb)) {
+                (Ok(k), None) => m.add(k, Shape::Body { aabb, kind }, groups),
                 (Err(e), Some(want)) => assert!(same_kind(&e, &want), "{e:?} for {want:?}"),
                 (got, want) => panic!("insert_body {aabb:?}: {got:?}, expected {want:?}"),
             }
@@ -897,6 +915,13 @@ fn step_and_check(bp: &mut BroadPhase, m: &mut Model, passes: Passes) {
         Passes::Adaptive => {}
     }
     bp.validate();
+    for key in &m.live {
+        assert!(bp.contains(*key), "a live key not contained");
+    }
+    for key in &m.dead {
+        assert!(!bp.contains(*key), "a removed key contained");
+    }
+    assert!(!bp.contains(ProxyKey::default()), "the null key contained");
     m.prev = expected;
 }
 
