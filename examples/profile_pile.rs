@@ -2,11 +2,12 @@
 //! --example profile_pile -- --frames PATH [--n 10000] [--steps 35] [--passes P]`.
 //!
 //! The scene is `vs_rapier`'s `pile`: `n` spheres settled by 240 dynamic rapier steps (seed 1),
-//! then `--steps` recorded frames. Recording needs the feature `rapier`; the frames are saved
+//! then `--steps` recorded frames (`--centers`: the spheres sent by `update_centers`, else by
+//! `update_spheres`). Recording needs the feature `rapier`; the frames are saved
 //! to `--frames` and read back from there by later runs (with or without the feature), so a run
 //! under callgrind replays them without stepping rapier. Runs 5 warm-up frames, then the rest,
-//! each fed as one `update_spheres` batch and one `BroadPhase::step`, and prints the median
-//! ns/object/step. Under callgrind, `--toggle-collect=*measured*` counts only the measured
+//! each fed as one batch (built before the timer) and one `BroadPhase::step`, and prints the
+//! median ns/object/step. Under callgrind, `--toggle-collect=*measured*` counts only the measured
 //! steps.
 
 use broadleaf::fixtures::cli::{self, Flags, Stop};
@@ -21,13 +22,14 @@ const WARMUP: usize = 5;
 #[cfg(feature = "rapier")]
 const SETTLE_STEPS: usize = 240;
 
-const USAGE: &str = "usage: profile_pile --frames PATH [--n 10000] [--steps 35] [--passes adaptive|full|incremental]";
+const USAGE: &str = "usage: profile_pile --frames PATH [--n 10000] [--steps 35] [--passes adaptive|full|incremental] [--centers]";
 
 struct Args {
     frames: String,
     n: usize,
     steps: usize,
     passes: Passes,
+    centers: bool,
 }
 
 fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
@@ -36,6 +38,7 @@ fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
         n: 10_000,
         steps: 35,
         passes: Passes::Adaptive,
+        centers: false,
     };
     let mut flags = Flags::new(argv);
     while let Some(flag) = flags.next_flag()? {
@@ -44,6 +47,7 @@ fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
             "--n" => a.n = flags.parse(&flag)?,
             "--steps" => a.steps = flags.parse(&flag)?,
             "--passes" => a.passes = flags.choice(&flag, &cli::PASSES)?,
+            "--centers" => a.centers = true,
             _ => return Err(Stop::unknown(&flag)),
         }
     }
@@ -133,7 +137,8 @@ fn main() {
         passes: args.passes,
         ..Config::default()
     });
-    let (mut feed, mut spawns, mut frame) = (Feed::new(false), Vec::new(), Frame::default());
+    let mut feed = Feed::new(false).centers(args.centers);
+    let (mut spawns, mut frame) = (Vec::new(), Frame::default());
     scene.spawns(&mut spawns);
     feed.spawn(&mut bp, &spawns).expect("valid scene");
     bp.step();
@@ -141,9 +146,10 @@ fn main() {
     let (mut times, mut tested, mut enlarged, mut pairs) = (Vec::new(), 0usize, 0usize, 0usize);
     for i in 0..scene.frames.len().saturating_sub(1) {
         scene.advance(&mut frame);
+        feed.stage(&frame).expect("valid frame");
         let t = Instant::now();
         pairs = black_box(measured_step(&mut || {
-            feed.apply(&mut bp, &frame).expect("valid frame");
+            feed.commit(&mut bp, &frame).expect("valid frame");
             bp.step();
             bp.pairs().len()
         }));

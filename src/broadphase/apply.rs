@@ -15,7 +15,7 @@
 //!   that changes node gets its node at once and its node lists later: the pass that
 //!   follows relinks the moved spheres beside its walk-order sort, on another thread when
 //!   the sort is split, see `Octree::update_live_deferred`; a BVH leaf is written and grown,
-//!   and once every slot is applied each grown leaf's ancestors are enlarged in one walk up,
+//!   and once every slot is applied each grown leaf's ancestors are grown in one walk up,
 //!   however many of its bodies moved), inside it the fat box it still lies in, or a new one.
 //!
 //! Slot order makes the pass stream through every per-slot array and the octree's records,
@@ -48,7 +48,7 @@ impl BroadPhase {
         self.apply_stale();
         self.stale = 0;
         // The bodies' leaves were written without their ancestors
-        // (`Bvh::update_box_deferred`): each leaf that grew has them enlarged once, here.
+        // (`Bvh::update_box_deferred`): each leaf that grew has them grown once, here.
         self.dynamic.enlarge_deferred();
         self.statics.enlarge_deferred();
     }

@@ -66,10 +66,16 @@ fn jitter(slot: u32, now: u32) -> f32 {
 
 /// The speed (metres per step, largest axis) of a box that moved from `old` to `new` since
 /// step `stamp`, at step `now`.
-#[inline(always)]
 #[cfg(feature = "parallel")]
+#[inline(always)]
 pub(super) fn speed(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -> f32 {
-    displacement(old, new, stamp, now).abs().max_element()
+    speed_of(displacement(old, new, stamp, now))
+}
+
+/// The speed of a motion of `d` per step: metres per step along its largest axis.
+#[inline(always)]
+fn speed_of(d: Vec3A) -> f32 {
+    d.abs().max_element()
 }
 
 /// What the updates applied since the last step say of the movers' motion: what the pass
@@ -145,7 +151,7 @@ impl BroadPhase {
     #[inline]
     pub(super) fn note_motion(&mut self, s: usize, old: &SimdBox, exact: &SimdBox) -> Vec3A {
         let d = displacement(old, exact, self.store.stamp[s], self.now);
-        let speed = d.abs().max_element();
+        let speed = speed_of(d);
         self.store.speed[s] = speed;
         self.motion.note(speed, exact.extent().max_element());
         self.store.stamp[s] = self.now;

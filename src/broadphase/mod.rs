@@ -38,7 +38,8 @@ use crate::geom::{self, check_aabb, check_sphere};
 use crate::octree::Octree;
 use crate::pair::{Pair, ProxyKey};
 use crate::{Aabb, BatchError, Error, Vec3};
-use store::{Kind, Store, flag};
+use shape::write_sphere;
+use store::{Kind, Store, flag, mark_stale_in};
 
 /// Which pass a step ran.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -109,7 +110,12 @@ pub struct StepStats {
 /// kept, the broadphase is in the *incremental regime*; a full pass over fat boxes enters it
 /// and a full pass over exact boxes leaves it. Each step estimates both costs from what it is
 /// about to do (movers, escapes, candidates) and runs the cheaper pass ([`Passes`]), so the
-/// cost never jumps when a world wakes up or settles; [`StepStats::pass`] says which ran. Collision groups are tested where a pair is first found (in the
+/// cost never jumps when a world wakes up or settles; [`StepStats::pass`] says which ran.
+/// Outside the regime the estimate reads the motion just applied, not how many proxies were
+/// sent: a proxy moving more than its smallest fat margin a step would escape every few
+/// steps, a slower one would re-test in proportion to its motion over its size, and one sent
+/// where it already was would cost nothing; so a settling pile sent whole every frame enters
+/// the regime while its balls still move millimetres a step. Collision groups are tested where a pair is first found (in the
 /// structures' passes and the escaped proxies' queries), so a filtered pair is never a
 /// candidate, never sorted and never diffed.
 #[derive(Clone, Debug)]
@@ -771,30 +777,3 @@ const TRIM_FLOOR: usize = 256;
 
 /// The most live proxies: the structures index their entries with `u32`.
 const MAX_PROXIES: usize = (u32::MAX - 2) as usize;
-
-/// Writes a sphere's new centre and radius into its shape. They arrive as values and are
-/// written field by field: a whole `Shape` built on the stack and copied with wide loads
-/// stalls on the store forwarding of its narrow stores.
-#[inline]
-fn write_sphere(shape: &mut Shape, center: Vec3, radius: f32) {
-    match shape {
-        Shape::Sphere {
-            center: c,
-            radius: r,
-        } => (*c, *r) = (center, radius),
-        other => *other = Shape::Sphere { center, radius },
-    }
-}
-
-/// Marks `slot` updated and not yet applied in `flags`, listing it in `movers` once (the
-/// first time it gets `MOVED`, which every stale slot has); true if it was not stale yet.
-#[inline]
-fn mark_stale_in(flags: &mut [u8], movers: &mut Vec<u32>, slot: u32) -> bool {
-    let f = &mut flags[slot as usize];
-    let old = *f;
-    *f = old | flag::MOVED | flag::STALE;
-    if old & flag::MOVED == 0 {
-        movers.push(slot);
-    }
-    old & flag::STALE == 0
-}

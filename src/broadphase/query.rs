@@ -205,8 +205,8 @@ impl BroadPhase {
 
     /// The first proxy touched by the sphere `center + t·dir` of radius `radius`, for `t` in
     /// `[0, max_t]`, with its `t` in units of `dir` (0 if it touches at the start; touching
-    /// counts). Shapes as the user gave them: spheres as spheres ([`geom::sphere_cast_sphere`]),
-    /// bodies as their boxes ([`geom::sphere_cast_aabb`]); ties go to the smaller key. `None`
+    /// counts). Shapes as the user gave them: spheres as spheres (`sphere_cast_sphere`),
+    /// bodies as their boxes (`sphere_cast_aabb`); ties go to the smaller key. `None`
     /// for a non-finite argument, a negative radius or a negative `max_t`.
     #[must_use]
     pub fn cast_sphere(
@@ -342,7 +342,7 @@ impl BroadPhase {
     }
 
     /// The `k` proxies whose shapes, as the user gave them, are nearest `point` (distance 0
-    /// inside: [`geom::point_sphere_distance`], [`geom::point_aabb_distance`]), with their
+    /// inside: `point_sphere_distance`, `point_aabb_distance`), with their
     /// distances, sorted by `(distance, key)`; all of them if there are fewer. Empty for
     /// `k == 0` or a non-finite `point`. Allocates its result; [`BroadPhase::nearest_into`]
     /// fills a buffer of the caller's instead.

@@ -96,3 +96,17 @@ impl CollisionGroups {
         self.memberships & other.filter != 0 && other.memberships & self.filter != 0
     }
 }
+
+/// Writes a sphere's new centre and radius into its shape. They arrive as values and are
+/// written field by field: a whole `Shape` built on the stack and copied with wide loads
+/// stalls on the store forwarding of its narrow stores.
+#[inline]
+pub(super) fn write_sphere(shape: &mut Shape, center: Vec3, radius: f32) {
+    match shape {
+        Shape::Sphere {
+            center: c,
+            radius: r,
+        } => (*c, *r) = (center, radius),
+        other => *other = Shape::Sphere { center, radius },
+    }
+}

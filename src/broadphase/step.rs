@@ -117,7 +117,7 @@ impl Parallel {
 const PATCH_FLOOR: usize = 32;
 
 /// An incremental step refits the dynamic BVH once this fraction of its bodies got new fat
-/// boxes since its last refit: until then the boxes enlarged on update keep it exact, only
+/// boxes since its last refit: until then the boxes grown on update keep it exact, only
 /// looser.
 const REFIT_FRACTION: f64 = 0.125;
 

@@ -331,6 +331,19 @@ impl Store {
     }
 }
 
+/// Marks `slot` updated and not yet applied in `flags`, listing it in `movers` once (the
+/// first time it gets `MOVED`, which every stale slot has); true if it was not stale yet.
+#[inline]
+pub(super) fn mark_stale_in(flags: &mut [u8], movers: &mut Vec<u32>, slot: u32) -> bool {
+    let f = &mut flags[slot as usize];
+    let old = *f;
+    *f = old | flag::MOVED | flag::STALE;
+    if old & flag::MOVED == 0 {
+        movers.push(slot);
+    }
+    old & flag::STALE == 0
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

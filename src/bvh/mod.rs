@@ -8,7 +8,7 @@
 //! Queries and pairs are **always exact for the current boxes**, whatever was called since
 //! the last [`Bvh::refit`]:
 //! - [`Bvh::update`] writes the box; if it left its leaf's box, the leaf and its ancestors are
-//!   enlarged (walking up only while an ancestor does not contain it), so the tree stays
+//!   grown (walking up only while an ancestor does not contain it), so the tree stays
 //!   conservative. [`Bvh::refit`] later tightens every node.
 //!   Inside the crate, `update_box_deferred` grows only the leaf and notes it, for a caller
 //!   that refits before its next pass anyway or enlarges the noted leaves' ancestors once
@@ -204,7 +204,7 @@ pub struct Bvh {
     scratch: BuildScratch,
     /// Scratch of the `&mut self` pair traversals.
     pair_scratch: PairScratch,
-    /// Leaves grown by [`Bvh::update_box_deferred`] whose ancestors are not enlarged yet
+    /// Leaves grown by [`Bvh::update_box_deferred`] whose ancestors are not grown yet
     /// (a leaf may appear more than once); empty whenever the tree is exact.
     deferred: Vec<u32>,
 }
@@ -320,7 +320,7 @@ impl Bvh {
     }
 
     /// Replaces the box of `key`. Queries and pairs see the new box at once; node boxes are
-    /// only enlarged here and tightened by [`Bvh::refit`]. `Err` (tree unchanged) for a bad
+    /// only grown here and tightened by [`Bvh::refit`]. `Err` (tree unchanged) for a bad
     /// box or a stale key.
     pub fn update(&mut self, key: ProxyKey, aabb: Aabb) -> Result<(), Error> {
         check_aabb(&aabb)?;
@@ -376,7 +376,7 @@ impl Bvh {
         Ok(())
     }
 
-    /// True if [`Bvh::update_box_deferred`] grew leaves whose ancestors are not enlarged yet.
+    /// True if [`Bvh::update_box_deferred`] grew leaves whose ancestors are not grown yet.
     #[must_use]
     pub(crate) fn has_deferred(&self) -> bool {
         !self.deferred.is_empty()

@@ -147,7 +147,7 @@ impl Bvh {
     }
 
     /// Calls `f(key, aabb)` for every live box `aabb` within `radius` of `p`
-    /// ([`geom::point_aabb_distance`] `<= radius`, so touching counts), once each, in no
+    /// (`point_aabb_distance` `<= radius`, so touching counts), once each, in no
     /// particular order. Nodes are pruned by the same distance, which never decreases as a box
     /// shrinks, so no box within `radius` is missed. Nothing for a non-finite `p` or a NaN or
     /// negative `radius`. The first `Break` of `f` ends it and is returned.
@@ -182,7 +182,7 @@ impl Bvh {
     }
 
     /// Calls `f` with the key of every live box within `radius` of `center`
-    /// ([`geom::point_aabb_distance`] `<= radius`: the box overlaps the closed ball, touching
+    /// (`point_aabb_distance` `<= radius`: the box overlaps the closed ball, touching
     /// counts), each once, in no particular order. Nothing for a non-finite `center` or
     /// `radius`, or a negative `radius`.
     pub fn query_sphere(&self, center: Vec3, radius: f32, f: impl FnMut(ProxyKey)) {
@@ -205,7 +205,7 @@ impl Bvh {
 
     /// The first live box touched by the sphere `center + t·dir`, `radius`, `t ∈ [0, max_t]`,
     /// with its `t` in units of `dir` (0 if it touches at the start), per
-    /// [`geom::sphere_cast_aabb`] (exact: edges and corners are rounded); ties go to the smaller
+    /// `sphere_cast_aabb` (exact: edges and corners are rounded); ties go to the smaller
     /// key. `None` if nothing is touched, or for a non-finite argument, a negative `radius` or
     /// a negative `max_t`.
     ///
@@ -232,7 +232,7 @@ impl Bvh {
         hit.best()
     }
 
-    /// The `k` live boxes nearest `point` by [`geom::point_aabb_distance`] (0 inside a box),
+    /// The `k` live boxes nearest `point` by `point_aabb_distance` (0 inside a box),
     /// with their distances, sorted by `(distance, key)`: the first `k` of all boxes in that
     /// order (all of them if there are fewer). Empty for `k == 0` or a non-finite `point`.
     ///

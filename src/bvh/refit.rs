@@ -155,7 +155,7 @@ mod tests {
     }
 
     /// Boxes written without enlarging (`update_box_deferred`), mixed with plain updates,
-    /// give the brute-force pairs and a valid tree once the ancestors are enlarged once
+    /// give the brute-force pairs and a valid tree once the ancestors are grown once
     /// (`enlarge_deferred`) or the tree refitted, whichever comes; nothing stays deferred.
     #[test]
     fn deferred_enlargement_then_one_walk_or_refit_is_exact() {

@@ -15,7 +15,7 @@ impl Bvh {
     pub fn validate(&self) {
         assert!(
             self.deferred.is_empty(),
-            "leaves grown by update_box_deferred whose ancestors were not enlarged"
+            "leaves grown by update_box_deferred whose ancestors were not grown"
         );
         let n_nodes = self.nodes.len();
         assert_eq!(

@@ -259,7 +259,7 @@ impl Octree {
     }
 
     /// The closest sphere hit by the segment `origin + t·dir`, `t ∈ [0, max_t]` (`t` in units
-    /// of `dir`; an origin inside a sphere hits at 0), per [`geom::ray_sphere`]; ties go to
+    /// of `dir`; an origin inside a sphere hits at 0), per `ray_sphere`; ties go to
     /// the smaller key. A non-finite origin or direction, or a NaN or negative `max_t`, hits
     /// nothing.
     #[must_use]
@@ -524,7 +524,7 @@ impl Octree {
 
     /// Calls `visit(key, aabb)`, `aabb` its stored box `center ± radius`, for every sphere
     /// whose pruning box with `inflate` added to its radius, `center ± (radius·(1 + 2⁻²⁰) +
-    /// inflate)` ([`geom::sphere_prune_box`], for the `f64` re-tests), the segment
+    /// inflate)` (`sphere_prune_box`, for the `f64` re-tests), the segment
     /// `origin + t·dir`, `t ∈ [0, best]` enters ([`Aabb::ray_entry`], touching counts), once each; `best` starts at `max_t` and becomes
     /// `min(best, returned value)` after each visit (a NaN return leaves it), so a sphere
     /// entered exactly at `best` is still visited. Nodes come in walk order, not by distance.
@@ -552,7 +552,7 @@ impl Octree {
     }
 
     /// Calls `visit(id)` for every sphere of every node whose reach box, grown by the rounding tolerance, is
-    /// within `radius` of `p` ([`geom::point_aabb_distance`]): a superset of the spheres whose
+    /// within `radius` of `p` (`point_aabb_distance`): a superset of the spheres whose
     /// box is within `radius`, since that box lies in the grown reach box and the distance
     /// does not decrease as a box shrinks.
     fn near_ids(
@@ -565,7 +565,7 @@ impl Octree {
         self.candidates(&Aabb::from_center_radius(p, radius), visit)
     }
 
-    /// Calls `f(key)` for every sphere whose pruning box ([`geom::sphere_prune_box`])
+    /// Calls `f(key)` for every sphere whose pruning box (`sphere_prune_box`)
     /// overlaps the cube `p ± radius`, once
     /// each: a superset of those within `radius` of `p`, for callers that measure exact
     /// distances themselves. Nothing for a non-finite `p` or a NaN or negative `radius`. The
@@ -593,7 +593,7 @@ impl Octree {
 
     /// The first sphere touched by the sphere `center + t·dir`, `radius`, `t ∈ [0, max_t]`,
     /// with its `t` in units of `dir` (0 if it touches at the start), per
-    /// [`geom::sphere_cast_sphere`]; ties go to the smaller key. `None` if nothing is touched,
+    /// `sphere_cast_sphere`; ties go to the smaller key. `None` if nothing is touched,
     /// or for a non-finite argument, a negative `radius` or a negative `max_t`.
     ///
     /// Nodes are pruned by their reach box grown by `radius` plus a relative pad (the exact
@@ -616,7 +616,7 @@ impl Octree {
         hit.best()
     }
 
-    /// The `k` spheres nearest `point` by [`geom::point_sphere_distance`] (0 inside a sphere),
+    /// The `k` spheres nearest `point` by `point_sphere_distance` (0 inside a sphere),
     /// with their distances, sorted by `(distance, key)`: the first `k` of all spheres in that
     /// order (all of them if there are fewer). Empty for `k == 0` or a non-finite `point`.
     ///
