@@ -184,7 +184,7 @@ fn step(args: &Args) {
         pairs
     );
     println!(
-        "last step: {:?}, updated {}, enlarged {}, candidates {} (tested {})",
+        "last step: {:?}, updated {}, escaped {}, candidates {} (tested {})",
         s.pass, s.updated, s.escaped, s.candidates, s.candidates_tested
     );
 }

@@ -143,7 +143,7 @@ fn main() {
     feed.spawn(&mut bp, &spawns).expect("valid scene");
     bp.step();
     let n = scene.len().max(1) as f64;
-    let (mut times, mut tested, mut enlarged, mut pairs) = (Vec::new(), 0usize, 0usize, 0usize);
+    let (mut times, mut tested, mut escaped, mut pairs) = (Vec::new(), 0usize, 0usize, 0usize);
     for i in 0..scene.frames.len().saturating_sub(1) {
         scene.advance(&mut frame);
         feed.stage(&frame).expect("valid frame");
@@ -156,17 +156,17 @@ fn main() {
         if i >= WARMUP {
             times.push(t.elapsed().as_nanos() as f64 / n);
             tested += bp.stats().candidates_tested;
-            enlarged += bp.stats().escaped;
+            escaped += bp.stats().escaped;
         }
     }
     times.sort_by(f64::total_cmp);
     let median = times.get(times.len() / 2).copied().unwrap_or(f64::NAN);
     println!(
-        "pile n={} steps={} median_ns_per_object_step={median:.1} pairs={pairs} tested_per_step={:.0} enlarged_per_step={:.1} last {:?}",
+        "pile n={} steps={} median_ns_per_object_step={median:.1} pairs={pairs} tested_per_step={:.0} escaped_per_step={:.1} last {:?}",
         scene.len(),
         times.len(),
         tested as f64 / times.len().max(1) as f64,
-        enlarged as f64 / times.len().max(1) as f64,
+        escaped as f64 / times.len().max(1) as f64,
         bp.stats().pass
     );
 }
