@@ -76,6 +76,12 @@ const RELEARN_KEEP: f64 = 0.9;
 /// is not tried again every few steps.
 const ESCAPE_KEEP: f64 = 0.98;
 
+/// How many times more candidates than the doubled pairs a world gets per unit of its fast
+/// movers' mean fat margin over their size: a box grown by `m` of its size on every side
+/// overlaps about `(1 + 2m)³` as many neighbours in a packed world; this is its slope near
+/// `m = 0.5`, the widest margin, which a landing's movers reach.
+const CANDIDATES_PER_MARGIN: f64 = 4.0;
+
 /// What the cost estimates learn from the steps they watch.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Costs {
@@ -205,14 +211,15 @@ impl BroadPhase {
     /// candidates, `escapes` of them after leaving their fat boxes.
     fn incremental_cost(&self, loud: f64, escapes: f64) -> f64 {
         let n = self.store.len().max(1) as f64;
-        // Before any count, fat boxes are taken to double the pairs; outside the regime the
-        // last count may be of fat boxes grown for another motion (a landing's swept boxes),
-        // so it is taken only where it is below that.
-        let doubled = 2.0 * self.pairs.len() as f64 / n;
+        // Outside the regime (or before any count) fat boxes are taken to double the pairs,
+        // more where fast movers would get wide ones (their margin over their size, summed,
+        // per proxy, times [`CANDIDATES_PER_MARGIN`]): a count from the regime's last entry
+        // was of fat boxes grown for another motion (a free fall's, a landing's).
+        let wide = self.motion.fast_margin / n * CANDIDATES_PER_MARGIN;
+        let doubled = 2.0 * self.pairs.len() as f64 / n * (1.0 + wide);
         let per_proxy = match self.costs.cand_per_proxy {
             Some(counted) if self.incremental => counted,
-            Some(counted) => counted.min(doubled),
-            None => doubled,
+            _ => doubled,
         };
         let cands = if self.incremental {
             self.cand.len() as f64

@@ -93,6 +93,10 @@ pub(super) struct Motion {
     /// extent (per step): a slow mover re-tests its candidates about once in the steps it
     /// takes to drift half their least slack, so the loud movers of a step follow this sum.
     pub(super) slow_motion: f64,
+    /// Over the fast movers, the sum of each one's fat margin as a fraction of its size
+    /// (times the jitter's mean of 1.5): how much larger than exact their fat boxes would be,
+    /// which makes their candidates outnumber their pairs.
+    pub(super) fast_margin: f64,
 }
 
 impl Motion {
@@ -101,6 +105,10 @@ impl Motion {
     pub(super) fn note(&mut self, speed: f32, size: f32) {
         if outgrows_min_margin(speed, size) {
             self.fast += 1;
+            // Fast, so `size` is 0 only where the margin is too: a point grows by nothing.
+            if size > 0.0 {
+                self.fast_margin += f64::from(1.5 * margin(speed, size) / size);
+            }
         } else {
             self.slow += 1;
             // Not fast, so `speed` is 0 where `size` is.
@@ -124,6 +132,7 @@ impl Motion {
             fast: self.fast + other.fast,
             slow: self.slow + other.slow,
             slow_motion: self.slow_motion + other.slow_motion,
+            fast_margin: self.fast_margin + other.fast_margin,
         }
     }
 }
