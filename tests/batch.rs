@@ -192,6 +192,12 @@ impl World {
         self.model.assert_same_proxies(&self.b, "b after the batch");
     }
 
+    /// The live spheres' keys, in key order.
+    fn sphere_keys(&self) -> Vec<ProxyKey> {
+        let keys = self.model.keys().into_iter();
+        keys.filter(|k| self.model.shapes[k].is_sphere()).collect()
+    }
+
     /// Steps both twins: each equals the model (so they equal each other).
     fn step(&mut self, context: &str) {
         let want = self.model.check_step(&mut self.a, context);
@@ -365,12 +371,7 @@ proptest! {
 fn bad_last_entry_leaves_the_good_prefix_unapplied() {
     let mut world = World::new(Config::default(), 7);
     world.step("setup");
-    let spheres: Vec<ProxyKey> = world
-        .model
-        .keys()
-        .into_iter()
-        .filter(|k| world.model.shapes[k].is_sphere())
-        .collect();
+    let spheres = world.sphere_keys();
     let mut batch: Vec<_> = spheres.iter().map(|&k| (k, Vec3::ZERO, 1.0)).collect();
     batch.push((spheres[0], Vec3::new(0.0, f32::NAN, 0.0), 1.0));
     let err = world.a.update_spheres(&batch).unwrap_err();
@@ -388,12 +389,7 @@ fn bad_last_entry_leaves_the_good_prefix_unapplied() {
 fn centers_of_another_length_are_refused_whole() {
     let mut world = World::new(Config::default(), 11);
     world.step("setup");
-    let spheres: Vec<ProxyKey> = world
-        .model
-        .keys()
-        .into_iter()
-        .filter(|k| world.model.shapes[k].is_sphere())
-        .collect();
+    let spheres = world.sphere_keys();
     let centers = vec![Vec3::ZERO; spheres.len() + 1];
     for (keys, centers) in [
         (&spheres[..], &centers[..]),

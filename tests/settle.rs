@@ -32,6 +32,18 @@ fn pile(model: &mut Model, bp: &mut BroadPhase, rng: &mut Rng, side: usize) -> V
     keys
 }
 
+/// A default broadphase holding a `side`³ [`pile`] (seeded by `seed`), stepped once against
+/// its model, with the rng that goes on moving it.
+fn built_pile(seed: u64, side: usize) -> (Rng, BroadPhase, Model, Vec<ProxyKey>) {
+    let mut rng = Rng::new(seed);
+    let mut bp = BroadPhase::new(Config::default());
+    let mut model = Model::new(0.0);
+    model.quadratic = false;
+    let keys = pile(&mut model, &mut bp, &mut rng, side);
+    model.check_step(&mut bp, "built");
+    (rng, bp, model, keys)
+}
+
 /// Moves every sphere by `speed` m/s for one step in a random direction each, through
 /// `update_centers` (all of them sent, as a replay of an engine's frames sends them).
 fn shake(model: &mut Model, bp: &mut BroadPhase, rng: &mut Rng, keys: &[ProxyKey], speed: f32) {
@@ -99,12 +111,7 @@ fn assert_settles(passes: &[(Pass, f32)], from: usize, within: usize, stay: usiz
 
 #[test]
 fn a_settling_pile_sent_every_step_enters_the_incremental_regime() {
-    let mut rng = Rng::new(43);
-    let mut bp = BroadPhase::new(Config::default());
-    let mut model = Model::new(0.0);
-    model.quadratic = false;
-    let keys = pile(&mut model, &mut bp, &mut rng, 14);
-    model.check_step(&mut bp, "built");
+    let (mut rng, mut bp, mut model, keys) = built_pile(43, 14);
     let passes = settle(
         &mut model,
         &mut bp,
@@ -125,12 +132,7 @@ fn a_settling_pile_sent_every_step_enters_the_incremental_regime() {
 
 #[test]
 fn a_woken_pile_leaves_the_incremental_regime_and_comes_back() {
-    let mut rng = Rng::new(47);
-    let mut bp = BroadPhase::new(Config::default());
-    let mut model = Model::new(0.0);
-    model.quadratic = false;
-    let keys = pile(&mut model, &mut bp, &mut rng, 12);
-    model.check_step(&mut bp, "built");
+    let (mut rng, mut bp, mut model, keys) = built_pile(47, 12);
     let settled = settle(
         &mut model,
         &mut bp,
