@@ -22,7 +22,7 @@
 //! whatever order the caller updated in (a churn's reused keys come in none).
 //!
 //! **Between an update and the next step** the structures hold the stale slots at their last
-//! applied boxes, so the queries ([`super::query`]) skip a stale slot where a structure
+//! applied boxes, so the queries (`BroadPhase::query_aabb` and the rest) skip a stale slot where a structure
 //! reports it and test every stale slot's latest shape after the structures' walk instead: a
 //! query costs `O(stale)` more until the next step applies them (nothing at all once the step
 //! ran, or when nothing was updated). [`BroadPhase::shape`], [`BroadPhase::aabb`] and snapshots

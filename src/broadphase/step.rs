@@ -17,8 +17,8 @@
 //! each part is sorted by its own task, and the event diff is split the same way. Each pair is
 //! found by one producer, once, and every part covers a key range, so the lists are the
 //! serial pass's at any thread count. What stays serial: the octree's relinks (one task,
-//! beside the walk-order sort) and the body leaves of the updates' apply (see
-//! [`super::apply`]), the refits, the sphere × body queries (one task), and the incremental
+//! beside the walk-order sort) and the body leaves of the updates' apply,
+//! the refits, the sphere × body queries (one task), and the incremental
 //! pass.
 
 use super::packed::{
