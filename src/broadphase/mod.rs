@@ -493,17 +493,33 @@ impl BroadPhase {
             self.check_sphere_update(key, center, radius)
                 .map_err(|error| BatchError { index, error })?;
         }
-        // `set_sphere`'s stores, with the arrays borrowed once for the batch.
+        self.store_spheres(updates.iter().map(|&(k, c, r)| (k, c, Some(r))));
+        Ok(())
+    }
+
+    /// `set_sphere`'s stores for a checked batch of live spheres, with the arrays borrowed
+    /// once: each entry's centre, and its radius where it gives one (else the sphere keeps
+    /// its own).
+    #[inline]
+    fn store_spheres(&mut self, entries: impl Iterator<Item = (ProxyKey, Vec3, Option<f32>)>) {
         let (st, movers) = (&mut self.store, &mut self.movers);
         let (shape, flags) = (&mut st.shape[..], &mut st.flags[..]);
         let mut newly_stale = 0;
-        for &(key, center, radius) in updates {
+        for (key, center, radius) in entries {
             let slot = crate::pair::slot(key);
-            write_sphere(&mut shape[slot as usize], center, radius);
+            let s = &mut shape[slot as usize];
+            let radius = match (radius, *s) {
+                (Some(r), _) => r,
+                (None, Shape::Sphere { radius, .. }) => radius,
+                (None, Shape::Body { .. }) => {
+                    debug_assert!(false, "a checked sphere batch names a body");
+                    continue;
+                }
+            };
+            write_sphere(s, center, radius);
             newly_stale += usize::from(mark_stale_in(flags, movers, slot));
         }
         self.stale += newly_stale;
-        Ok(())
     }
 
     /// Moves many spheres at once, keeping their radii: `centers[i]` is the new centre of
@@ -527,20 +543,11 @@ impl BroadPhase {
             });
         }
         for (index, (&key, &center)) in keys.iter().zip(centers).enumerate() {
-            self.check_center_update(key, center)
+            // A radius of 0 always passes: only the centre is checked.
+            self.check_sphere_update(key, center, 0.0)
                 .map_err(|error| BatchError { index, error })?;
         }
-        let (st, movers) = (&mut self.store, &mut self.movers);
-        let (shape, flags) = (&mut st.shape[..], &mut st.flags[..]);
-        let mut newly_stale = 0;
-        for (&key, &center) in keys.iter().zip(centers) {
-            let slot = crate::pair::slot(key);
-            if let Shape::Sphere { center: c, .. } = &mut shape[slot as usize] {
-                *c = center;
-            }
-            newly_stale += usize::from(mark_stale_in(flags, movers, slot));
-        }
-        self.stale += newly_stale;
+        self.store_spheres(keys.iter().zip(centers).map(|(&k, &c)| (k, c, None)));
         Ok(())
     }
 
@@ -563,19 +570,6 @@ impl BroadPhase {
     #[inline]
     fn check_sphere_update(&self, key: ProxyKey, center: Vec3, radius: f32) -> Result<u32, Error> {
         check_sphere(center, radius)?;
-        let slot = self.store.resolve(key).ok_or(Error::UnknownProxy)?;
-        match self.store.kind[slot as usize] {
-            Kind::Sphere => Ok(slot),
-            _ => Err(Error::WrongKind),
-        }
-    }
-
-    /// The slot of a live sphere given a new `center`, or what
-    /// [`BroadPhase::update_centers`] refuses.
-    #[inline]
-    fn check_center_update(&self, key: ProxyKey, center: Vec3) -> Result<u32, Error> {
-        // A radius of 0 always passes: only the centre is checked.
-        check_sphere(center, 0.0)?;
         let slot = self.store.resolve(key).ok_or(Error::UnknownProxy)?;
         match self.store.kind[slot as usize] {
             Kind::Sphere => Ok(slot),
