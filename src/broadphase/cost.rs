@@ -85,8 +85,6 @@ const CANDIDATES_PER_MARGIN: f64 = 4.0;
 /// What the cost estimates learn from the steps they watch.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Costs {
-    /// Candidates per proxy at the last count.
-    pub(super) cand_per_proxy: Option<f64>,
     /// Of the movers of the last incremental step, the fraction that re-tested their
     /// candidates (see [`super::slack`]).
     pub(super) loud_per_mover: f64,
@@ -119,7 +117,6 @@ pub(super) struct Costs {
 impl Default for Costs {
     fn default() -> Self {
         Costs {
-            cand_per_proxy: None,
             loud_per_mover: 1.0,
             loud_per_slow: 1.0,
             loud_per_motion: LOUD_PER_MOTION,
@@ -211,21 +208,16 @@ impl BroadPhase {
     /// candidates, `escapes` of them after leaving their fat boxes.
     fn incremental_cost(&self, loud: f64, escapes: f64) -> f64 {
         let n = self.store.len().max(1) as f64;
-        // Outside the regime (or before any count) fat boxes are taken to double the pairs,
-        // more where fast movers would get wide ones (their margin over their size, summed,
-        // per proxy, times [`CANDIDATES_PER_MARGIN`]): a count from the regime's last entry
-        // was of fat boxes grown for another motion (a free fall's, a landing's).
-        let wide = self.motion.fast_margin / n * CANDIDATES_PER_MARGIN;
-        let doubled = 2.0 * self.pairs.len() as f64 / n * (1.0 + wide);
-        let per_proxy = match self.costs.cand_per_proxy {
-            Some(counted) if self.incremental => counted,
-            _ => doubled,
-        };
+        // In the regime the candidates are counted; outside it fat boxes are taken to double
+        // the pairs, more where fast movers would get wide ones (their margin over their
+        // size, summed, per proxy, times [`CANDIDATES_PER_MARGIN`]).
         let cands = if self.incremental {
             self.cand.len() as f64
         } else {
-            n * per_proxy
+            let wide = self.motion.fast_margin / n * CANDIDATES_PER_MARGIN;
+            2.0 * self.pairs.len() as f64 * (1.0 + wide)
         };
+        let per_proxy = cands / n;
         // Before any pass an escape is priced as a dense world's: the first step of a gas
         // has no pairs yet.
         let density = if self.costs.pairs_seen {

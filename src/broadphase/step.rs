@@ -265,8 +265,6 @@ impl BroadPhase {
                 fresh.truncate(hits);
             });
             self.stats.candidates_tested = tested;
-            let n = self.store.len().max(1) as f64;
-            self.costs.cand_per_proxy = Some(self.cand.len() as f64 / n);
             self.incremental = true;
         } else {
             self.cand.clear();
