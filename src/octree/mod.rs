@@ -68,6 +68,7 @@ mod loose_node;
 mod nodes;
 mod placement;
 mod query;
+mod ray;
 mod region;
 mod strict;
 mod validate;
