@@ -29,6 +29,7 @@
 //! read the latest shapes; [`BroadPhase::octree`] and [`BroadPhase::bvh`] show the structures as
 //! the last step left them.
 
+use super::regime::Incremental;
 use super::store::flag;
 use super::{BroadPhase, Shape, fat, slack};
 use crate::radix::sort_bits_by;
@@ -64,7 +65,7 @@ impl BroadPhase {
         if self.stale >= slots / DENSE_FRACTION {
             // Most slots are stale: one streaming walk over the flags is cheaper than sorting
             // the mover list (whose order then stays the caller's).
-            if self.incremental && self.apply_spheres_fat(true) == 0 {
+            if self.regime.is_some() && self.apply_spheres_fat(true) == 0 {
                 return;
             }
             for s in 0..slots {
@@ -86,7 +87,7 @@ impl BroadPhase {
                     bits,
                 );
             }
-            if self.incremental && self.apply_spheres_fat(false) == 0 {
+            if self.regime.is_some() && self.apply_spheres_fat(false) == 0 {
                 return;
             }
             for i in 0..self.movers.len() {
@@ -109,12 +110,11 @@ impl BroadPhase {
         match self.store.shape[s] {
             Shape::Sphere { center, radius } => {
                 let grown = fat::grown_sphere(center, radius, self.config.margin);
-                if self.incremental {
-                    let old = self.store.exact[s];
+                if let Some(r) = &mut self.regime {
+                    let old = core::mem::replace(&mut r.exact[s], grown.aabb);
                     let motion = self.note_motion(s, &old, &grown.aabb);
-                    self.store.exact[s] = grown.aabb;
                     if self.refresh_fat(slot, &grown.aabb, motion) {
-                        slack::settle(&mut self.store, &mut self.loud, slot);
+                        self.settle(slot);
                     }
                 } else {
                     // The octree's record holds the exact box it was last applied at.
@@ -128,13 +128,12 @@ impl BroadPhase {
             }
             shape @ Shape::Body { kind, .. } => {
                 let exact = fat::grown(shape, self.config.margin).aabb;
-                // The store keeps every body's exact box (see `Store::exact`).
-                let old = self.store.exact[s];
+                // Every body's exact box is kept (see `Incremental`).
+                let old = core::mem::replace(&mut self.kept_exact_mut()[s], exact);
                 let motion = self.note_motion(s, &old, &exact);
-                self.store.exact[s] = exact;
-                if self.incremental {
+                if self.regime.is_some() {
                     if self.refresh_fat(slot, &exact, motion) {
-                        slack::settle(&mut self.store, &mut self.loud, slot);
+                        self.settle(slot);
                     }
                 } else {
                     let key = self.store.key(slot);
@@ -155,13 +154,16 @@ impl BroadPhase {
     fn apply_spheres_fat(&mut self, dense: bool) -> usize {
         let (margin, now) = (self.config.margin, self.now);
         let first_escape = self.escaped.len();
+        let Some(r) = &mut self.regime else {
+            return self.stale;
+        };
         let (st, loud, escaped) = (&mut self.store, &mut self.loud, &mut self.escaped);
         // The motion is not counted: only the estimate outside the regime reads it.
         let rest = if dense {
-            fat_walk(0..st.slots(), st, loud, escaped, margin, now)
+            fat_walk(0..st.slots(), st, r, loud, escaped, margin, now)
         } else {
             let movers = self.movers.iter().map(|&m| m as usize);
-            fat_walk(movers, st, loud, escaped, margin, now)
+            fat_walk(movers, st, r, loud, escaped, margin, now)
         };
         for i in first_escape..self.escaped.len() {
             // The walk left an escaped sphere's exact box, speed and stamp as they were: its
@@ -169,9 +171,8 @@ impl BroadPhase {
             let slot = self.escaped[i];
             let s = slot as usize;
             let new = self.exact_box(&self.store.shape[s]);
-            let old = self.store.exact[s];
+            let old = core::mem::replace(&mut self.kept_exact_mut()[s], new);
             let motion = self.note_motion(s, &old, &new);
-            self.store.exact[s] = new;
             self.hold_moving(slot, motion);
         }
         rest
@@ -193,7 +194,7 @@ impl BroadPhase {
         use rayon::prelude::*;
         let slots = self.store.slots();
         let threads = rayon::current_num_threads();
-        if self.incremental
+        if self.regime.is_some()
             || threads < 2
             || self.octree.len() < super::step::PARALLEL_MIN_SPHERES
             || self.stale < slots / DENSE_FRACTION
@@ -309,16 +310,16 @@ impl BroadPhase {
 fn fat_walk(
     slots: impl Iterator<Item = usize>,
     st: &mut super::store::Store,
+    r: &mut Incremental,
     loud: &mut Vec<u32>,
     escaped: &mut Vec<u32>,
     margin: f32,
     now: u32,
 ) -> usize {
     let n = st.slots();
-    let (flags, shape) = (&mut st.flags[..n], &st.shape[..n]);
-    let (exact, stamp) = (&mut st.exact[..n], &mut st.stamp[..n]);
-    let (held, anchor) = (&st.held[..n], &mut st.anchor[..n]);
-    let slk = &mut st.slack[..n];
+    let (flags, shape, stamp) = (&mut st.flags[..n], &st.shape[..n], &mut st.stamp[..n]);
+    let (exact, held) = (&mut r.exact[..n], &r.held[..n]);
+    let (anchor, slk) = (&mut r.anchor[..n], &mut r.slack[..n]);
     let mut rest = 0;
     for s in slots {
         let f = flags[s];

@@ -160,13 +160,13 @@ impl BroadPhase {
         }
         match self.config.passes {
             Passes::Full => return Pass::Full,
-            Passes::Incremental if self.incremental => return Pass::Incremental,
+            Passes::Incremental if self.regime.is_some() => return Pass::Incremental,
             Passes::Incremental => return Pass::FullFat,
             Passes::Adaptive => {}
         }
         let n = self.store.len() as f64;
         let full = n * unit::FULL + self.pairs.len() as f64 * unit::FULL_PAIR;
-        if self.incremental {
+        if self.regime.is_some() {
             // Leaving drops the candidates, which a later return rebuilds with a full pass of
             // its own: a single step over the full pass's cost (a burst of escapes) does not
             // leave, two in a row do, and so does one step far over it (a world waking up).
@@ -211,8 +211,8 @@ impl BroadPhase {
         // In the regime the candidates are counted; outside it fat boxes are taken to double
         // the pairs, more where fast movers would get wide ones (their margin over their
         // size, summed, per proxy, times [`CANDIDATES_PER_MARGIN`]).
-        let cands = if self.incremental {
-            self.cand.len() as f64
+        let cands = if let Some(r) = &self.regime {
+            r.cand.len() as f64
         } else {
             let wide = self.motion.fast_margin / n * CANDIDATES_PER_MARGIN;
             2.0 * self.pairs.len() as f64 * (1.0 + wide)

@@ -172,7 +172,11 @@ impl BroadPhase {
     /// along its `motion` per step, which its structure holds from now on (false).
     #[inline]
     pub(super) fn refresh_fat(&mut self, slot: u32, exact: &SimdBox, motion: Vec3A) -> bool {
-        if self.store.held[slot as usize].contains(exact) {
+        let still_in = self
+            .regime
+            .as_ref()
+            .is_some_and(|r| r.held[slot as usize].contains(exact));
+        if still_in {
             self.mark(slot, flag::MOVED);
             true
         } else {
@@ -182,27 +186,32 @@ impl BroadPhase {
         }
     }
 
-    /// Gives `slot` a new held box (its exact box, or with `fat` a fat box around it) and
-    /// writes it to the slot's structure.
+    /// Gives `slot` a new held box (in the incremental regime a fat box around its exact
+    /// box, else the exact box) and writes it to the slot's structure.
     #[inline]
-    pub(super) fn hold(&mut self, slot: u32, fat: bool) {
-        self.hold_held(slot, fat, Vec3A::ZERO);
+    pub(super) fn hold(&mut self, slot: u32) {
+        self.hold_held(slot, Vec3A::ZERO);
     }
 
     /// Gives `slot` a new fat box stretched along its `motion` per step (see
     /// [`BroadPhase::held_shape`]) and writes it to the slot's structure.
     #[inline]
     pub(super) fn hold_moving(&mut self, slot: u32, motion: Vec3A) {
-        self.hold_held(slot, true, motion);
+        self.hold_held(slot, motion);
     }
 
     /// [`BroadPhase::hold`] and [`BroadPhase::hold_moving`]: the held shape of
     /// [`BroadPhase::held_shape`], written to the store and the slot's structure.
     #[inline]
-    fn hold_held(&mut self, slot: u32, fat: bool, motion: Vec3A) {
+    fn hold_held(&mut self, slot: u32, motion: Vec3A) {
         let s = slot as usize;
-        let held = self.held_shape(slot, fat, motion);
-        self.store.set_held(s, held.aabb);
+        let held = self.held_shape(slot, motion);
+        let fat = if let Some(r) = &mut self.regime {
+            r.held[s] = held.aabb;
+            true
+        } else {
+            false
+        };
         let key = self.store.key(slot);
         // The key is live: the structures hold every live proxy under its key.
         let placed = match self.store.shape[s] {
@@ -244,20 +253,10 @@ impl BroadPhase {
         grown(self.store.shape[slot as usize], self.config.margin)
     }
 
-    /// Fills the exact box of every live slot, on entering the incremental regime (outside it
-    /// the store does not keep them); every slot is applied.
-    pub(super) fn fill_exact(&mut self) {
-        self.store.grow_incremental();
-        for s in 0..self.store.slots() {
-            if self.store.kind[s] != super::store::Kind::Free {
-                self.store.exact[s] = self.exact_box(&self.store.shape[s]);
-            }
-        }
-    }
-
-    /// What `slot`'s structure should hold: its exact box, or with `fat` one grown by a
-    /// margin sized by the slot's speed. A sphere is held as a sphere of the same centre and
-    /// a larger radius, whose box contains the exact one (rounding is monotone).
+    /// What `slot`'s structure should hold: outside the incremental regime its exact box, in
+    /// it one grown by a margin sized by the slot's speed. A sphere is held as a sphere of the
+    /// same centre and a larger radius, whose box contains the exact one (rounding is
+    /// monotone).
     ///
     /// With a `motion` per step (non-zero only for a proxy that just left its fat box) whose
     /// speed outgrows the smallest margin, the fat box is the one swept over
@@ -266,12 +265,12 @@ impl BroadPhase {
     /// (centred half-way along it, its radius grown by half the sweep's length). Where
     /// rounding would leave the exact box outside it, the centred box is held.
     #[inline]
-    pub(super) fn held_shape(&self, slot: u32, fat: bool, motion: Vec3A) -> Held {
+    pub(super) fn held_shape(&self, slot: u32, motion: Vec3A) -> Held {
         let s = slot as usize;
-        if !fat {
+        let Some(r) = &self.regime else {
             return self.exact_shape(slot);
-        }
-        let exact = self.store.exact[s];
+        };
+        let exact = r.exact[s];
         let margin = if self.config.skin > 0.0 {
             self.config.skin
         } else {
@@ -478,8 +477,8 @@ mod tests {
             }
             bp.step();
             bp.validate();
-            entries += usize::from(bp.incremental && !was_incremental);
-            was_incremental = bp.incremental;
+            entries += usize::from(bp.regime.is_some() && !was_incremental);
+            was_incremental = bp.regime.is_some();
         }
         assert!(
             entries >= 2,

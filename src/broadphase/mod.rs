@@ -12,7 +12,8 @@
 //! it pairs with; [`config`] the settings; [`fat`] the fat-box layer (motion, fat boxes, the
 //! marks a step reads); [`slack`] what the incremental pass need not re-test; [`gapped`] the
 //! lists it patches; [`packed`] the packed pair the passes share; [`cost`] the cost model;
-//! [`step`] the passes; [`query`], [`snapshot`] (serde) and [`validate`] (the invariants).
+//! [`step`] the passes; [`regime`] the incremental regime's state as a type, its entry and
+//! its exit; [`query`], [`snapshot`] (serde) and [`validate`] (the invariants).
 
 mod apply;
 mod config;
@@ -21,6 +22,7 @@ mod fat;
 mod gapped;
 mod packed;
 mod query;
+mod regime;
 mod shape;
 mod slack;
 #[cfg(feature = "serde")]
@@ -108,7 +110,10 @@ pub struct StepStats {
 ///
 /// Its cost follows what moved. While the structures hold fat boxes and the candidates are
 /// kept, the broadphase is in the *incremental regime*; a full pass over fat boxes enters it
-/// and a full pass over exact boxes leaves it. Each step estimates both costs from what it is
+/// and a full pass over exact boxes leaves it. The regime is one value that exists only while
+/// the broadphase is in it (the candidates, their reverse index, the fat boxes, the anchors
+/// and slacks, and every proxy's exact box; outside it a sphere's exact box is the one its
+/// octree record holds). Each step estimates both costs from what it is
 /// about to do (movers, escapes, candidates) and runs the cheaper pass ([`Passes`]), so the
 /// cost never jumps when a world wakes up or settles; [`StepStats::pass`] says which ran.
 /// Outside the regime the estimate reads the motion just applied, not how many proxies were
@@ -123,9 +128,10 @@ pub struct BroadPhase {
     config: Config,
     store: Store,
     /// The spheres, under their keys, each at its exact box (in the incremental regime, its
-    /// fat box `store.held`).
+    /// fat box [`Incremental::held`](regime::Incremental::held)).
     octree: Octree,
-    /// The dynamic and the static bodies, under their keys, each holding its `store.held` box.
+    /// The dynamic and the static bodies, under their keys, each at its exact box (in the
+    /// incremental regime, its fat box).
     dynamic: Bvh,
     statics: Bvh,
     /// A body's held box changed (or one was inserted or removed) since the tree's last refit.
@@ -133,8 +139,11 @@ pub struct BroadPhase {
     statics_changed: bool,
     /// Dynamic bodies given a new fat box since the dynamic tree's last refit.
     dynamic_escapes: usize,
-    /// True while the structures hold fat boxes and `cand` is complete.
-    incremental: bool,
+    /// The incremental regime's state, while the broadphase is in it (see
+    /// [`regime::Incremental`]).
+    regime: Option<regime::Incremental>,
+    /// The buffers of the regime last left, kept for the next entry.
+    spare: regime::Incremental,
     /// True once any proxy was given groups other than the default: until then the pair
     /// passes skip the groups test.
     any_groups: bool,
@@ -156,21 +165,6 @@ pub struct BroadPhase {
     removals: usize,
     /// The motion of the proxies applied this step, for the pass estimate.
     motion: fat::Motion,
-    /// Candidate pairs (packed slot pairs, `HIT` set if their exact boxes overlapped at the
-    /// last step), sorted.
-    cand: gapped::Gapped<u64>,
-    /// The candidates' reverse index: `(higher slot, lower slot)` of each, sorted, so that a
-    /// proxy's lower partners are found without a scan. Kept only while the incremental pass
-    /// finds the loud proxies' candidates through it (see `rev_stale`).
-    rev: gapped::Gapped<u64>,
-    /// True while `rev` is not the candidates' reverse index: a step that scans the
-    /// candidates instead of looking them up leaves it, and the next lookup builds it again.
-    rev_stale: bool,
-    /// Where each proxy's candidates were last found in `cand` and `rev`: the lookups start
-    /// there.
-    hints: slack::Hints,
-    /// The incremental pass's list patches.
-    patch: slack::Patch,
     /// Scratch of the passes: new candidates or pairs (a full pass's sorted pairs until they
     /// replace the key pairs), sort buffer, events.
     fresh: Vec<u64>,
@@ -242,7 +236,8 @@ impl BroadPhase {
             dynamic_changed: false,
             statics_changed: false,
             dynamic_escapes: 0,
-            incremental: false,
+            regime: None,
+            spare: regime::Incremental::default(),
             any_groups: false,
             movers: Vec::new(),
             stale: 0,
@@ -253,11 +248,6 @@ impl BroadPhase {
             pending: Vec::new(),
             removals: 0,
             motion: fat::Motion::default(),
-            cand: gapped::Gapped::default(),
-            rev: gapped::Gapped::default(),
-            rev_stale: false,
-            hints: slack::Hints::default(),
-            patch: slack::Patch::default(),
             fresh: Vec::new(),
             sort_buf: Vec::new(),
             added_packed: Vec::new(),
@@ -323,12 +313,13 @@ impl BroadPhase {
                     + self.pending.capacity(),
                 4,
             )
-            + self.patch.heap_bytes()
-            + self.hints.heap_bytes()
+            + self
+                .regime
+                .as_ref()
+                .map_or(0, regime::Incremental::heap_bytes)
+            + self.spare.heap_bytes()
             + v(
-                self.cand.capacity()
-                    + self.rev.capacity()
-                    + self.fresh.capacity()
+                self.fresh.capacity()
                     + self.sort_buf.capacity()
                     + self.added_packed.capacity()
                     + self.removed_packed.capacity(),
@@ -358,7 +349,10 @@ impl BroadPhase {
     /// A hint: room the allocator cannot give is not reserved (no error, no panic).
     pub fn reserve(&mut self, spheres: usize, bodies: usize) {
         let additional = spheres.saturating_add(bodies).min(MAX_PROXIES);
-        self.store.reserve(additional);
+        let slots = self.store.reserve(additional);
+        if let Some(r) = &mut self.regime {
+            r.reserve(slots);
+        }
         // Every insert is listed as moved and escaped until the next step.
         for list in [&mut self.movers, &mut self.escaped] {
             crate::radix::try_grow_to(list, list.len() + additional);
@@ -413,14 +407,10 @@ impl BroadPhase {
     }
 
     fn insert(&mut self, shape: Shape, groups: CollisionGroups) -> Result<ProxyKey, Error> {
-        let exact = self.exact_box(&shape);
         if self.octree.len() + self.dynamic.len() + self.statics.len() >= MAX_PROXIES {
             return Err(Error::Full);
         }
-        let slot = self
-            .store
-            .alloc(shape, exact, self.now)
-            .ok_or(Error::Full)?;
+        let slot = self.store.alloc(shape, self.now).ok_or(Error::Full)?;
         if groups != CollisionGroups::ALL {
             self.store.set_group(slot as usize, groups);
             self.any_groups = true;
@@ -429,16 +419,16 @@ impl BroadPhase {
         Ok(self.store.key(slot))
     }
 
-    /// Puts the new live proxy in `slot` (its shape stored, and its exact box where the store
-    /// keeps them, see [`Store::alloc`]) into its structure
-    /// under its key, holding its exact box, or a fat one in the incremental regime, and marks
-    /// it for the next step to find its pairs. [`BroadPhase::insert`] and a snapshot's restore
-    /// both place proxies here.
+    /// Puts the new live proxy in `slot` (its shape stored) into its structure under its key,
+    /// holding its exact box, or a fat one in the incremental regime, keeps its exact box
+    /// where [`regime::Incremental`] says, and marks it for the next step to find its pairs.
+    /// [`BroadPhase::insert`] and a snapshot's restore both place proxies here.
     fn place(&mut self, slot: u32) {
         let key = self.store.key(slot);
-        let held = self.held_shape(slot, self.incremental, glam::Vec3A::ZERO);
-        if self.incremental {
-            self.store.set_held(slot as usize, held.aabb);
+        self.keep_exact(slot, self.exact_box(&self.store.shape[slot as usize]));
+        let held = self.held_shape(slot, glam::Vec3A::ZERO);
+        if let Some(r) = &mut self.regime {
+            r.held[slot as usize] = held.aabb;
         }
         match self.store.shape[slot as usize] {
             Shape::Sphere { center, .. } => self.octree.insert_checked(key, center, held.radius),
@@ -694,7 +684,7 @@ impl BroadPhase {
         // at its end, the caller), and the split phases inside it (the apply's, the pass's)
         // start on a worker that is already awake.
         #[cfg(feature = "parallel")]
-        if self.tasks() >= 2 && !self.incremental {
+        if self.tasks() >= 2 && self.regime.is_none() {
             rayon::scope(|_| self.step_in());
             return;
         }

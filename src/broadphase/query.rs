@@ -135,12 +135,12 @@ impl BroadPhase {
         }
         let q = SimdBox::new(aabb);
         // Outside the incremental regime the structures hold the exact boxes, which their
-        // walks have tested; inside it they hold fat ones.
-        let incremental = self.incremental;
+        // walks have tested; inside it they hold fat ones, and the regime the exact boxes.
+        let exact = self.regime.as_ref().map(|r| &r.exact[..]);
         let mut test = |k: ProxyKey| {
             let s = crate::pair::slot(k) as usize;
             if !self.is_stale(s)
-                && (!incremental || self.store.exact[s].overlaps(&q))
+                && exact.is_none_or(|e| e[s].overlaps(&q))
                 && self.passes(filter, k, s)
             {
                 f(k)

@@ -36,7 +36,8 @@
 use super::BroadPhase;
 use super::gapped::Scratch;
 use super::packed::{HIT, keys_into, pack_pair, sort_scratch, unpack};
-use super::store::{Store, flag};
+use super::regime::Incremental;
+use super::store::flag;
 use crate::geom::SimdBox;
 use crate::radix::{PairBits, sort_bits_by, sort_u64, sort_u64_kept};
 use glam::Vec3A;
@@ -303,20 +304,24 @@ impl BroadPhase {
     /// as their updates were applied ([`settle`]). A loud proxy is re-anchored at its exact
     /// box.
     pub(super) fn classify(&mut self) {
-        let (st, loud) = (&mut self.store, &mut self.loud);
+        let Some(r) = &mut self.regime else {
+            return;
+        };
+        let (flags, loud) = (&mut self.store.flags[..], &mut self.loud);
         for &p in &self.pending {
             let s = p as usize;
-            st.flags[s] &= !flag::PENDING;
-            if st.flags[s] & (flag::GONE | flag::LOUD) == 0 {
-                make_loud(st, loud, p);
+            flags[s] &= !flag::PENDING;
+            if flags[s] & (flag::GONE | flag::LOUD) == 0 {
+                make_loud(flags, r, loud, p);
             }
         }
         self.pending.clear();
         // The movers that stayed in their fat boxes were classified as their updates were
-        // applied ([`settle`]); every other mover escaped (or was inserted, or changed groups).
+        // applied ([`BroadPhase::settle`]); every other mover escaped (or was inserted, or
+        // changed groups).
         for &e in &self.escaped {
-            if st.flags[e as usize] & (flag::GONE | flag::LOUD) == 0 {
-                make_loud(st, loud, e);
+            if flags[e as usize] & (flag::GONE | flag::LOUD) == 0 {
+                make_loud(flags, r, loud, e);
             }
         }
     }
@@ -324,20 +329,23 @@ impl BroadPhase {
     /// Every live proxy anchored at its exact box, its slack the least over its candidates,
     /// and the candidates' reverse index: after a pass that found and tested every candidate.
     pub(super) fn anchor_all(&mut self) {
+        let Some(r) = &mut self.regime else {
+            return;
+        };
         let st = &mut self.store;
-        st.grow_incremental();
+        r.fit(st.slots());
         for s in 0..st.slots() {
-            st.anchor[s] = st.exact[s];
-            st.slack[s] = f32::MAX;
+            r.anchor[s] = r.exact[s];
+            r.slack[s] = f32::MAX;
             st.flags[s] &= !flag::DRIFTED;
         }
-        for &c in self.cand.iter() {
+        for &c in r.cand.iter() {
             let (a, b) = unpack(c & !HIT);
-            let s = slack(&st.exact[a], &st.exact[b]);
-            st.slack[a] = st.slack[a].min(s);
-            st.slack[b] = st.slack[b].min(s);
+            let s = slack(&r.exact[a], &r.exact[b]);
+            r.slack[a] = r.slack[a].min(s);
+            r.slack[b] = r.slack[b].min(s);
         }
-        hint_firsts(&mut self.hints.cand, st.slots(), &self.cand);
+        hint_firsts(&mut r.hints.cand, st.slots(), &r.cand);
         self.rebuild_rev();
         self.clear_pending();
     }
@@ -345,10 +353,13 @@ impl BroadPhase {
     /// Builds the reverse index from the candidates: on entering the regime, and after steps
     /// that left it.
     fn rebuild_rev(&mut self) {
-        let cand = &self.cand;
+        let Some(r) = &mut self.regime else {
+            return;
+        };
+        let cand = &r.cand;
         let layout = PairBits::for_slots(self.store.slots());
         let scratch = sort_scratch(&mut self.octree, &mut self.sort_buf);
-        self.rev.refill(cand.len(), 0, |list| {
+        r.rev.refill(cand.len(), 0, |list| {
             let at = list.len();
             list.extend(cand.iter().map(|&c| {
                 let (a, b) = unpack(c & !HIT);
@@ -356,8 +367,8 @@ impl BroadPhase {
             }));
             sort_u64_kept(&mut list[at..], scratch, layout);
         });
-        self.rev_stale = false;
-        hint_firsts(&mut self.hints.rev, self.store.slots(), &self.rev);
+        r.rev_stale = false;
+        hint_firsts(&mut r.hints.rev, self.store.slots(), &r.rev);
     }
 
     /// Forgets the pending marks (the candidates they were about are gone).
@@ -376,12 +387,15 @@ impl BroadPhase {
     /// the pair list and the key pairs in place with the changes, which are this step's
     /// `added` and `removed`. Every other candidate keeps its last outcome untouched.
     pub(super) fn update_candidates(&mut self) {
+        let Some(r) = &mut self.regime else {
+            return;
+        };
         let visits = self.loud.len() + self.store.freed().len();
-        let lookup = visits * CANDIDATES_PER_LOOKUP < self.cand.len();
-        if lookup && self.rev_stale {
+        let lookup = visits * CANDIDATES_PER_LOOKUP < r.cand.len();
+        r.patch.clear();
+        if lookup && r.rev_stale {
             self.rebuild_rev();
         }
-        self.patch.clear();
         if lookup {
             self.touched_by_lookup();
         } else {
@@ -394,10 +408,13 @@ impl BroadPhase {
     /// Lists in `patch.touched`, sorted and each once, the candidates of the loud and removed
     /// proxies, looked up through the candidates and their reverse index from the hints.
     fn touched_by_lookup(&mut self) {
-        let p = &mut self.patch;
-        let (cand, rev) = (&self.cand[..], &self.rev[..]);
+        let Some(r) = &mut self.regime else {
+            return;
+        };
+        let p = &mut r.patch;
+        let (cand, rev) = (&r.cand[..], &r.rev[..]);
         let key_at = |i: usize| cand[i] & !HIT;
-        let hints = &mut self.hints;
+        let hints = &mut r.hints;
         // A proxy inserted since the hints were last set has none yet.
         fit(&mut hints.cand, self.store.slots());
         fit(&mut hints.rev, self.store.slots());
@@ -444,8 +461,11 @@ impl BroadPhase {
 
     /// [`BroadPhase::touched_by_lookup`] by one scan of every candidate.
     fn touched_by_scan(&mut self) {
-        let p = &mut self.patch;
-        let cand = &self.cand[..];
+        let Some(r) = &mut self.regime else {
+            return;
+        };
+        let p = &mut r.patch;
+        let cand = &r.cand[..];
         // In the candidates' order, each once: a mask per 64 candidates, built without a
         // branch (whether a side is loud is a coin toss when many are), then its bits.
         let flags = &self.store.flags;
@@ -467,10 +487,12 @@ impl BroadPhase {
     /// sorted) in one walk, noting in `patch` the candidates that go and come, and in the
     /// packed `added` / `removed` the pairs whose status changed; returns the pairs tested.
     fn retest(&mut self) -> usize {
-        let p = &mut self.patch;
-        let st = &mut self.store;
-        let (flags, exact, anchor) = (&mut st.flags, &st.exact, &st.anchor);
-        let slk = &mut st.slack;
+        let Some(r) = &mut self.regime else {
+            return 0;
+        };
+        let p = &mut r.patch;
+        let (flags, exact, anchor) = (&mut self.store.flags, &r.exact, &r.anchor);
+        let slk = &mut r.slack;
         let pending = &mut self.pending;
         let (added, removed) = (&mut self.added_packed, &mut self.removed_packed);
         added.clear();
@@ -497,7 +519,7 @@ impl BroadPhase {
             exact[a].overlaps(&exact[b])
         };
         let fresh = &self.fresh;
-        let cand: &mut [u64] = &mut self.cand;
+        let cand: &mut [u64] = &mut r.cand;
         let mut j = 0;
         // Where the next new candidate can sort from: past the last touched candidate (one
         // equal to it was that candidate found again).
@@ -550,13 +572,16 @@ impl BroadPhase {
     /// Patches the candidates, their reverse index (while the lookups read it) and the key
     /// pairs with what [`BroadPhase::retest`] noted, and maps the events to keys.
     fn patch_lists(&mut self, lookup: bool) {
-        let p = &mut self.patch;
+        let Some(r) = &mut self.regime else {
+            return;
+        };
+        let p = &mut r.patch;
         let (added, removed) = (&self.added_packed, &self.removed_packed);
         // The reverse index, kept while the lookups read it: a dropped candidate's entry
         // goes, a new one's comes. A step that scanned leaves it (moving most of its entries
         // costs about what rebuilding it does, and many loud proxies scan step after step).
         if lookup {
-            let rev = &mut self.rev;
+            let rev = &mut r.rev;
             let layout = PairBits::for_slots(self.store.slots());
             sort_keys(&mut p.rev_keys, &mut p.keys_tmp, layout);
             for &e in &p.rev_keys {
@@ -572,9 +597,9 @@ impl BroadPhase {
             }
             rev.patch(&p.rev_gone, &p.rev_at, &p.rev_new, &mut p.scratch);
         } else {
-            self.rev_stale = true;
+            r.rev_stale = true;
         }
-        self.cand
+        r.cand
             .patch(&p.cand_gone, &p.cand_at, &p.cand_new, &mut p.scratch);
 
         // The key pairs: the changed pairs' places in the old list, which is in the packed
@@ -610,18 +635,23 @@ fn insert_new(
     hit
 }
 
-/// Classifies the mover `slot`, whose new exact box still lies in its fat box: quiet (flagged
-/// drifted) while it drifted less than half its slack, else loud.
-#[inline]
-pub(super) fn settle(st: &mut Store, loud: &mut Vec<u32>, slot: u32) {
-    let s = slot as usize;
-    if st.flags[s] & flag::LOUD != 0 {
-        return;
-    }
-    if stays_quiet(&st.exact[s], &st.anchor[s], st.slack[s]) {
-        st.flags[s] |= flag::DRIFTED;
-    } else {
-        make_loud(st, loud, slot);
+impl BroadPhase {
+    /// Classifies the mover `slot`, whose new exact box still lies in its fat box: quiet
+    /// (flagged drifted) while it drifted less than half its slack, else loud.
+    #[inline]
+    pub(super) fn settle(&mut self, slot: u32) {
+        let Some(r) = &mut self.regime else {
+            return;
+        };
+        let (s, flags) = (slot as usize, &mut self.store.flags[..]);
+        if flags[s] & flag::LOUD != 0 {
+            return;
+        }
+        if stays_quiet(&r.exact[s], &r.anchor[s], r.slack[s]) {
+            flags[s] |= flag::DRIFTED;
+        } else {
+            make_loud(flags, r, &mut self.loud, slot);
+        }
     }
 }
 
@@ -637,12 +667,12 @@ fn sort_keys(keys: &mut Vec<u64>, tmp: &mut Vec<u64>, layout: PairBits) {
 
 /// Marks `slot` loud and re-anchors it at its exact box; its slack is found again by the scan.
 #[inline]
-fn make_loud(st: &mut Store, loud: &mut Vec<u32>, slot: u32) {
+fn make_loud(flags: &mut [u8], r: &mut Incremental, loud: &mut Vec<u32>, slot: u32) {
     let s = slot as usize;
-    st.flags[s] = st.flags[s] & !flag::DRIFTED | flag::LOUD;
+    flags[s] = flags[s] & !flag::DRIFTED | flag::LOUD;
     loud.push(slot);
-    st.anchor[s] = st.exact[s];
-    st.slack[s] = f32::MAX;
+    r.anchor[s] = r.exact[s];
+    r.slack[s] = f32::MAX;
 }
 
 #[cfg(test)]

@@ -290,14 +290,6 @@ impl Snapshot {
         for (s, groups) in grouped {
             bp.store.set_group(s, groups);
         }
-        // Every body's exact box is kept (see `Store::exact`).
-        for s in 0..n {
-            if matches!(bp.store.kind[s], Kind::Dynamic | Kind::Static) {
-                let exact = bp.exact_box(&bp.store.shape[s]);
-                bp.store.keep_exact();
-                bp.store.exact[s] = exact;
-            }
-        }
         bp.removals = self.quarantine.len();
         bp.store.set_free_lists(self.free, self.quarantine, live);
         // Every live proxy enters its structure as `BroadPhase::insert` puts a new one there

@@ -129,7 +129,7 @@ impl BroadPhase {
         self.stats = StepStats {
             pass,
             updated,
-            escaped: if self.incremental { escaped } else { 0 },
+            escaped: if self.regime.is_some() { escaped } else { 0 },
             ..StepStats::default()
         };
         match pass {
@@ -148,7 +148,7 @@ impl BroadPhase {
         self.stats.dynamic_cost_ratio = d.0;
         self.stats.dynamic_rebuilds = d.1;
         self.stats.static_rebuilds = st.1;
-        self.stats.candidates = if self.incremental { self.cand.len() } else { 0 };
+        self.stats.candidates = self.regime.as_ref().map_or(0, |r| r.cand.len());
         for &s in &self.movers {
             self.store.flags[s as usize] &= !(flag::MOVED | flag::ESCAPED);
         }
@@ -157,7 +157,7 @@ impl BroadPhase {
         }
         self.loud.clear();
         self.movers.clear();
-        if !self.incremental {
+        if self.regime.is_none() {
             // Outside the incremental regime only inserts and regroups are listed as escaped:
             // the list gives back the room a burst of inserts (the first step's) left far
             // above that. Inside it the escapes swing from step to step, and it keeps its room.
@@ -173,14 +173,16 @@ impl BroadPhase {
     /// Grows the lists whose length swings from step to step ahead of their peaks, so that a
     /// world in steady state stops allocating after its first few swings.
     fn keep_headroom(&mut self) {
-        self.cand.ahead();
         ahead(&mut self.fresh);
         self.pairs.ahead();
         let n = self.store.len();
-        if self.incremental {
+        let mut cands = 0;
+        if let Some(r) = &mut self.regime {
+            r.cand.ahead();
             ahead(&mut self.loud);
             ahead(&mut self.pending);
-            self.patch.keep_headroom(n / PATCH_FLOOR);
+            r.patch.keep_headroom(n / PATCH_FLOOR);
+            cands = r.cand.len();
         }
         // A full pass finds every pair (or candidate) into `fresh` and sorts it there, diffs
         // the key pairs against it and refills them from it; the incremental steps fill
@@ -190,7 +192,7 @@ impl BroadPhase {
         // sort's second buffer may be the octree's walk order: each is sized exactly for the
         // spheres when they grow, so both are kept half again ahead of the pairs, and a pair
         // count near the sphere count does not cross the growth threshold at some later step.
-        let most = self.cand.len().max(self.pairs.len());
+        let most = cands.max(self.pairs.len());
         let scratch = sort_scratch(&mut self.octree, &mut self.sort_buf);
         for v in [&mut self.fresh, scratch] {
             if v.capacity() < most + most / 2 {
@@ -224,13 +226,21 @@ impl BroadPhase {
     /// sorted list in `fresh` replaces them.
     #[inline(always)]
     fn full_in(&mut self, fat: bool, tasks: usize) {
-        if fat && !self.incremental {
-            self.fill_exact();
+        // Entering or staying in the regime gives every proxy a new fat box; leaving it gives
+        // every proxy its exact box again.
+        let hold_all = fat || self.regime.is_some();
+        match (fat, self.regime.is_some()) {
+            (true, false) => self.enter_regime(),
+            (false, true) => {
+                self.leave_regime();
+                self.costs.over = false;
+            }
+            _ => {}
         }
-        if self.incremental || fat {
+        if hold_all {
             for s in 0..self.store.slots() as u32 {
                 if self.store.kind[s as usize] != Kind::Free {
-                    self.hold(s, fat);
+                    self.hold(s);
                 }
             }
         }
@@ -247,12 +257,12 @@ impl BroadPhase {
                 self.sort_fresh();
             }
         }
-        if fat {
+        if let Some(r) = &mut self.regime {
             // The candidates are copied out, and `fresh` keeps those whose exact boxes
             // overlap, in place and in order: the new pair list.
-            let (exact, fresh) = (&self.store.exact, &mut self.fresh);
+            let (exact, fresh) = (&r.exact, &mut self.fresh);
             let tested = fresh.len();
-            self.cand.refill(tested, 0, |cand| {
+            r.cand.refill(tested, 0, |cand| {
                 let mut hits = 0;
                 for i in 0..fresh.len() {
                     let c = fresh[i];
@@ -265,14 +275,6 @@ impl BroadPhase {
                 fresh.truncate(hits);
             });
             self.stats.candidates_tested = tested;
-            self.incremental = true;
-        } else {
-            self.cand.clear();
-            self.rev.clear();
-            self.rev_stale = false;
-            self.incremental = false;
-            self.costs.over = false;
-            self.clear_pending();
         }
         match tasks {
             #[cfg(feature = "parallel")]
@@ -422,13 +424,16 @@ impl BroadPhase {
     /// New candidates of each escaped proxy: every held box its own overlaps, in the octree
     /// and both BVHs (a static proxy skips the static BVH), that its groups allow.
     fn query_escaped(&mut self) {
+        let Some(r) = &self.regime else {
+            return;
+        };
         let (store, fresh, groups) = (&self.store, &mut self.fresh, self.any_groups);
         for &e in &self.escaped {
             let es = e as usize;
             if store.flags[es] & flag::GONE != 0 {
                 continue;
             }
-            let held = store.held[es].aabb();
+            let held = r.held[es].aabb();
             let mut push = |k: ProxyKey| {
                 let s = crate::pair::slot(k);
                 if s != e

@@ -63,23 +63,13 @@ pub(super) struct Store {
     pub(super) flags: Vec<u8>,
     /// The shape as the user gave it. 28 bytes per slot.
     pub(super) shape: Vec<Shape>,
-    /// The box pairs are computed on, the shape's box grown by `Config::margin` (for a stale
-    /// slot, the last applied one): kept for every body, and for spheres while the
-    /// incremental pass runs. Outside that regime the octree's record holds a sphere's exact
-    /// box, so it is not kept twice; a body's BVH leaf is a random access away from the
-    /// apply's walk, which reads the box it replaces. The array is allocated by the first body
-    /// or the regime's arrays ([`Store::set_held`]), so a world of spheres outside the regime
-    /// keeps none; a sphere's entry is filled on every entry into the regime. 32 bytes.
+    /// Outside the incremental regime, a body's exact box (the box pairs are computed on:
+    /// its shape's grown by `Config::margin`; for a stale slot, the last applied one); a
+    /// sphere's entry means nothing. Inside the regime this array is the regime's (see
+    /// [`Incremental`](super::regime::Incremental)) and this one is empty. Allocated by the
+    /// first body or the first entry into the regime, so a world of spheres that never
+    /// enters it keeps none. 32 bytes.
     pub(super) exact: Vec<SimdBox>,
-    /// The box its structure (octree or BVH) holds for it while the incremental pass runs: a
-    /// fat box around the exact one (outside that regime the structure holds the exact box and
-    /// this is stale, or not allocated yet: see [`Store::set_held`]). 32 bytes.
-    pub(super) held: Vec<SimdBox>,
-    /// While the incremental pass runs (allocated with `held`): the exact box when its
-    /// candidates were last tested. 32 bytes.
-    pub(super) anchor: Vec<SimdBox>,
-    /// The least slack of its candidates, from the anchors (metres, rounded down). 4 bytes.
-    pub(super) slack: Vec<f32>,
     /// Collision groups, [`CollisionGroups::ALL`] where not set. Allocated (for every slot)
     /// when the first other groups are set, so a world that sets none keeps none: read
     /// through [`Store::group`]. 8 bytes.
@@ -129,10 +119,10 @@ impl Store {
         ))
     }
 
-    /// Takes a slot for a new proxy, or `None` when every slot index is in use. Its exact box
-    /// `exact` is stored where [`Store::exact`] says; its groups start at
-    /// [`CollisionGroups::ALL`].
-    pub(super) fn alloc(&mut self, shape: Shape, exact: SimdBox, step: u32) -> Option<u32> {
+    /// Takes a slot for a new proxy, or `None` when every slot index is in use. Its groups
+    /// start at [`CollisionGroups::ALL`]; its exact box is the caller's to keep
+    /// (`BroadPhase::keep_exact`).
+    pub(super) fn alloc(&mut self, shape: Shape, step: u32) -> Option<u32> {
         let kind = match shape {
             Shape::Sphere { .. } => Kind::Sphere,
             Shape::Body {
@@ -170,15 +160,6 @@ impl Store {
         self.kind[s] = kind;
         self.flags[s] = 0;
         self.shape[s] = shape;
-        if !self.held.is_empty() {
-            // The incremental regime's arrays, once allocated, cover every slot.
-            self.grow_incremental();
-            self.held[s] = exact;
-        }
-        if kind != Kind::Sphere || !self.exact.is_empty() {
-            self.keep_exact();
-            self.exact[s] = exact;
-        }
         if let Some(g) = self.groups.get_mut(s) {
             *g = CollisionGroups::ALL;
         }
@@ -203,9 +184,9 @@ impl Store {
     }
 
     /// Reserves room, exactly, for `additional` more live slots than the free ones hold (at
-    /// most [`MAX_SLOTS`] in all); the incremental regime's arrays only if they are allocated.
-    /// A hint: room the allocator cannot give is not reserved.
-    pub(super) fn reserve(&mut self, additional: usize) {
+    /// most [`MAX_SLOTS`] in all), and returns the slots reserved for. A hint: room the
+    /// allocator cannot give is not reserved.
+    pub(super) fn reserve(&mut self, additional: usize) -> usize {
         let new = additional.saturating_sub(self.free.len());
         let want = (self.version.len() + new).min(MAX_SLOTS as usize);
         try_grow_to(&mut self.version, want);
@@ -220,11 +201,7 @@ impl Store {
         if !self.exact.is_empty() {
             try_grow_to(&mut self.exact, want);
         }
-        if !self.held.is_empty() {
-            try_grow_to(&mut self.held, want);
-            try_grow_to(&mut self.anchor, want);
-            try_grow_to(&mut self.slack, want);
-        }
+        want
     }
 
     /// Frees a live slot; it stays quarantined until [`Store::release_quarantine`].
@@ -269,17 +246,6 @@ impl Store {
         self.live = live;
     }
 
-    /// Sets the held box of slot `s`, growing `exact`, `held`, `anchor` and `slack` to
-    /// every slot first: they are filled only once the incremental regime is entered, so a world
-    /// that never enters it keeps none.
-    #[inline]
-    pub(super) fn set_held(&mut self, s: usize, b: SimdBox) {
-        if self.held.len() <= s {
-            self.grow_incremental();
-        }
-        self.held[s] = b;
-    }
-
     /// The collision groups of slot `s` ([`CollisionGroups::ALL`] unless set otherwise).
     #[inline]
     pub(super) fn group(&self, s: usize) -> CollisionGroups {
@@ -305,15 +271,6 @@ impl Store {
         self.exact.resize(n, SimdBox::EMPTY);
     }
 
-    /// Grows `exact`, `held`, `anchor` and `slack` to every slot.
-    pub(super) fn grow_incremental(&mut self) {
-        let n = self.version.len();
-        self.keep_exact();
-        self.held.resize(n, SimdBox::EMPTY);
-        self.anchor.resize(n, SimdBox::EMPTY);
-        self.slack.resize(n, 0.0);
-    }
-
     /// Heap bytes held (capacity, not length).
     pub(super) fn heap_bytes(&self) -> usize {
         let cap = |n: usize, one: usize| n * one;
@@ -322,8 +279,6 @@ impl Store {
             + cap(self.flags.capacity(), 1)
             + cap(self.shape.capacity(), core::mem::size_of::<Shape>())
             + cap(self.exact.capacity(), 32)
-            + cap(self.held.capacity() + self.anchor.capacity(), 32)
-            + cap(self.slack.capacity(), 4)
             + cap(self.groups.capacity(), 8)
             + cap(self.speed.capacity(), 4)
             + cap(self.stamp.capacity(), 4)
@@ -349,20 +304,19 @@ mod tests {
     use super::*;
     use crate::Vec3;
 
-    /// A unit sphere at the origin and its exact box.
-    fn unit_sphere() -> (Shape, SimdBox) {
-        let sphere = Shape::Sphere {
+    /// A unit sphere at the origin.
+    fn unit_sphere() -> Shape {
+        Shape::Sphere {
             center: Vec3::ZERO,
             radius: 1.0,
-        };
-        (sphere, SimdBox::from_center_radius(Vec3::ZERO, 1.0))
+        }
     }
 
     /// `reserve` sizes every per-slot array to exactly the slots asked for, counting free
     /// slots as room, and the allocations that fill them do not grow them.
     #[test]
     fn reserve_is_exact_and_counts_free_slots() {
-        let (sphere, exact) = unit_sphere();
+        let sphere = unit_sphere();
         let mut st = Store::default();
         st.reserve(100);
         let caps = |st: &Store| {
@@ -376,9 +330,7 @@ mod tests {
             ]
         };
         assert_eq!(caps(&st), [100; 6]);
-        let slots: Vec<u32> = (0..100)
-            .map(|_| st.alloc(sphere, exact, 0).unwrap())
-            .collect();
+        let slots: Vec<u32> = (0..100).map(|_| st.alloc(sphere, 0).unwrap()).collect();
         assert_eq!(caps(&st), [100; 6]);
         for &s in &slots[..10] {
             st.free(s);
@@ -388,7 +340,7 @@ mod tests {
         st.reserve(15);
         assert_eq!(caps(&st), [105; 6]);
         for _ in 0..15 {
-            st.alloc(sphere, exact, 1).unwrap();
+            st.alloc(sphere, 1).unwrap();
         }
         assert_eq!(caps(&st), [105; 6]);
         assert_eq!(st.len(), 105);
@@ -399,10 +351,10 @@ mod tests {
     /// reused one start at `ALL`.
     #[test]
     fn groups_are_allocated_by_the_first_other_than_all() {
-        let (sphere, exact) = unit_sphere();
+        let sphere = unit_sphere();
         let mut st = Store::default();
-        let a = st.alloc(sphere, exact, 0).unwrap();
-        let b = st.alloc(sphere, exact, 0).unwrap();
+        let a = st.alloc(sphere, 0).unwrap();
+        let b = st.alloc(sphere, 0).unwrap();
         st.set_group(a as usize, CollisionGroups::ALL);
         assert_eq!(st.groups.capacity(), 0);
         assert_eq!(st.group(b as usize), CollisionGroups::ALL);
@@ -416,12 +368,12 @@ mod tests {
             (st.group(a as usize), st.group(b as usize)),
             (CollisionGroups::ALL, g)
         );
-        let c = st.alloc(sphere, exact, 1).unwrap();
+        let c = st.alloc(sphere, 1).unwrap();
         assert_eq!(st.groups.len(), st.slots());
         assert_eq!(st.group(c as usize), CollisionGroups::ALL);
         st.free(b);
         st.release_quarantine();
-        let reused = st.alloc(sphere, exact, 2).unwrap();
+        let reused = st.alloc(sphere, 2).unwrap();
         assert_eq!(reused, b);
         assert_eq!(st.group(reused as usize), CollisionGroups::ALL);
     }

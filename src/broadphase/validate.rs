@@ -1,6 +1,7 @@
 //! The whole-structure invariant check of a [`BroadPhase`].
 
 use super::packed::{HIT, pack, pack_pair, unpack};
+use super::regime::Incremental;
 use super::slack::{distance, drift, slack};
 use super::store::{Kind, flag};
 use super::{BodyKind, BroadPhase, Pair, Shape};
@@ -39,8 +40,11 @@ impl BroadPhase {
         self.octree.validate();
         self.dynamic.validate();
         self.statics.validate();
-        if self.incremental && self.movers.is_empty() && self.removals == 0 {
-            self.validate_candidates();
+        if let Some(r) = &self.regime
+            && self.movers.is_empty()
+            && self.removals == 0
+        {
+            self.validate_candidates(r);
         }
         self.validate_pairs();
     }
@@ -63,23 +67,21 @@ impl BroadPhase {
         if is_stale {
             *stale += 1;
             assert_ne!(st.flags[s] & flag::MOVED, 0, "slot {s}: stale, not moved");
-        } else if self.incremental || st.kind[s] != Kind::Sphere {
+        } else if let Some(exact) = self.kept_exact(s) {
             assert_eq!(
-                st.exact[s],
+                exact,
                 self.exact_box(&st.shape[s]),
                 "slot {s}: exact box stale"
             );
         }
         let key = st.key(s as u32);
-        // Outside the incremental regime the structure holds the exact box, which the
-        // store keeps only inside it: a stale slot's, the last applied, is known only to
-        // its structure there.
-        let held = if self.incremental {
-            Some(st.held[s])
-        } else if is_stale {
-            None
-        } else {
-            Some(self.exact_box(&st.shape[s]))
+        // Outside the incremental regime the structure holds the exact box, which is kept
+        // elsewhere only for a body: a stale sphere's, the last applied, is known only to its
+        // structure there (and a stale body's is checked above).
+        let held = match &self.regime {
+            Some(r) => Some(r.held[s]),
+            None if is_stale => None,
+            None => Some(self.exact_box(&st.shape[s])),
         };
         let (home, held_there) = match st.shape[s] {
             Shape::Sphere { .. } => (0, self.octree.aabb(key)),
@@ -111,9 +113,9 @@ impl BroadPhase {
             1,
             "slot {s}: held by more than one structure"
         );
-        if self.incremental {
+        if let Some(r) = &self.regime {
             assert!(
-                st.held[s].contains(&st.exact[s]),
+                r.held[s].contains(&r.exact[s]),
                 "slot {s}: outside its fat box"
             );
         }
@@ -152,11 +154,11 @@ impl BroadPhase {
     /// With no change pending: the candidates are exactly the allowed pairs of overlapping
     /// held boxes (never static × static), sorted, and the pairs are the candidates marked
     /// overlapping.
-    fn validate_candidates(&self) {
+    fn validate_candidates(&self, r: &Incremental) {
         let st = &self.store;
         let mut fat: Vec<(SimdBox, u32)> = (0..st.slots())
             .filter(|&s| st.kind[s] != Kind::Free)
-            .map(|s| (st.held[s], s as u32))
+            .map(|s| (r.held[s], s as u32))
             .collect();
         fat.sort_by(|p, q| p.0.min.x.total_cmp(&q.0.min.x));
         let boxes: Vec<SimdBox> = fat.iter().map(|p| p.0).collect();
@@ -169,14 +171,14 @@ impl BroadPhase {
             }
         });
         want.sort_unstable();
-        let have: Vec<u64> = self.cand.iter().map(|&c| c & !HIT).collect();
+        let have: Vec<u64> = r.cand.iter().map(|&c| c & !HIT).collect();
         assert_eq!(have, want, "candidates are not the overlapping fat pairs");
-        if !self.rev_stale {
+        if !r.rev_stale {
             let mut rev: Vec<u64> = have.iter().map(|&c| c.rotate_right(32)).collect();
             rev.sort_unstable();
-            assert_eq!(rev, *self.rev, "the reverse index is not the candidates'");
+            assert_eq!(rev, *r.rev, "the reverse index is not the candidates'");
         }
-        let hits: Vec<u64> = self
+        let hits: Vec<u64> = r
             .cand
             .iter()
             .filter(|&&c| c & HIT != 0)
@@ -187,28 +189,28 @@ impl BroadPhase {
         for &c in &hits {
             let (a, b) = ((c >> 32) as usize, c as u32 as usize);
             assert!(
-                st.exact[a].overlaps(&st.exact[b]),
+                r.exact[a].overlaps(&r.exact[b]),
                 "a reported pair does not overlap"
             );
         }
-        self.validate_slack();
+        self.validate_slack(r);
     }
 
     /// With candidates and no change pending, the slack invariants (see `slack`): each live
     /// proxy that moved from its anchor is flagged drifted, and its drift is below half its
     /// slack (or it is pending); each candidate's slack at the anchors bounds both sides' slack, and unless a
     /// side is pending its recorded status is the status at the anchors.
-    fn validate_slack(&self) {
+    fn validate_slack(&self, r: &Incremental) {
         let st = &self.store;
         let pending = |s: usize| st.flags[s] & flag::PENDING != 0;
         for s in (0..st.slots()).filter(|&s| st.kind[s] != Kind::Free) {
-            let d = drift(&st.exact[s], &st.anchor[s]);
+            let d = drift(&r.exact[s], &r.anchor[s]);
             assert!(
-                st.flags[s] & flag::DRIFTED != 0 || distance(&st.exact[s], &st.anchor[s]) == 0.0,
+                st.flags[s] & flag::DRIFTED != 0 || distance(&r.exact[s], &r.anchor[s]) == 0.0,
                 "slot {s}: moved from its anchor, not flagged drifted"
             );
             assert!(
-                pending(s) || d == 0.0 || d + d < st.slack[s],
+                pending(s) || d == 0.0 || d + d < r.slack[s],
                 "slot {s}: drifted half its slack, not pending"
             );
             assert!(
@@ -216,16 +218,16 @@ impl BroadPhase {
                 "slot {s}: pending flag and list"
             );
         }
-        for &c in self.cand.iter() {
+        for &c in r.cand.iter() {
             let (a, b) = unpack(c & !HIT);
-            let s = slack(&st.anchor[a], &st.anchor[b]);
+            let s = slack(&r.anchor[a], &r.anchor[b]);
             assert!(
-                st.slack[a] <= s && st.slack[b] <= s,
+                r.slack[a] <= s && r.slack[b] <= s,
                 "slots {a}, {b}: slack above their candidate's"
             );
             if !pending(a) && !pending(b) {
                 assert_eq!(
-                    st.anchor[a].overlaps(&st.anchor[b]),
+                    r.anchor[a].overlaps(&r.anchor[b]),
                     c & HIT != 0,
                     "slots {a}, {b}: status at the anchors is not the recorded one"
                 );
