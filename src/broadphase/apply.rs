@@ -9,7 +9,7 @@
 //! slot's flags when many are stale, else the mover list, radix-sorted by slot when the
 //! caller's order was another), each given
 //! - its exact box (the shape grown by `Config::margin`) and its motion since it was last
-//!   applied (for its fat margin and the pass estimate: a key updated several times between
+//!   applied (for its skin and the pass estimate: a key updated several times between
 //!   two steps counts one move, from where it was applied last to its last shape);
 //! - its place in its structure: outside the incremental regime the exact box (a sphere
 //!   that changes node gets its node at once and its node lists later: the pass that

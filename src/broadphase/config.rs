@@ -23,8 +23,8 @@ pub struct Config {
     /// The dynamic bodies' BVH is rebuilt when its SAH cost after a refit exceeds this many
     /// times its cost at its last build; finite, `>= 1`.
     pub rebuild_threshold: f32,
-    /// A fixed fat-box margin in metres (finite, `>= 0`) instead of the adaptive one; 0 (the
-    /// default) lets every proxy's margin follow how far it moves per step. The pairs are the
+    /// A fixed skin in metres (finite, `>= 0`) instead of the adaptive one; 0 (the
+    /// default) lets every proxy's skin follow how far it moves per step. The pairs are the
     /// same either way; only the cost changes.
     pub skin: f32,
     /// Which passes a step may run: [`Passes::Adaptive`] (the default) picks the cheaper one
@@ -49,7 +49,7 @@ pub enum Passes {
 }
 
 impl Default for Config {
-    /// No region hint, loose placement, margin 0, rebuild threshold 1.5, adaptive fat margins
+    /// No region hint, loose placement, margin 0, rebuild threshold 1.5, adaptive skins
     /// (skin 0), adaptive passes.
     fn default() -> Self {
         Self {

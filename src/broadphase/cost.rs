@@ -49,7 +49,7 @@ mod unit {
 }
 
 /// The incremental regime is entered when its estimated cost is below this fraction of the
-/// full pass: the margin pays for the rebuild that enters it.
+/// full pass: the headroom pays for the rebuild that enters it.
 const ENTER_FRACTION: f64 = 0.8;
 /// The incremental regime is left at once, without waiting for a second step over the full
 /// pass's estimate, when a step's estimate is this many times the full pass's: a burst that
@@ -61,7 +61,7 @@ const LEAVE_AT_ONCE: f64 = 2.0;
 const SETTLING_LEAVE_AT_ONCE: f64 = 4.0;
 /// Before the incremental regime has run, a slow mover (one that stays in its fat box) is
 /// taken to re-test its candidates once in the steps it takes to drift half the smallest fat
-/// margin, `1/64` of its size (see `fat::MIN_MARGIN`): per step, its speed as a fraction of its
+/// skin, `1/64` of its size (see `fat::MIN_SKIN`): per step, its speed as a fraction of its
 /// size times this. Once the regime has run and been left, the estimate follows what it saw
 /// instead ([`Costs::loud_per_motion`]).
 const LOUD_PER_MOTION: f64 = 2.0 * 64.0;
@@ -77,10 +77,10 @@ const RELEARN_KEEP: f64 = 0.9;
 const ESCAPE_KEEP: f64 = 0.98;
 
 /// How many times more candidates than the doubled pairs a world gets per unit of its fast
-/// movers' mean fat margin over their size: a box grown by `m` of its size on every side
+/// movers' mean skin over their size: a box grown by `m` of its size on every side
 /// overlaps about `(1 + 2m)³` as many neighbours in a packed world; this is its slope near
-/// `m = 0.5`, the widest margin, which a landing's movers reach.
-const CANDIDATES_PER_MARGIN: f64 = 4.0;
+/// `m = 0.5`, the widest skin, which a landing's movers reach.
+const CANDIDATES_PER_SKIN: f64 = 4.0;
 
 /// What the cost estimates learn from the steps they watch.
 #[derive(Clone, Copy, Debug)]
@@ -209,12 +209,12 @@ impl BroadPhase {
     fn incremental_cost(&self, loud: f64, escapes: f64) -> f64 {
         let n = self.store.len().max(1) as f64;
         // In the regime the candidates are counted; outside it fat boxes are taken to double
-        // the pairs, more where fast movers would get wide ones (their margin over their
-        // size, summed, per proxy, times [`CANDIDATES_PER_MARGIN`]).
+        // the pairs, more where fast movers would get wide ones (their skin over their
+        // size, summed, per proxy, times [`CANDIDATES_PER_SKIN`]).
         let cands = if let Some(r) = &self.regime {
             r.cand.len() as f64
         } else {
-            let wide = self.motion.fast_margin / n * CANDIDATES_PER_MARGIN;
+            let wide = self.motion.fast_skin / n * CANDIDATES_PER_SKIN;
             2.0 * self.pairs.len() as f64 * (1.0 + wide)
         };
         let per_proxy = cands / n;

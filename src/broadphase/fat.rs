@@ -1,5 +1,5 @@
 //! The fat-box layer of the incremental regime: how far each proxy moves per step, the fat
-//! box its structure holds while the candidates are kept (a margin of a few steps of its own
+//! box its structure holds while the candidates are kept (a skin of a few steps of its own
 //! motion), and the marks that list the slots a step must look at.
 
 use super::store::flag;
@@ -8,7 +8,7 @@ use crate::geom::SimdBox;
 use crate::{Aabb, Vec3};
 use glam::Vec3A;
 
-/// A proxy's fat margin covers this many steps of its last measured motion.
+/// A proxy's skin covers this many steps of its last measured motion.
 pub(super) const LOOKAHEAD_STEPS: f32 = 3.0;
 /// A proxy that leaves its fat box while moving gets one stretched along its last motion:
 /// the box it would sweep over this many steps (times the jitter, see [`jitter`]) of that
@@ -20,7 +20,7 @@ pub(super) const PREDICT_STEPS: f32 = 6.0;
 /// Steps after entering the incremental regime in which two steps over the full pass's
 /// estimate do not leave it, and one leaves at once only much further over it:
 /// the entry gives every proxy a fat box at once, centred (no motion is known yet) with a
-/// margin of up to `2·LOOKAHEAD_STEPS` steps of its speed, so the fast movers leave them
+/// skin of up to `2·LOOKAHEAD_STEPS` steps of its speed, so the fast movers leave them
 /// within that many steps, together, in a burst that says nothing of the steps after it; the
 /// boxes they get then are swept along their motion and jittered, and their escapes spread
 /// out.
@@ -32,29 +32,29 @@ const PREDICT_SIDE_STEPS: f32 = 1.0;
 /// The longest predicted sweep, as a multiple of the box's largest extent (a teleport must
 /// not leave a long box behind).
 const MAX_PREDICT: f32 = 1.0;
-/// The smallest fat margin, as a fraction of the box's largest extent: resting proxies keep a
+/// The smallest skin, as a fraction of the box's largest extent: resting proxies keep a
 /// box this much larger than exact, so jitter does not make them escape.
-const MIN_MARGIN: f32 = 1.0 / 64.0;
-/// The largest fat margin, as a fraction of the box's largest extent: a teleport must not
+const MIN_SKIN: f32 = 1.0 / 64.0;
+/// The largest skin, as a fraction of the box's largest extent: a teleport must not
 /// leave a huge fat box behind.
-const MAX_MARGIN: f32 = 0.5;
+const MAX_SKIN: f32 = 0.5;
 
-/// The fat margin of a box of largest extent `size` moving `speed` metres per step.
+/// The skin of a box of largest extent `size` moving `speed` metres per step.
 #[inline]
-fn margin(speed: f32, size: f32) -> f32 {
-    clamp_margin(speed * LOOKAHEAD_STEPS, size)
+fn skin_for(speed: f32, size: f32) -> f32 {
+    clamp_skin(speed * LOOKAHEAD_STEPS, size)
 }
 
-/// A margin `m` for a box of largest extent `size`, kept between [`MIN_MARGIN`] and
-/// [`MAX_MARGIN`] of that extent.
+/// A skin `m` for a box of largest extent `size`, kept between [`MIN_SKIN`] and
+/// [`MAX_SKIN`] of that extent.
 #[inline]
-fn clamp_margin(m: f32, size: f32) -> f32 {
-    m.min(size * MAX_MARGIN).max(size * MIN_MARGIN)
+fn clamp_skin(m: f32, size: f32) -> f32 {
+    m.min(size * MAX_SKIN).max(size * MIN_SKIN)
 }
 
-/// A factor in `[1, 2)` on the fat margin, hashed from the slot and the step the box is made
+/// A factor in `[1, 2)` on the skin, hashed from the slot and the step the box is made
 /// at. Proxies given fat boxes in the same step at the same speed would otherwise all leave
-/// them in the same later step (a burst of queries); spread margins spread the escapes. A
+/// them in the same later step (a burst of queries); spread skins spread the escapes. A
 /// factor fixed per slot would give each proxy a fixed period in whole steps, and the
 /// proxies of equal periods would keep escaping together: hashing in the step redraws it at
 /// every new fat box.
@@ -83,7 +83,7 @@ fn speed_of(d: Vec3A) -> f32 {
 /// [`Motion::note`]).
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct Motion {
-    /// Movers that outgrow the smallest fat margin ([`outgrows_min_margin`]): in the
+    /// Movers that outgrow the smallest skin ([`outgrows_min_skin`]): in the
     /// incremental regime about one in [`PREDICT_STEPS`] of them would leave its fat box each
     /// step.
     pub(super) fast: usize,
@@ -93,21 +93,21 @@ pub(super) struct Motion {
     /// extent (per step): a slow mover re-tests its candidates about once in the steps it
     /// takes to drift half their least slack, so the loud movers of a step follow this sum.
     pub(super) slow_motion: f64,
-    /// Over the fast movers, the sum of each one's fat margin as a fraction of its size
+    /// Over the fast movers, the sum of each one's skin as a fraction of its size
     /// (times the jitter's mean of 1.5): how much larger than exact their fat boxes would be,
     /// which makes their candidates outnumber their pairs.
-    pub(super) fast_margin: f64,
+    pub(super) fast_skin: f64,
 }
 
 impl Motion {
     /// Counts a mover of box extent `size` moving `speed` metres per step.
     #[inline(always)]
     pub(super) fn note(&mut self, speed: f32, size: f32) {
-        if outgrows_min_margin(speed, size) {
+        if outgrows_min_skin(speed, size) {
             self.fast += 1;
-            // Fast, so `size` is 0 only where the margin is too: a point grows by nothing.
+            // Fast, so `size` is 0 only where the skin is too: a point grows by nothing.
             if size > 0.0 {
-                self.fast_margin += f64::from(1.5 * margin(speed, size) / size);
+                self.fast_skin += f64::from(1.5 * skin_for(speed, size) / size);
             }
         } else {
             self.slow += 1;
@@ -132,7 +132,7 @@ impl Motion {
             fast: self.fast + other.fast,
             slow: self.slow + other.slow,
             slow_motion: self.slow_motion + other.slow_motion,
-            fast_margin: self.fast_margin + other.fast_margin,
+            fast_skin: self.fast_skin + other.fast_skin,
         }
     }
 }
@@ -146,16 +146,16 @@ pub(super) fn displacement(old: &SimdBox, new: &SimdBox, stamp: u32, now: u32) -
     moved / steps as f32
 }
 
-/// True if a box of largest extent `size` moving `speed` per step gets a margin above the
+/// True if a box of largest extent `size` moving `speed` per step gets a skin above the
 /// smallest: it will leave its fat box every few steps.
 #[inline]
-pub(super) fn outgrows_min_margin(speed: f32, size: f32) -> bool {
-    speed * LOOKAHEAD_STEPS > size * MIN_MARGIN
+pub(super) fn outgrows_min_skin(speed: f32, size: f32) -> bool {
+    speed * LOOKAHEAD_STEPS > size * MIN_SKIN
 }
 
 impl BroadPhase {
     /// Records how far slot `s` moved per step since its last update (from the exact box it
-    /// was last applied at, `old`, to its new one, `exact`), for its fat margin and the pass
+    /// was last applied at, `old`, to its new one, `exact`), for its skin and the pass
     /// estimate, and returns that motion (see [`displacement`]).
     #[inline]
     pub(super) fn note_motion(&mut self, s: usize, old: &SimdBox, exact: &SimdBox) -> Vec3A {
@@ -254,12 +254,12 @@ impl BroadPhase {
     }
 
     /// What `slot`'s structure should hold: outside the incremental regime its exact box, in
-    /// it one grown by a margin sized by the slot's speed. A sphere is held as a sphere of the
+    /// it one grown by a skin sized by the slot's speed. A sphere is held as a sphere of the
     /// same centre and a larger radius, whose box contains the exact one (rounding is
     /// monotone).
     ///
     /// With a `motion` per step (non-zero only for a proxy that just left its fat box) whose
-    /// speed outgrows the smallest margin, the fat box is the one swept over
+    /// speed outgrows the smallest skin, the fat box is the one swept over
     /// [`PREDICT_STEPS`] of that motion instead, grown on every side by
     /// [`PREDICT_SIDE_STEPS`] of the speed; a sphere is held as the sphere around that sweep
     /// (centred half-way along it, its radius grown by half the sweep's length). Where
@@ -271,22 +271,22 @@ impl BroadPhase {
             return self.exact_shape(slot);
         };
         let exact = r.exact[s];
-        let margin = if self.config.skin > 0.0 {
+        let skin = if self.config.skin > 0.0 {
             self.config.skin
         } else {
             let resting = self.now.wrapping_sub(self.store.stamp[s]) > 1;
             let speed = if resting { 0.0 } else { self.store.speed[s] };
             let size = exact.extent().max_element();
             let j = jitter(slot, self.now);
-            if motion != Vec3A::ZERO && outgrows_min_margin(speed, size) {
+            if motion != Vec3A::ZERO && outgrows_min_skin(speed, size) {
                 let sweep = motion * PREDICT_STEPS;
                 if let Some(held) = self.predicted(s, &exact, size, sweep, j, speed) {
                     return held;
                 }
             }
-            margin(speed, size) * j
+            skin_for(speed, size) * j
         };
-        // The exact shape, [`grown`] by the fat margin (the exact box is the one last applied).
+        // The exact shape, [`grown`] by the skin (the exact box is the one last applied).
         let exact_shape = match self.store.shape[s] {
             Shape::Sphere { center, radius } => Shape::Sphere {
                 center,
@@ -297,7 +297,7 @@ impl BroadPhase {
                 kind,
             },
         };
-        grown(exact_shape, margin)
+        grown(exact_shape, skin)
     }
 
     /// [`BroadPhase::held_shape`]'s box swept along `sweep` (times `jitter`) for slot `s` of
@@ -322,7 +322,7 @@ impl BroadPhase {
         } else {
             sweep
         } * jitter;
-        let side = clamp_margin(speed * PREDICT_SIDE_STEPS, size);
+        let side = clamp_skin(speed * PREDICT_SIDE_STEPS, size);
         let held = match self.store.shape[s] {
             Shape::Sphere { center, radius } => {
                 let r = grown_radius(radius, self.config.margin);
@@ -356,22 +356,22 @@ pub(super) struct Held {
     pub(super) center: Vec3,
 }
 
-/// The grown-box rule: `shape` grown by `margin`, as a structure holds it. A sphere keeps its
+/// The grown-box rule: `shape` grown by `by`, as a structure holds it. A sphere keeps its
 /// centre and grows its radius ([`grown_radius`]); a body's box grows on every side, and a face
 /// that overflows stays at `±f32::MAX` (which overlaps exactly what `±∞` would). The box pairs
 /// are computed on is the shape grown by `Config::margin`, a fat box that one grown again by
-/// the fat margin.
+/// the skin.
 #[inline]
-pub(super) fn grown(shape: Shape, margin: f32) -> Held {
+pub(super) fn grown(shape: Shape, by: f32) -> Held {
     match shape {
-        Shape::Sphere { center, radius } => grown_sphere(center, radius, margin),
-        Shape::Body { aabb, .. } if margin == 0.0 => Held {
+        Shape::Sphere { center, radius } => grown_sphere(center, radius, by),
+        Shape::Body { aabb, .. } if by == 0.0 => Held {
             aabb: SimdBox::new(&aabb),
             radius: 0.0,
             center: Vec3::ZERO,
         },
         Shape::Body { aabb, .. } => {
-            let g = aabb.grown(margin);
+            let g = aabb.grown(by);
             let finite = Aabb {
                 min: g.min.max(Vec3::splat(-f32::MAX)),
                 max: g.max.min(Vec3::splat(f32::MAX)),
@@ -388,8 +388,8 @@ pub(super) fn grown(shape: Shape, margin: f32) -> Held {
 /// [`grown`] for a sphere: the update path passes centre and radius as values, since a `Shape`
 /// built for the call costs instructions on that path.
 #[inline]
-pub(super) fn grown_sphere(center: Vec3, radius: f32, margin: f32) -> Held {
-    let radius = grown_radius(radius, margin);
+pub(super) fn grown_sphere(center: Vec3, radius: f32, by: f32) -> Held {
+    let radius = grown_radius(radius, by);
     Held {
         aabb: SimdBox::from_center_radius(center, radius),
         radius,
@@ -397,11 +397,11 @@ pub(super) fn grown_sphere(center: Vec3, radius: f32, margin: f32) -> Held {
     }
 }
 
-/// A sphere's radius grown by `margin`. A sum that overflows stays at `f32::MAX`: huge finite
+/// A sphere's radius grown by `by`. A sum that overflows stays at `f32::MAX`: huge finite
 /// radii stay finite, and the octree places such a sphere in its root.
 #[inline]
-fn grown_radius(radius: f32, margin: f32) -> f32 {
-    (radius + margin).min(f32::MAX)
+fn grown_radius(radius: f32, by: f32) -> f32 {
+    (radius + by).min(f32::MAX)
 }
 
 #[cfg(test)]

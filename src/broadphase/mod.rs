@@ -97,7 +97,7 @@ pub struct StepStats {
 /// octree's for sphere × sphere, the dynamic BVH's self traversal and its traversal against the
 /// static BVH for body × body, and sphere × body by queries from the smaller side into the
 /// other's structure. Its cost follows the number of proxies. The **incremental pass** needs
-/// the structures to hold *fat* boxes (each exact box grown by a margin that follows how far
+/// the structures to hold *fat* boxes (each exact box grown by a *skin* that follows how far
 /// that proxy moves per step, or swept along its motion once it left one) and the sorted list of *candidates*, the pairs of overlapping fat
 /// boxes. Since an exact box lies in its fat box, every overlapping pair is a candidate. A step
 /// then
@@ -117,7 +117,7 @@ pub struct StepStats {
 /// about to do (movers, escapes, candidates) and runs the cheaper pass ([`Passes`]), so the
 /// cost never jumps when a world wakes up or settles; [`StepStats::pass`] says which ran.
 /// Outside the regime the estimate reads the motion just applied, not how many proxies were
-/// sent: a proxy moving more than its smallest fat margin a step would escape every few
+/// sent: a proxy moving more than its smallest skin a step would escape every few
 /// steps, a slower one would re-test in proportion to its motion over its size, and one sent
 /// where it already was would cost nothing; so a settling pile sent whole every frame enters
 /// the regime while its balls still move millimetres a step. Collision groups are tested where a pair is first found (in the

@@ -74,8 +74,8 @@ pub(super) struct Store {
     /// when the first other groups are set, so a world that sets none keeps none: read
     /// through [`Store::group`]. 8 bytes.
     groups: Vec<CollisionGroups>,
-    /// Distance the box moved per step, as last measured (metres, largest axis): sizes the fat
-    /// margin. 4 bytes.
+    /// Distance the box moved per step, as last measured (metres, largest axis): sizes the skin.
+    /// 4 bytes.
     pub(super) speed: Vec<f32>,
     /// The step at which the slot was last updated or got its fat box. 4 bytes.
     pub(super) stamp: Vec<u32>,

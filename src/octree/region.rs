@@ -150,7 +150,7 @@ impl Octree {
 }
 
 /// Cells of the level the median sphere lives at span this many of its diameters. Below 2, so
-/// the median sphere is placed at that level; above 1 by enough that a fat margin on its
+/// the median sphere is placed at that level; above 1 by enough that a skin on its
 /// radius does not lift it a level.
 const CELL_DIAMETERS: f32 = 1.25;
 /// A re-rooted region covers the spheres' boxes grown by this factor around their centre,
