@@ -274,11 +274,10 @@ mod tests {
         bvh
     }
 
-    /// Regression: the split once handed each task a contiguous stretch of its items, and
-    /// the diagonal items, which hold most of the pairs, fell to one or two tasks (one task of
-    /// eight found 44 % of `bodies`' pairs while its thread's partner idled). Now the items
-    /// are expanded by weight and taken heaviest first: no item holds more than a small share
-    /// of the pairs, and the items together hold each pair once.
+    /// The items are expanded by weight and taken heaviest first, so no item holds more than
+    /// a small share of the pairs (contiguous stretches of items would leave the diagonal
+    /// ones, which hold most of the pairs, to one or two tasks), and the items together hold
+    /// each pair once.
     #[test]
     fn split_items_are_light() {
         let mut rng = Rng::new(31);
