@@ -187,6 +187,8 @@ fn main() {
             });
             let (mut feed, mut spawns, mut frame) =
                 (Feed::new(false), Vec::new(), Frame::default());
+            // `BROADLEAF_TRACE=1` prints every step's `StepStats` on stderr.
+            let trace = std::env::var_os("BROADLEAF_TRACE").is_some();
             scene.spawns(&mut spawns);
             feed.spawn(&mut bp, &spawns).expect("valid scene");
             for i in 0..WARMUP + args.steps {
@@ -199,6 +201,9 @@ fn main() {
                 }));
                 if i >= WARMUP {
                     times.push(t.elapsed().as_nanos() as f64 / n as f64);
+                }
+                if trace {
+                    eprintln!("{i}: {:?}", bp.stats());
                 }
             }
             println!(
