@@ -140,7 +140,7 @@ mod tests {
     }
 
     #[test]
-    fn refit_tightens_what_update_enlarged() {
+    fn refit_tightens_what_update_grew() {
         let boxes: Vec<Aabb> = (0..64).map(|i| unit_at(2.0 * i as f32)).collect();
         let (mut bvh, keys) = Bvh::from_aabbs(BvhConfig::default(), &boxes).unwrap();
         let root_before = bvh.nodes[0].aabb();
