@@ -141,7 +141,7 @@ impl BroadPhase {
                 r.exact[s] = exact;
             }
             (None, Shape::Body { .. }) => {
-                self.store.keep_exact();
+                self.store.grow_exact();
                 self.store.exact[s] = exact;
             }
             (None, Shape::Sphere { .. }) => {}

@@ -265,7 +265,7 @@ impl Store {
     }
 
     /// Grows `exact` to every slot (see [`Store::exact`]).
-    pub(super) fn keep_exact(&mut self) {
+    pub(super) fn grow_exact(&mut self) {
         let n = self.version.len();
         grow_slots(&mut self.exact, n);
         self.exact.resize(n, SimdBox::EMPTY);
