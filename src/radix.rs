@@ -668,7 +668,8 @@ fn scatter_row(row: &mut [&mut [u64]], shift: u32, keys: impl Iterator<Item = u6
 #[cfg(feature = "parallel")]
 fn recycle<'a>(mut table: Vec<&mut [u64]>) -> Vec<&'a mut [u64]> {
     table.clear();
-    table.into_iter().filter_map(|_| None).collect()
+    // The map never runs: the table is empty.
+    table.into_iter().map(|_| Default::default()).collect()
 }
 
 /// Grows `v` to half again its length once it is within a quarter of its capacity: a sort's

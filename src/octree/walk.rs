@@ -161,7 +161,7 @@ pub(super) struct Scratch {
 /// The most tasks a parallel walk-order sort splits the spheres into: each counts its keys
 /// in a row of `2¹¹` counters, and the stretches of the destination number as many per task.
 #[cfg(feature = "parallel")]
-const MAX_PARTS: usize = 32;
+const MAX_TASKS: usize = 32;
 
 impl Scratch {
     /// The walk order's list, which holds nothing anyone reads between passes: the
@@ -536,7 +536,7 @@ impl Octree {
 /// Spheres per task of the parallel walk-order sort, at least: a task's fixed costs (its row
 /// of counters, its stretches, handing it out) outweigh the split below it.
 #[cfg(feature = "parallel")]
-const MIN_PART_SPHERES: usize = 4096;
+const MIN_TASK_SPHERES: usize = 4096;
 
 #[cfg(feature = "parallel")]
 impl Octree {
@@ -554,7 +554,7 @@ impl Octree {
     ) {
         use rayon::prelude::*;
         let key_bits = walk_key_bits(self.lattice.depth);
-        let tasks = parts.min(MAX_PARTS).min(self.live / MIN_PART_SPHERES);
+        let tasks = parts.min(MAX_TASKS).min(self.live / MIN_TASK_SPHERES);
         if key_bits > 32 || tasks < 2 || self.lattice.placement == Placement::Strict {
             self.sort_into_walk_order(s, tmp);
             return;
