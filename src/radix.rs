@@ -741,6 +741,15 @@ mod tests {
         }
     }
 
+    /// A pool of `threads` threads.
+    #[cfg(feature = "parallel")]
+    fn pool_of(threads: usize) -> rayon::ThreadPool {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+    }
+
     #[test]
     fn sorts_like_sort_unstable() {
         let mut next = xorshift(0x9E37_79B9_7F4A_7C15);
@@ -824,10 +833,7 @@ mod tests {
         let mut s = ParScatter::default();
         let same_digit = |k: u64, lo: u32| (k & !(0x7FF << (lo + 11))) | (0x2A5 << (lo + 11));
         for threads in [1, 2, 3, 8] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
+            let pool = pool_of(threads);
             for (n, lo, bits) in [
                 (0, 0, 22),
                 (1, 32, 21),
@@ -915,10 +921,7 @@ mod tests {
         let mut next = xorshift(0x2545_F491_4F6C_DD1D);
         let (mut splitters, mut tmp, mut bounds) = (Vec::new(), Vec::new(), Vec::new());
         for threads in [1, 2, 3] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
+            let pool = pool_of(threads);
             for (n, producers, slots) in [
                 (0, 3, 500),
                 (5, 2, 500),
