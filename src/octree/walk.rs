@@ -448,13 +448,7 @@ impl Octree {
         items.clear();
         if key_bits <= 32 {
             s.wide_key.clear();
-            items.extend(
-                self.objs
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, o)| o.node != NONE)
-                    .map(|(id, o)| (u64::from(o.walk_key) << 32) | id as u64),
-            );
+            items.extend(self.walk_items(0..self.objs.len()));
             tmp.resize(n, 0);
             if sort_bits_in(items, tmp, &mut s.counts, 32, key_bits) {
                 items.copy_from_slice(tmp);
@@ -485,6 +479,17 @@ impl Octree {
             items.extend(wide.iter().map(|&(_, id)| u64::from(id)));
         }
         self.scatter(s, tmp);
+    }
+
+    /// `(walk key << 32) | id` of the placed spheres of ids `ids`, in id order: what a tree
+    /// with 32-bit walk keys sorts.
+    fn walk_items(&self, ids: core::ops::Range<usize>) -> impl Iterator<Item = u64> + '_ {
+        let first = ids.start;
+        self.objs[ids]
+            .iter()
+            .zip(first..)
+            .filter(|(o, _)| o.node != NONE)
+            .map(|(o, id)| (u64::from(o.walk_key) << 32) | id as u64)
     }
 
     /// Fills the walk-ordered boxes (or copies) from the sorted list. Each sphere's walk
@@ -571,16 +576,8 @@ impl Octree {
         items.resize(n, 0);
         boxes.resize(n, SimdBox::EMPTY);
         tmp.resize(n, 0);
-        let objs = &self.objs;
-        let keys = |ids: core::ops::Range<usize>| {
-            let first = ids.start;
-            objs[ids]
-                .iter()
-                .zip(first..)
-                .filter(|(o, _)| o.node != NONE)
-                .map(|(o, id)| (u64::from(o.walk_key) << 32) | id as u64)
-        };
-        sort_bits_par(objs.len(), keys, items, tmp, par, tasks, 32, key_bits);
+        let keys = |ids| self.walk_items(ids);
+        sort_bits_par(self.objs.len(), keys, items, tmp, par, tasks, 32, key_bits);
         // The gather writes in order and its scattered loads are independent of each other.
         let chunk = n.div_ceil(tasks);
         boxes
