@@ -16,6 +16,11 @@
 /// The widest digit of the narrow plan: 2048 counters (8 KiB) stay in L1.
 const MAX_DIGIT_BITS: u32 = 11;
 
+#[cfg(feature = "parallel")]
+use core::ops::Range;
+#[cfg(feature = "parallel")]
+use rayon::prelude::*;
+
 /// The plans a pair sort chooses from, as (counters per pass, passes): each covers keys of up
 /// to `passes × log2(counters)` bits, and keeps its counters on the stack.
 mod plan {
@@ -465,6 +470,208 @@ fn sort_core<T: Copy>(
     in_b
 }
 
+/// Counters per digit of the parallel scatter: the serial [`sort_bits_in`]'s digits.
+#[cfg(feature = "parallel")]
+const RADIX: usize = 1 << MAX_DIGIT_BITS;
+
+/// Buffers of [`sort_bits_par`], reused by every sort; they never shrink.
+#[cfg(feature = "parallel")]
+#[derive(Debug, Default)]
+pub(crate) struct ParScatter {
+    /// Per task and digit, task `t`'s at `t · RADIX + digit`: how many of the task's keys
+    /// have the digit in the current pass, the length of its stretch of the destination.
+    counts: Vec<u32>,
+    /// The allocation of the table of destination stretches, laid out as `counts`: empty
+    /// between passes, and reused by each (see [`recycle`]).
+    stretches: Vec<&'static mut [u64]>,
+}
+
+#[cfg(feature = "parallel")]
+impl Clone for ParScatter {
+    /// The counts; the table of stretches is empty between sorts and holds no data.
+    fn clone(&self) -> Self {
+        ParScatter {
+            counts: self.counts.clone(),
+            stretches: Vec::new(),
+        }
+    }
+}
+
+#[cfg(feature = "parallel")]
+impl ParScatter {
+    /// Bytes held on the heap.
+    pub(crate) fn heap_bytes(&self) -> usize {
+        self.counts.capacity() * size_of::<u32>()
+            + self.stretches.capacity() * size_of::<&mut [u64]>()
+    }
+}
+
+/// [`sort_bits_in`] over rayon's current pool in `tasks` tasks, from a source read in place:
+/// sorts the keys that `keys` lists for the ranges of `0..len` (in order, the same keys
+/// each time it is called) by bits `lo..lo + bits`, stable, into `out`, which is as long as
+/// all of them, with `tmp` (the same length) as the second buffer. `out` ends as the serial
+/// sort of the listed keys leaves it, at any task and thread count.
+///
+/// Each pass is a least-significant-digit scatter split by source range. The source is cut
+/// into `tasks` contiguous ranges, in order, and each task counts its keys per digit. The
+/// stable sort by the digit puts a key of digit `d` from task `t` after every key of a
+/// smaller digit, every key of digit `d` from an earlier task, and the earlier keys of its
+/// own range: so task `t`'s keys of digit `d` fill one stretch of the destination, and these
+/// stretches, in (digit, task) order, tile it. One walk of `split_at_mut` hands every task its
+/// own stretch of each digit, disjoint from all others, and each task writes its keys into
+/// them in order. The first pass reads the source through `keys`; each later one counts the
+/// previous pass's output again by range (the counts depend on where the keys now are) and
+/// is skipped if every key has the same digit.
+#[cfg(feature = "parallel")]
+#[allow(clippy::too_many_arguments)] // reason: the serial sort's arguments, a source and a task count
+pub(crate) fn sort_bits_par<F, I>(
+    len: usize,
+    keys: F,
+    out: &mut [u64],
+    tmp: &mut [u64],
+    s: &mut ParScatter,
+    tasks: usize,
+    lo: u32,
+    bits: u32,
+) where
+    F: Fn(Range<usize>) -> I + Sync,
+    I: Iterator<Item = u64>,
+{
+    debug_assert_eq!(out.len(), tmp.len());
+    let n = out.len();
+    let tasks = tasks.max(1);
+    let passes = bits.div_ceil(MAX_DIGIT_BITS).max(1);
+    s.counts.resize(tasks * RADIX, 0);
+    let counts = &mut s.counts[..tasks * RADIX];
+    let range = |t: usize, len: usize| len * t / tasks..len * (t + 1) / tasks;
+    // The first pass writes the buffer from which the passes after it end in `out`.
+    let mut in_out = passes % 2 == 1;
+    let first = |t| keys(range(t, len));
+    count_by_task(counts, lo, first);
+    let dst = if in_out { &mut *out } else { &mut *tmp };
+    scatter_by_task(counts, &mut s.stretches, dst, lo, first);
+    for pass in 1..passes {
+        let shift = lo + pass * MAX_DIGIT_BITS;
+        let (src, dst): (&[u64], &mut [u64]) = if in_out { (out, tmp) } else { (tmp, out) };
+        let chunk = |t| src[range(t, n)].iter().copied();
+        count_by_task(counts, shift, chunk);
+        let d0 = src.first().map_or(0, |&k| digit(k, shift));
+        let same: usize = counts
+            .iter()
+            .skip(d0)
+            .step_by(RADIX)
+            .map(|&c| c as usize)
+            .sum();
+        if same == n {
+            continue;
+        }
+        scatter_by_task(counts, &mut s.stretches, dst, shift, chunk);
+        in_out = !in_out;
+    }
+    if !in_out {
+        let at = n.div_ceil(tasks).max(1);
+        out.par_chunks_mut(at)
+            .zip(tmp.par_chunks(at))
+            .for_each(|(o, t)| o.copy_from_slice(t));
+    }
+}
+
+/// The digit of `k` at `shift` in the parallel scatter.
+#[cfg(feature = "parallel")]
+#[inline]
+fn digit(k: u64, shift: u32) -> usize {
+    (k >> shift) as usize & (RADIX - 1)
+}
+
+/// Counts in parallel the digits at `shift` of each task's keys (`keys(t)`) into its row of
+/// `counts`.
+#[cfg(feature = "parallel")]
+fn count_by_task<I: Iterator<Item = u64>>(
+    counts: &mut [u32],
+    shift: u32,
+    keys: impl Fn(usize) -> I + Sync,
+) {
+    counts
+        .par_chunks_mut(RADIX)
+        .enumerate()
+        .for_each(|(t, row)| count_row(row, shift, keys(t)));
+}
+
+/// One task of [`count_by_task`]. Not inlined: a profile shows each task's share by name.
+#[cfg(feature = "parallel")]
+#[inline(never)]
+fn count_row(row: &mut [u32], shift: u32, keys: impl Iterator<Item = u64>) {
+    row.fill(0);
+    let Ok(row) = <&mut [u32; RADIX]>::try_from(row) else {
+        return;
+    };
+    for k in keys {
+        row[digit(k, shift)] += 1;
+    }
+}
+
+/// One pass of [`sort_bits_par`]: cuts `dst` into the (digit, task) stretches that `counts`
+/// gives, in digit-major order, and has each task write its keys (`keys(t)`) in order into
+/// its stretches, over rayon's current pool. `stretches` lends the table's allocation.
+#[cfg(feature = "parallel")]
+fn scatter_by_task<I: Iterator<Item = u64>>(
+    counts: &[u32],
+    stretches: &mut Vec<&'static mut [u64]>,
+    dst: &mut [u64],
+    shift: u32,
+    keys: impl Fn(usize) -> I + Sync,
+) {
+    let tasks = counts.len() / RADIX;
+    let mut table: Vec<&mut [u64]> = core::mem::take(stretches);
+    table.resize_with(counts.len(), Default::default);
+    let mut rest = dst;
+    for d in 0..RADIX {
+        for t in 0..tasks {
+            let at = t * RADIX + d;
+            // Clamped, though the counts tile `dst` exactly: a miscount loses keys, not
+            // the step.
+            let len = (counts[at] as usize).min(rest.len());
+            let (head, tail) = core::mem::take(&mut rest).split_at_mut(len);
+            table[at] = head;
+            rest = tail;
+        }
+    }
+    debug_assert!(rest.is_empty());
+    table
+        .par_chunks_mut(RADIX)
+        .enumerate()
+        .for_each(|(t, row)| scatter_row(row, shift, keys(t)));
+    table.clear();
+    *stretches = recycle(table);
+}
+
+/// One task of [`scatter_by_task`]: writes each key to the front of its digit's stretch in
+/// `row`, which then starts past it. Not inlined: a profile shows each task's share by name.
+#[cfg(feature = "parallel")]
+#[inline(never)]
+fn scatter_row(row: &mut [&mut [u64]], shift: u32, keys: impl Iterator<Item = u64>) {
+    let Ok(row) = <&mut [&mut [u64]; RADIX]>::try_from(row) else {
+        return;
+    };
+    for k in keys {
+        let d = digit(k, shift);
+        if let Some((first, rest)) = core::mem::take(&mut row[d]).split_first_mut() {
+            *first = k;
+            row[d] = rest;
+        }
+    }
+}
+
+/// The allocation of an emptied table of stretches, for the next pass to borrow again:
+/// collecting a `Vec`'s iterator into items of the same size and alignment reuses its buffer
+/// (std's in-place collect), so the table allocates only when it grows.
+#[cfg(feature = "parallel")]
+fn recycle<'a>(mut table: Vec<&mut [u64]>) -> Vec<&'a mut [u64]> {
+    table.clear();
+    // The map never runs: the table is empty.
+    table.into_iter().map(|_| Default::default()).collect()
+}
+
 /// Grows `v` to half again its length once it is within a quarter of its capacity: a sort's
 /// list whose length swings from step to step (the pair lists, the parallel walk-order sort's
 /// parts) stops growing after its first few swings. Exactly to that capacity ([`grow_to`]).
@@ -532,6 +739,15 @@ mod tests {
             s ^= s << 17;
             s
         }
+    }
+
+    /// A pool of `threads` threads.
+    #[cfg(feature = "parallel")]
+    fn pool_of(threads: usize) -> rayon::ThreadPool {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
     }
 
     #[test]
@@ -606,6 +822,74 @@ mod tests {
         }
     }
 
+    /// The parallel scatter leaves the serial sort's output (stable: the bits outside the
+    /// sorted ones are a payload in source order) for keys read in place with gaps, at 1, 2, 3
+    /// and 8 threads and any task count: random keys, every key the same, every key the same
+    /// in one digit, few distinct keys, one task's worth of keys, fewer keys than tasks, none.
+    #[cfg(feature = "parallel")]
+    #[test]
+    fn the_parallel_scatter_sorts_as_the_serial_sort() {
+        let mut next = xorshift(0x5DEE_CE66_D1CE_4E5B);
+        let mut s = ParScatter::default();
+        let same_digit = |k: u64, lo: u32| (k & !(0x7FF << (lo + 11))) | (0x2A5 << (lo + 11));
+        for threads in [1, 2, 3, 8] {
+            let pool = pool_of(threads);
+            for (n, lo, bits) in [
+                (0, 0, 22),
+                (1, 32, 21),
+                (5, 32, 21),
+                (100, 0, 11),
+                (5000, 32, 21),
+                (5000, 0, 33),
+                (5000, 3, 40),
+                (20_000, 32, 32),
+            ] {
+                for case in ["random", "equal", "equal digit", "few"] {
+                    // Every fifth entry of the source is a gap the keys skip.
+                    let source: Vec<Option<u64>> = (0..n)
+                        .map(|i| {
+                            let k = match case {
+                                "random" => next(),
+                                "equal" => 0x1234_5678_9ABC_DEF0,
+                                "equal digit" => same_digit(next(), lo),
+                                _ => (next() % 3) << lo | (next() >> 44 << 44),
+                            };
+                            (i % 5 != 4).then_some(k)
+                        })
+                        .collect();
+                    let listed: Vec<u64> = source.iter().flatten().copied().collect();
+                    let (mut want, mut tmp) = (listed.clone(), vec![0; listed.len()]);
+                    if sort_bits_in(&mut want, &mut tmp, &mut Vec::new(), lo, bits) {
+                        want = tmp.clone();
+                    }
+                    for tasks in [1, 2, 3, 8, 13] {
+                        let mut out = vec![7; listed.len()];
+                        let keys = |r: Range<usize>| source[r].iter().flatten().copied();
+                        pool.install(|| {
+                            sort_bits_par(n, keys, &mut out, &mut tmp, &mut s, tasks, lo, bits);
+                        });
+                        let at = format!("{case} n {n} bits {lo}+{bits} tasks {tasks}");
+                        assert_eq!(out, want, "{at} threads {threads}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// The table of stretches keeps its allocation from pass to pass: the parallel scatter
+    /// allocates nothing in steady state.
+    #[cfg(feature = "parallel")]
+    #[test]
+    fn recycling_the_table_keeps_its_allocation() {
+        let mut buf = [0u64; 4];
+        let mut table: Vec<&mut [u64]> = Vec::with_capacity(100);
+        let at = table.as_ptr() as usize;
+        table.push(&mut buf);
+        let table: Vec<&'static mut [u64]> = recycle(table);
+        assert!(table.is_empty());
+        assert_eq!((table.as_ptr() as usize, table.capacity()), (at, 100));
+    }
+
     /// The compact key orders pairs as the full keys do, at the extremes of every layout.
     #[test]
     fn compact_keys_keep_the_order() {
@@ -637,10 +921,7 @@ mod tests {
         let mut next = xorshift(0x2545_F491_4F6C_DD1D);
         let (mut splitters, mut tmp, mut bounds) = (Vec::new(), Vec::new(), Vec::new());
         for threads in [1, 2, 3] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
+            let pool = pool_of(threads);
             for (n, producers, slots) in [
                 (0, 3, 500),
                 (5, 2, 500),

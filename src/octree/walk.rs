@@ -20,7 +20,9 @@ use super::{NONE, Octree};
 use crate::geom::SimdBox;
 use crate::pair::ProxyKey;
 #[cfg(feature = "parallel")]
-use crate::radix::{ahead, part_of, split_points};
+use crate::radix::ParScatter;
+#[cfg(feature = "parallel")]
+use crate::radix::sort_bits_par;
 use crate::radix::{room_for, sort_bits_by, sort_bits_in};
 use crate::sweep::{self, Ordered};
 use core::borrow::Borrow;
@@ -151,55 +153,15 @@ pub(super) struct Scratch {
     pub(super) sweeps: Sweeps,
     /// True from [`Octree::prepare_pass`] to the pass it prepares: the order is sorted.
     pub(super) ready: bool,
-    /// The parallel sort's buffers (see [`Octree::sort_into_walk_order_par`]).
+    /// The parallel sort's counts and table (see [`Octree::sort_into_walk_order_par`]).
     #[cfg(feature = "parallel")]
-    par: ParSort,
+    par: ParScatter,
 }
 
-/// The most parts a parallel walk-order sort splits the spheres into: its lists number the
-/// parts squared.
+/// The most tasks a parallel walk-order sort splits the spheres into: each counts its keys
+/// in a row of `2¹¹` counters, and the stretches of the destination number as many per task.
 #[cfg(feature = "parallel")]
-const MAX_PARTS: usize = 32;
-
-/// Buffers of the parallel walk-order sort, reused by every pass; they never shrink.
-#[cfg(feature = "parallel")]
-#[derive(Clone, Debug, Default)]
-struct ParSort {
-    /// Walk keys sampled from the spheres, sorted, to pick the parts' first keys from.
-    sample: Vec<u64>,
-    /// The first walk key of every part but the first, increasing.
-    splitters: Vec<u64>,
-    /// Per range of ids and part: `(walk key << 32) | id` of the range's spheres in the part;
-    /// range `c`'s part `p` at `c · parts + p`.
-    buckets: Vec<Vec<u64>>,
-    /// Per part: its sorting buffers.
-    parts: Vec<PartSort>,
-    /// The parts' first walk positions, and the sphere count last.
-    bounds: Vec<u32>,
-}
-
-/// One part's radix counts (its items and their second buffer are its stretches of
-/// `Scratch::items` and the sort's second buffer).
-#[cfg(feature = "parallel")]
-#[derive(Clone, Debug, Default)]
-struct PartSort {
-    counts: Vec<u32>,
-}
-
-#[cfg(feature = "parallel")]
-impl ParSort {
-    fn heap_bytes(&self) -> usize {
-        self.sample.capacity() * 8
-            + self.splitters.capacity() * 8
-            + self.buckets.iter().map(|b| b.capacity() * 8).sum::<usize>()
-            + self.bounds.capacity() * 4
-            + self
-                .parts
-                .iter()
-                .map(|p| p.counts.capacity() * 4)
-                .sum::<usize>()
-    }
-}
+const MAX_TASKS: usize = 32;
 
 impl Scratch {
     /// The walk order's list, which holds nothing anyone reads between passes: the
@@ -486,13 +448,7 @@ impl Octree {
         items.clear();
         if key_bits <= 32 {
             s.wide_key.clear();
-            items.extend(
-                self.objs
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, o)| o.node != NONE)
-                    .map(|(id, o)| (u64::from(o.walk_key) << 32) | id as u64),
-            );
+            items.extend(self.walk_items(0..self.objs.len()));
             tmp.resize(n, 0);
             if sort_bits_in(items, tmp, &mut s.counts, 32, key_bits) {
                 items.copy_from_slice(tmp);
@@ -523,6 +479,17 @@ impl Octree {
             items.extend(wide.iter().map(|&(_, id)| u64::from(id)));
         }
         self.scatter(s, tmp);
+    }
+
+    /// `(walk key << 32) | id` of the placed spheres of ids `ids`, in id order: what a tree
+    /// with 32-bit walk keys sorts.
+    fn walk_items(&self, ids: core::ops::Range<usize>) -> impl Iterator<Item = u64> + '_ {
+        let first = ids.start;
+        self.objs[ids]
+            .iter()
+            .zip(first..)
+            .filter(|(o, _)| o.node != NONE)
+            .map(|(o, id)| (u64::from(o.walk_key) << 32) | id as u64)
     }
 
     /// Fills the walk-ordered boxes (or copies) from the sorted list. Each sphere's walk
@@ -571,23 +538,19 @@ impl Octree {
     }
 }
 
-/// Spheres per part of the parallel walk-order sort, at least: a part's fixed costs (the radix
-/// sort's counters, handing out the task) outweigh the split below it.
+/// Spheres per task of the parallel walk-order sort, at least: a task's fixed costs (its row
+/// of counters, its stretches, handing it out) outweigh the split below it.
 #[cfg(feature = "parallel")]
-const MIN_PART_SPHERES: usize = 4096;
-/// Walk keys sampled per part to pick the parts' first keys from: enough that the parts'
-/// sizes stay within a few percent of each other.
-#[cfg(feature = "parallel")]
-const SAMPLES_PER_PART: usize = 64;
+const MIN_TASK_SPHERES: usize = 4096;
 
 #[cfg(feature = "parallel")]
 impl Octree {
-    /// [`Octree::sort_into_walk_order`] split over rayon's current pool: the walk keys are cut
-    /// into at most `parts` ranges of about equal sphere counts (quantiles of a sample), each
-    /// a run of the walk order, and each range is gathered, sorted and copied out by its own
-    /// task. Keys and ids are unique together, so the walk order is the serial sort's, whatever
-    /// the cut. Trees too deep for 32-bit keys, too small for two parts, or strict (whose pass
-    /// is serial) sort serially.
+    /// [`Octree::sort_into_walk_order`] split over rayon's current pool in up to `parts`
+    /// tasks: the radix sort's passes scatter by id range ([`sort_bits_par`], reading the
+    /// first pass's keys from the spheres in place), then each task gathers the boxes of its
+    /// stretch of the walk order. The walk order is the serial sort's at any task count.
+    /// Trees too deep for 32-bit keys, too small for two tasks, or strict (whose pass is
+    /// serial) sort serially.
     pub(super) fn sort_into_walk_order_par(
         &self,
         s: &mut Scratch,
@@ -596,8 +559,8 @@ impl Octree {
     ) {
         use rayon::prelude::*;
         let key_bits = walk_key_bits(self.lattice.depth);
-        let parts = parts.min(MAX_PARTS).min(self.live / MIN_PART_SPHERES);
-        if key_bits > 32 || parts < 2 || self.lattice.placement == Placement::Strict {
+        let tasks = parts.min(MAX_TASKS).min(self.live / MIN_TASK_SPHERES);
+        if key_bits > 32 || tasks < 2 || self.lattice.placement == Placement::Strict {
             self.sort_into_walk_order(s, tmp);
             return;
         }
@@ -605,53 +568,7 @@ impl Octree {
         let Scratch {
             items, boxes, par, ..
         } = s;
-        let objs = &self.objs;
-        let stride = (objs.len() / (parts * SAMPLES_PER_PART)).max(1);
-        par.sample.clear();
-        par.sample.extend(
-            objs.iter()
-                .step_by(stride)
-                .filter(|o| o.node != NONE)
-                .map(|o| u64::from(o.walk_key)),
-        );
-        if par.sample.is_empty() {
-            self.sort_into_walk_order(s, tmp);
-            return;
-        }
-        par.sample.sort_unstable();
-        split_points(&par.sample, |&k| k, parts, &mut par.splitters);
-        // Each range of ids lists its spheres by part (the number of splitters at most the
-        // walk key) as `(walk key << 32) | id`: a part then sorts only its own lists.
-        let np = par.splitters.len() + 1;
-        let splitters = &par.splitters;
-        if par.buckets.len() < np * np {
-            par.buckets.resize_with(np * np, Vec::new);
-        }
-        for b in &mut par.buckets[..np * np] {
-            b.clear();
-        }
-        let range = objs.len().div_ceil(np);
-        par.buckets[..np * np]
-            .par_chunks_mut(np)
-            .zip(objs.par_chunks(range))
-            .enumerate()
-            .for_each(|(c, (buckets, objs))| {
-                for (i, o) in objs.iter().enumerate() {
-                    if o.node != NONE {
-                        let key = u64::from(o.walk_key);
-                        buckets[part_of(splitters, key)].push((key << 32) | (c * range + i) as u64);
-                    }
-                }
-                buckets.iter_mut().for_each(ahead);
-            });
-        par.bounds.clear();
-        par.bounds.push(0);
-        for p in 0..np {
-            let len: usize = (0..np).map(|c| par.buckets[c * np + p].len()).sum();
-            par.bounds.push(par.bounds[p] + len as u32);
-        }
         let n = self.live;
-        debug_assert_eq!(par.bounds[np] as usize, n);
         // Grown by `room_for`, as in the serial sort.
         room_for(items, n);
         room_for(boxes, n);
@@ -659,85 +576,22 @@ impl Octree {
         items.resize(n, 0);
         boxes.resize(n, SimdBox::EMPTY);
         tmp.resize(n, 0);
-        if par.parts.len() < np {
-            par.parts.resize_with(np, PartSort::default);
-        }
-        let job = Parts {
-            tree: self,
-            buckets: &par.buckets[..np * np],
-            bounds: &par.bounds,
-            key_bits,
-        };
-        job.fill(0, &mut par.parts[..np], items, boxes, tmp);
-    }
-}
-
-/// What every part of a parallel walk-order sort reads.
-#[cfg(feature = "parallel")]
-struct Parts<'a> {
-    buckets: &'a [Vec<u64>],
-    tree: &'a Octree,
-    bounds: &'a [u32],
-    key_bits: u32,
-}
-
-#[cfg(feature = "parallel")]
-impl Parts<'_> {
-    /// Fills the walk order of parts `first..first + parts.len()`, whose positions `items`,
-    /// `boxes` and the sort's second buffer `tmp` are, halving the parts between two tasks
-    /// until one is left.
-    fn fill(
-        &self,
-        first: usize,
-        parts: &mut [PartSort],
-        items: &mut [u64],
-        boxes: &mut [SimdBox],
-        tmp: &mut [u64],
-    ) {
-        if let [part] = parts {
-            self.fill_one(first, part, items, boxes, tmp);
-            return;
-        }
-        let mid = parts.len() / 2;
-        let at = (self.bounds[first + mid] - self.bounds[first]) as usize;
-        let (pa, pb) = parts.split_at_mut(mid);
-        let (ia, ib) = items.split_at_mut(at);
-        let (ba, bb) = boxes.split_at_mut(at);
-        let (ta, tb) = tmp.split_at_mut(at);
-        rayon::join(
-            || self.fill(first, pa, ia, ba, ta),
-            || self.fill(first + mid, pb, ib, bb, tb),
-        );
+        let keys = |ids| self.walk_items(ids);
+        sort_bits_par(self.objs.len(), keys, items, tmp, par, tasks, 32, key_bits);
+        // The gather writes in order and its scattered loads are independent of each other.
+        let chunk = n.div_ceil(tasks);
+        boxes
+            .par_chunks_mut(chunk)
+            .zip(items.par_chunks(chunk))
+            .for_each(|(boxes, items)| self.gather_boxes(boxes, items));
     }
 
-    /// Part `p`: its spheres as the ranges listed them, sorted by `(walk key, id)`, then
-    /// gathered into the part's own stretch of the copies in walk order. (The serial sort
-    /// stores to scattered places instead, which stalls less than loading from them; the
-    /// gather writes in order and leaves the scattered loads independent of each other, which
-    /// a part's share of the spheres, spread over the whole id range, needs.)
-    fn fill_one(
-        &self,
-        p: usize,
-        part: &mut PartSort,
-        items: &mut [u64],
-        boxes: &mut [SimdBox],
-        tmp: &mut [u64],
-    ) {
-        let np = self.bounds.len() - 1;
-        let mut at = 0;
-        for listed in self.buckets.iter().skip(p).step_by(np) {
-            items[at..at + listed.len()].copy_from_slice(listed);
-            at += listed.len();
-        }
-        debug_assert_eq!(at, boxes.len());
-        // The sorted items end in one of the two buffers, and in `items` for the pass.
-        let in_tmp = sort_bits_in(items, tmp, &mut part.counts, 32, self.key_bits);
-        if in_tmp {
-            items.copy_from_slice(tmp);
-        }
-        let objs = &self.tree.objs;
-        for (b, &x) in boxes.iter_mut().zip(items.iter()) {
-            *b = objs[x as u32 as usize].simd_box();
+    /// The boxes of the walk-ordered `items` (`(walk key << 32) | id`), in their order. Not
+    /// inlined: a profile shows each task's share by name.
+    #[inline(never)]
+    fn gather_boxes(&self, boxes: &mut [SimdBox], items: &[u64]) {
+        for (b, &x) in boxes.iter_mut().zip(items) {
+            *b = self.objs[x as u32 as usize].simd_box();
         }
     }
 }
