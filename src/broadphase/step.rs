@@ -10,7 +10,8 @@
 //! least [`PARALLEL_MIN_SPHERES`] spheres or [`PARALLEL_MIN_BODIES`] dynamic bodies, the step
 //! (outside the incremental regime; inside it, a full pass) runs as one job on the pool, the
 //! full pass split in [`TASKS_PER_THREAD`] tasks per thread at each
-//! phase: the octree sorts its walk order in key-range parts and passes its runs in chunks
+//! phase: the octree sorts its walk order by a radix scatter whose tasks take ranges of its
+//! records, and passes its runs in chunks
 //! (each with its own pass state), the BVH passes hand their descents' items to as many tasks
 //! (each with its own stack), and one task runs the sphere × body queries; every producer cuts its pairs into
 //! the parts of the pair sort as it finds them (at the quantiles of the last step's pairs),
