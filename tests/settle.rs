@@ -1,7 +1,7 @@
 //! The pass follows the motion, not how many proxies were sent (issue 40): a pile whose every
 //! sphere is sent each step while its motion decays geometrically to rest enters the
-//! incremental regime within a few steps of that motion dropping under the smallest fat
-//! margin, and stays there; the same pile woken (every sphere moving fast again) leaves it and
+//! incremental regime within a few steps of that motion dropping under the smallest skin,
+//! and stays there; the same pile woken (every sphere moving fast again) leaves it and
 //! comes back once it settles; a gas whose spheres all move about 8 cm a step never enters
 //! it. After every step the pairs, `added` and `removed` equal the test's own sweep over its
 //! own model, and `validate()` holds.
@@ -81,14 +81,14 @@ fn settle(
         .collect()
 }
 
-/// The first step whose motion per step is under the smallest fat margin a sphere of radius
+/// The first step whose motion per step is under the smallest skin a sphere of radius
 /// 0.5 gets (`1/64` of its size, over `LOOKAHEAD_STEPS = 3` steps of its motion).
-fn under_margin(passes: &[(Pass, f32)]) -> usize {
-    let margin = 2.0 * RADIUS / 64.0 / 3.0;
+fn under_skin(passes: &[(Pass, f32)]) -> usize {
+    let skin = 2.0 * RADIUS / 64.0 / 3.0;
     passes
         .iter()
-        .position(|&(_, v)| v / HZ < margin)
-        .expect("the motion decays under the margin")
+        .position(|&(_, v)| v / HZ < skin)
+        .expect("the motion decays under the skin")
 }
 
 /// The pass entered the incremental regime within `within` steps of `from`, and every step
@@ -120,7 +120,7 @@ fn a_settling_pile_sent_every_step_enters_the_incremental_regime() {
         (1.0, 0.9, 120),
         "settling",
     );
-    let from = under_margin(&passes);
+    let from = under_skin(&passes);
     assert_settles(&passes, from, 6, from + 25);
     assert!(
         passes[..from.saturating_sub(8)]
@@ -158,7 +158,7 @@ fn a_woken_pile_leaves_the_incremental_regime_and_comes_back() {
         woken[..5].iter().any(|&(p, _)| p == Pass::Full),
         "the woken pile stayed in the incremental regime: {woken:?}"
     );
-    let from = under_margin(&woken);
+    let from = under_skin(&woken);
     assert_settles(&woken, from, 8, from + 30);
 }
 
