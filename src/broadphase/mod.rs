@@ -11,7 +11,8 @@
 //! The files: this one holds the type and its public API; [`shape`] what a proxy is and whom
 //! it pairs with; [`config`] the settings; [`fat`] the fat-box layer (motion, fat boxes, the
 //! marks a step reads); [`slack`] what the incremental pass need not re-test; [`gapped`] the
-//! lists it patches; [`packed`] the packed pair the passes share; [`cost`] the cost model;
+//! lists it patches; [`patch`] the regime's lookup hints and patch buffers; [`packed`] the
+//! packed pair the passes share; [`cost`] the cost model;
 //! [`step`] the passes; [`regime`] the incremental regime's state as a type, its entry and
 //! its exit; [`query`], [`snapshot`] (serde) and [`validate`] (the invariants).
 
@@ -21,6 +22,7 @@ mod cost;
 mod fat;
 mod gapped;
 mod packed;
+mod patch;
 mod query;
 mod regime;
 mod shape;

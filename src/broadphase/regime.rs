@@ -3,7 +3,7 @@
 //! and the entry into it and the exit from it.
 
 use super::gapped::Gapped;
-use super::slack::{Hints, Patch};
+use super::patch::{Hints, Patch};
 use super::store::Kind;
 use super::{BroadPhase, Shape};
 use crate::geom::SimdBox;
@@ -31,8 +31,8 @@ pub(super) struct Incremental {
     /// The fat box its structure (octree or BVH) holds, around the exact box. 32 bytes per
     /// slot.
     pub(super) held: Vec<SimdBox>,
-    /// The exact box when its candidates were last tested (see [`super::slack`]). 32 bytes
-    /// per slot.
+    /// The exact box when its candidates were last tested (see the incremental pass,
+    /// `slack`). 32 bytes per slot.
     pub(super) anchor: Vec<SimdBox>,
     /// The least slack of its candidates, from the anchors (metres, rounded down). 4 bytes
     /// per slot.

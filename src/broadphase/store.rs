@@ -65,8 +65,8 @@ pub(super) struct Store {
     pub(super) shape: Vec<Shape>,
     /// Outside the incremental regime, a body's exact box (the box pairs are computed on:
     /// its shape's grown by `Config::margin`; for a stale slot, the last applied one); a
-    /// sphere's entry means nothing. Inside the regime this array is the regime's (see
-    /// [`Incremental`](super::regime::Incremental)) and this one is empty. Allocated by the
+    /// sphere's entry means nothing. Inside the regime the array has moved into the regime's
+    /// state, which holds every proxy's exact box, and this one is empty. Allocated by the
     /// first body or the first entry into the regime, so a world of spheres that never
     /// enters it keeps none. 32 bytes.
     pub(super) exact: Vec<SimdBox>,
