@@ -11,7 +11,8 @@
 //! `--toggle-collect=*measured*` counts only the frames `--from..--to`.
 
 use broadleaf::fixtures::cli::{self, Flags, Stop};
-use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Passes, ProxyKey, Vec3};
+use broadleaf::fixtures::scene::CentersFeed;
+use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Passes, Vec3};
 use std::io::{Read, Write};
 use std::time::Instant;
 
@@ -165,11 +166,18 @@ fn record(_: usize) -> Option<Drop> {
     None
 }
 
-/// One measured frame; a separate function so callgrind can toggle collection on it.
-#[inline(never)]
-fn measured_frame(bp: &mut BroadPhase, keys: &[ProxyKey], centers: &[Vec3]) {
-    bp.update_centers(keys, centers).expect("valid batch");
+/// One frame: the staged batch, then the step.
+#[inline(always)]
+fn frame(bp: &mut BroadPhase, feed: &CentersFeed) {
+    feed.commit(bp).expect("valid batch");
     bp.step();
+}
+
+/// [`frame`] for the measured frames; a separate function so callgrind can toggle collection
+/// on it.
+#[inline(never)]
+fn measured_frame(bp: &mut BroadPhase, feed: &CentersFeed) {
+    frame(bp, feed);
 }
 
 fn main() {
@@ -198,45 +206,28 @@ fn main() {
         bp.insert_body(w, BodyKind::Static).expect("finite walls");
     }
     let objects = (d.balls + d.walls.len()) as f64;
-    let mut balls = Vec::with_capacity(d.balls);
-    let mut centers = vec![Vec3::ZERO; d.balls];
-    let (mut keys, mut batch, mut ns) = (Vec::new(), Vec::new(), Vec::new());
+    let mut feed = CentersFeed::default();
+    let mut ns = Vec::with_capacity(d.frames.len());
     let trace = std::env::var_os("BROADLEAF_TRACE").is_some();
     for (k, (ids, cs)) in d.frames.iter().enumerate() {
+        if k == 0 {
+            feed.stage_first(cs);
+        } else {
+            feed.stage(ids, cs, args.every);
+        }
         let t = Instant::now();
         if k == 0 {
-            for &c in cs {
-                balls.push(bp.insert_sphere(c, d.radius).expect("finite balls"));
-            }
-            centers.copy_from_slice(cs);
+            feed.insert(&mut bp, d.radius).expect("finite balls");
             bp.step();
+        } else if (args.from..args.to).contains(&k) {
+            measured_frame(&mut bp, &feed);
         } else {
-            for (&i, &c) in ids.iter().zip(cs) {
-                centers[i as usize] = c;
-            }
-            keys.clear();
-            batch.clear();
-            if args.every {
-                keys.extend_from_slice(&balls);
-                batch.extend_from_slice(&centers);
-            } else {
-                keys.extend(ids.iter().map(|&i| balls[i as usize]));
-                batch.extend_from_slice(cs);
-            }
-            let t = Instant::now();
-            if (args.from..args.to).contains(&k) {
-                measured_frame(&mut bp, &keys, &batch);
-            } else {
-                bp.update_centers(&keys, &batch).expect("valid batch");
-                bp.step();
-            }
-            ns.push(t.elapsed().as_nanos() as f64 / objects);
-            if trace {
-                eprintln!("{k}: {:.1} ns/object {:?}", ns[k], bp.stats());
-            }
-            continue;
+            frame(&mut bp, &feed);
         }
         ns.push(t.elapsed().as_nanos() as f64 / objects);
+        if trace {
+            eprintln!("{k}: {:.1} ns/object {:?}", ns[k], bp.stats());
+        }
     }
     let mean = |r: std::ops::Range<usize>, v: &[f64]| {
         let r = r.start.min(v.len())..r.end.min(v.len());

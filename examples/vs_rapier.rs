@@ -105,7 +105,8 @@ use broadleaf::fixtures::rapier_world::{
     FallRecording, SceneWorld, fall_steps, record_fall, record_pile,
 };
 use broadleaf::fixtures::scene::{
-    Bodies, Churn, Feed, Flying, Frame, GAS_RADIUS, Gas, Idle, Object, Rng, Scene, Spawn,
+    Bodies, CentersFeed, Churn, Feed, Flying, Frame, GAS_RADIUS, Gas, Idle, Object, Rng, Scene,
+    Spawn,
 };
 use broadleaf::fixtures::sim::DropConfig;
 use broadleaf::rapier::Comparison;
@@ -519,36 +520,22 @@ fn run_fall(n: usize, args: &Args) -> Row {
         .map(|&w| bp.insert_body(w, BodyKind::Static).expect("finite walls"))
         .collect();
     let objects = rec.balls() + walls.len();
-    let mut balls: Vec<ProxyKey> = Vec::with_capacity(rec.balls());
-    let (mut centers, mut keys, mut batch) = (Vec::new(), Vec::new(), Vec::new());
+    let mut feed = CentersFeed::default();
     let mut ours_ns = Vec::with_capacity(rec.frames());
     let (mut missed, mut extra, mut differ, mut cmp) = (0, 0, 0, Comparison::default());
     let trace = std::env::var_os("BROADLEAF_TRACE").is_some();
     for k in 0..rec.frames() {
         let (ids, moved) = rec.changed(k);
         let ns = if k == 0 {
-            centers.extend_from_slice(moved);
+            feed.stage_first(moved);
             let t = Instant::now();
-            for &c in moved {
-                balls.push(bp.insert_sphere(c, rec.radius).expect("finite balls"));
-            }
+            feed.insert(&mut bp, rec.radius).expect("finite balls");
             bp.step();
             t.elapsed()
         } else {
-            for (&i, &c) in ids.iter().zip(moved) {
-                centers[i as usize] = c;
-            }
-            keys.clear();
-            batch.clear();
-            if args.every {
-                keys.extend_from_slice(&balls);
-                batch.extend_from_slice(&centers);
-            } else {
-                keys.extend(ids.iter().map(|&i| balls[i as usize]));
-                batch.extend_from_slice(moved);
-            }
+            feed.stage(ids, moved, args.every);
             let t = Instant::now();
-            bp.update_centers(&keys, &batch).expect("valid batches");
+            feed.commit(&mut bp).expect("valid batches");
             bp.step();
             t.elapsed()
         };
@@ -556,7 +543,7 @@ fn run_fall(n: usize, args: &Args) -> Row {
         if trace {
             eprintln!("{k}: {:.1} ns/object {:?}", ours_ns[k], bp.stats());
         }
-        let exact = fall_exact(&bp, &rec, &balls, &walls, &centers);
+        let exact = fall_exact(&bp, &rec, &feed.balls, &walls, &feed.centers);
         // Against brute force alone (rapier's pairs of its dynamic run are not recorded):
         // `missed` = exact \ ours, `extra` = ours \ exact.
         cmp = Comparison::new(bp.pairs(), &exact, &exact);
