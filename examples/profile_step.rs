@@ -187,7 +187,7 @@ fn main() {
             });
             let (mut feed, mut spawns, mut frame) =
                 (Feed::new(false), Vec::new(), Frame::default());
-            // `BROADLEAF_TRACE=1` prints every step's `StepStats` on stderr.
+            // `BROADLEAF_TRACE=1` prints every step's time and `StepStats` on stderr.
             let trace = std::env::var_os("BROADLEAF_TRACE").is_some();
             scene.spawns(&mut spawns);
             feed.spawn(&mut bp, &spawns).expect("valid scene");
@@ -199,11 +199,12 @@ fn main() {
                     bp.step();
                     bp.pairs().len()
                 }));
+                let ns = t.elapsed().as_nanos() as f64 / n as f64;
                 if i >= WARMUP {
-                    times.push(t.elapsed().as_nanos() as f64 / n as f64);
+                    times.push(ns);
                 }
                 if trace {
-                    eprintln!("{i}: {:?}", bp.stats());
+                    eprintln!("{i}: {ns:.1} ns/object {:?}", bp.stats());
                 }
             }
             println!(

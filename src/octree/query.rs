@@ -16,6 +16,10 @@ use glam::Vec3;
 /// cells' lists directly; larger ones walk the occupied subtrees.
 const DIRECT_CELLS: u64 = 256;
 
+/// A direct query reads the cells of a level through their parents' child masks when it
+/// reaches more than this many of them (see `Octree::masked_cells`).
+const MASKED_CELLS: u64 = 32;
+
 /// A direct query reads the rows of at most this many cells without a branch per cell (see
 /// `Octree::candidates`).
 const ROW: u32 = 4;
@@ -125,6 +129,13 @@ impl Octree {
             }
             let (a, b) = self.lattice.reaching_cells(level, qlo, qhi);
             let len = (b[0] + 1).saturating_sub(a[0]);
+            let cells = (0..3)
+                .map(|i| u64::from((b[i] + 1).saturating_sub(a[i])))
+                .product::<u64>();
+            if cells > MASKED_CELLS {
+                self.masked_cells(level, a, b, &mut list)?;
+                continue;
+            }
             for z in a[2]..=b[2] {
                 for y in a[1]..=b[1] {
                     if len > ROW {
@@ -146,6 +157,42 @@ impl Octree {
                     }
                     for &head in &heads[..n] {
                         list(head)?;
+                    }
+                }
+            }
+        }
+        ControlFlow::Continue(())
+    }
+
+    /// Reads the lists of the cells `a ..= b` of `level` (at least 1) that hold a sphere,
+    /// found through their parents' child masks: one mask per parent cell instead of one list
+    /// head per cell, most of which are empty in a sparse level. A mask bit says the child's
+    /// subtree holds a sphere, which its own list may not: such a child's empty list is read.
+    fn masked_cells(
+        &self,
+        level: u32,
+        a: [u32; 3],
+        b: [u32; 3],
+        list: &mut impl FnMut(u32) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
+        // The octants of a parent at `p` (on one axis) whose child lies in `a ..= b`: `low`
+        // are the octants of the lower child on that axis, `high` those of the upper one.
+        let side = |p: u32, a: u32, b: u32, low: u8, high: u8| {
+            let inside = |c: u32| a <= c && c <= b;
+            (if inside(2 * p) { low } else { 0 }) | (if inside(2 * p + 1) { high } else { 0 })
+        };
+        for pz in a[2] / 2..=b[2] / 2 {
+            let zm = side(pz, a[2], b[2], 0x0F, 0xF0);
+            for py in a[1] / 2..=b[1] / 2 {
+                let yzm = zm & side(py, a[1], b[1], 0x33, 0xCC);
+                for px in a[0] / 2..=b[0] / 2 {
+                    let inside = yzm & side(px, a[0], b[0], 0x55, 0xAA);
+                    let parent = Cell::at(level - 1, [px, py, pz]);
+                    let mut bits = u32::from(self.nodes.mask(parent.node()) & inside);
+                    while bits != 0 {
+                        let child = parent.child(bits.trailing_zeros());
+                        bits &= bits - 1;
+                        list(self.nodes.head(child.node()))?;
                     }
                 }
             }
@@ -386,6 +433,59 @@ mod tests {
             Vec3::new(c.x - r, c.y - r, c.z - r),
             Vec3::new(c.x + r, c.y + r, c.z + r),
         )
+    }
+
+    /// Box queries over a deep sparse tree, sized to reach more than [`MASKED_CELLS`] cells of
+    /// its deepest level (read through the parents' masks) and, for some, more than
+    /// [`DIRECT_CELLS`] in all (the walk from the root), equal a scan of the spheres.
+    #[test]
+    fn box_queries_through_the_masks_find_every_overlapping_sphere() {
+        for (seed, placement) in [(3, Placement::Strict), (4, Placement::Loose)] {
+            let mut rng = Rng::new(seed);
+            let bounds = Aabb::new(Vec3::splat(-64.0), Vec3::splat(64.0));
+            let mut tree = Octree::with_placement(bounds, 7, placement).unwrap();
+            let shapes: Vec<(ProxyKey, Vec3, f32)> = (0..3000)
+                .map(|_| {
+                    let c = rng.vec3_in(Vec3::splat(-66.0), Vec3::splat(66.0));
+                    let r = rng.range(0.05, 0.6);
+                    (tree.insert(c, r).unwrap(), c, r)
+                })
+                .collect();
+            let deepest = (1..=tree.lattice.depth)
+                .rev()
+                .find(|&l| tree.per_level[l as usize] > 0)
+                .unwrap();
+            let (mut masked, mut walked) = (0, 0);
+            for q in 0..600 {
+                let lo = rng.vec3_in(Vec3::splat(-70.0), Vec3::splat(70.0));
+                let side = if q % 5 == 0 { 12.0 } else { 4.0 };
+                let aabb = Aabb::new(lo, lo + rng.vec3_in(Vec3::ZERO, Vec3::splat(side)));
+                let (qlo, qhi) = (
+                    tree.lattice.quantize(aabb.min),
+                    tree.lattice.quantize(aabb.max),
+                );
+                let (a, b) = tree.lattice.reaching_cells(deepest, qlo, qhi);
+                let cells: u64 = (0..3)
+                    .map(|i| u64::from((b[i] + 1).saturating_sub(a[i])))
+                    .product();
+                masked += usize::from(cells > MASKED_CELLS && cells <= DIRECT_CELLS);
+                walked += usize::from(cells > DIRECT_CELLS);
+                let mut got = Vec::new();
+                tree.query_aabb(&aabb, |k| got.push(k));
+                got.sort_unstable();
+                let mut want: Vec<ProxyKey> = shapes
+                    .iter()
+                    .filter(|&&(_, c, r)| Aabb::new(c - r, c + r).overlaps(&aabb))
+                    .map(|&(k, _, _)| k)
+                    .collect();
+                want.sort_unstable();
+                assert_eq!(got, want, "{placement:?} query {q} {aabb:?}");
+            }
+            assert!(
+                masked > 100 && walked > 20,
+                "masked {masked}, walked {walked}"
+            );
+        }
     }
 
     #[test]
