@@ -11,8 +11,10 @@ use super::{BroadPhase, Pass, Passes};
 mod unit {
     /// The full pass, per proxy (sort, sweep, lists).
     pub(super) const FULL: f64 = 110.0;
-    /// The full pass, per pair found (its sort and the lists).
-    pub(super) const FULL_PAIR: f64 = 20.0;
+    /// The full pass, per pair found: its sort and the lists, and the box tests of the
+    /// crowded cells that pairs come with (a settled pile's full pass costs about this much
+    /// more per pair than a sparse world's).
+    pub(super) const FULL_PAIR: f64 = 36.0;
     /// Carrying one candidate through the step without testing it: the scan for loud sides
     /// and the patches that move it. With few loud proxies the step looks their candidates up
     /// instead of scanning (see `slack::CANDIDATES_PER_LOOKUP`), at the price of scanning that
