@@ -65,7 +65,7 @@ impl BroadPhase {
         if self.stale >= slots / DENSE_FRACTION {
             // Most slots are stale: one streaming walk over the flags is cheaper than sorting
             // the mover list (whose order then stays the caller's).
-            if self.regime.is_some() && self.apply_spheres_fat(true) == 0 {
+            if self.apply_spheres_fat(true) == Some(0) {
                 return;
             }
             for s in 0..slots {
@@ -87,7 +87,7 @@ impl BroadPhase {
                     bits,
                 );
             }
-            if self.regime.is_some() && self.apply_spheres_fat(false) == 0 {
+            if self.apply_spheres_fat(false) == Some(0) {
                 return;
             }
             for i in 0..self.movers.len() {
@@ -150,13 +150,11 @@ impl BroadPhase {
     /// once (see [`super::slack`]), or escaped, and is listed to get its new fat box after the
     /// walk, in slot order. Returns how many stale slots it left for [`BroadPhase::apply`]: the
     /// bodies, and the spheres already listed as escaped (inserted or regrouped since the last
-    /// step).
-    fn apply_spheres_fat(&mut self, dense: bool) -> usize {
+    /// step); `None`, having done nothing, outside the regime.
+    fn apply_spheres_fat(&mut self, dense: bool) -> Option<usize> {
         let (margin, now) = (self.config.margin, self.now);
         let first_escape = self.escaped.len();
-        let Some(r) = &mut self.regime else {
-            return self.stale;
-        };
+        let r = self.regime.as_mut()?;
         let (st, loud, escaped) = (&mut self.store, &mut self.loud, &mut self.escaped);
         // The motion is not counted: only the estimate outside the regime reads it.
         let rest = if dense {
@@ -175,7 +173,7 @@ impl BroadPhase {
             let motion = self.note_motion(s, &old, &new);
             self.hold_moving(slot, motion);
         }
-        rest
+        Some(rest)
     }
 
     /// The dense walk with its spheres' share split over rayon's current pool, outside the
