@@ -13,7 +13,6 @@
 use broadleaf::fixtures::cli::{self, Flags, Stop};
 use broadleaf::fixtures::scene::CentersFeed;
 use broadleaf::{Aabb, BodyKind, BroadPhase, Config, Passes, Vec3};
-use std::io::{Read, Write};
 use std::time::Instant;
 
 const USAGE: &str = "usage: profile_fall --frames PATH [--n 4000] [--every] [--passes adaptive|full|incremental] [--from K] [--to K]";
@@ -80,19 +79,11 @@ fn save(path: &str, d: &Drop) -> std::io::Result<()> {
         w.extend(ids);
         w.extend(cs.iter().flat_map(|c| c.to_array().map(f32::to_bits)));
     }
-    let bytes: Vec<u8> = w.iter().flat_map(|x| x.to_le_bytes()).collect();
-    std::fs::File::create(path)?.write_all(&bytes)
+    cli::write_words(path, &w)
 }
 
 fn load(path: &str) -> Option<Drop> {
-    let mut bytes = Vec::new();
-    std::fs::File::open(path)
-        .ok()?
-        .read_to_end(&mut bytes)
-        .ok()?;
-    let mut it = bytes
-        .chunks_exact(4)
-        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]));
+    let mut it = cli::read_words(path)?.into_iter();
     let (walls, balls, frames, settle) = (
         it.next()? as usize,
         it.next()? as usize,
@@ -182,22 +173,7 @@ fn measured_frame(bp: &mut BroadPhase, feed: &CentersFeed) {
 
 fn main() {
     let args = cli::or_exit(USAGE, parse(std::env::args().skip(1)));
-    let d = match load(&args.frames) {
-        Some(d) => d,
-        None => {
-            let Some(d) = record(args.n) else {
-                eprintln!(
-                    "no frames at {} (record them with --features rapier)",
-                    args.frames
-                );
-                std::process::exit(2);
-            };
-            if let Err(e) = save(&args.frames, &d) {
-                eprintln!("cannot save the frames to {}: {e}", args.frames);
-            }
-            d
-        }
-    };
+    let d = cli::frames_or_exit(&args.frames, load, || record(args.n), save);
     let mut bp = BroadPhase::new(Config {
         passes: args.passes,
         ..Config::default()

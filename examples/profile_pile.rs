@@ -14,7 +14,6 @@ use broadleaf::fixtures::cli::{self, Flags, Stop};
 use broadleaf::fixtures::scene::{Feed, Frame, Recorded, Scene};
 use broadleaf::{Aabb, BroadPhase, Config, Passes, Vec3};
 use std::hint::black_box;
-use std::io::{Read, Write};
 use std::time::Instant;
 
 const WARMUP: usize = 5;
@@ -60,14 +59,7 @@ fn parse(argv: impl IntoIterator<Item = String>) -> Result<Args, Stop> {
 /// The frames saved at `path` (bounds, radius, then each frame's centres, as little-endian
 /// `f32`s behind a header of counts), if the file is there.
 fn load(path: &str) -> Option<Recorded> {
-    let mut bytes = Vec::new();
-    std::fs::File::open(path)
-        .ok()?
-        .read_to_end(&mut bytes)
-        .ok()?;
-    let mut words = bytes
-        .chunks_exact(4)
-        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]));
+    let mut words = cli::read_words(path)?.into_iter();
     let (frames, n) = (words.next()? as usize, words.next()? as usize);
     let mut f = || words.next().map(f32::from_bits);
     let v = |f: &mut dyn FnMut() -> Option<f32>| Some(Vec3::new(f()?, f()?, f()?));
@@ -90,8 +82,7 @@ fn save(path: &str, r: &Recorded) -> std::io::Result<()> {
     for f in &r.frames {
         out.extend(f.iter().flat_map(|c| c.to_array().map(f32::to_bits)));
     }
-    let bytes: Vec<u8> = out.iter().flat_map(|w| w.to_le_bytes()).collect();
-    std::fs::File::create(path)?.write_all(&bytes)
+    cli::write_words(path, &out)
 }
 
 #[cfg(feature = "rapier")]
@@ -117,22 +108,7 @@ fn measured_step(run: &mut dyn FnMut() -> usize) -> usize {
 
 fn main() {
     let args = cli::or_exit(USAGE, parse(std::env::args().skip(1)));
-    let mut scene = match load(&args.frames) {
-        Some(r) => r,
-        None => {
-            let Some(r) = record(&args) else {
-                eprintln!(
-                    "no frames at {} (record them with --features rapier)",
-                    args.frames
-                );
-                std::process::exit(2);
-            };
-            if let Err(e) = save(&args.frames, &r) {
-                eprintln!("cannot save the frames to {}: {e}", args.frames);
-            }
-            r
-        }
-    };
+    let mut scene = cli::frames_or_exit(&args.frames, load, || record(&args), save);
     let mut bp = BroadPhase::new(Config {
         passes: args.passes,
         ..Config::default()
