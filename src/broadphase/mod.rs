@@ -375,6 +375,43 @@ impl BroadPhase {
         self.insert_body_with(aabb, kind, CollisionGroups::ALL)
     }
 
+    /// Adds many spheres at once, `(center, radius)` per entry, and returns their keys in the
+    /// batch's order. Checked whole first: on the first bad entry (what
+    /// [`BroadPhase::insert_sphere`] refuses, or `Error::Full` at the first entry that does
+    /// not fit) nothing is added and the error names the entry.
+    ///
+    /// The batch's spheres are numbered by place. The broadphase keeps a proxy's records at
+    /// its key's slot, and a batch hands its slots to its spheres along a space-filling curve
+    /// through their centres, so spheres near each other get records near each other in
+    /// memory. A step that visits a sphere's neighbours (the re-tests and the queries of a
+    /// world that partly moves) then reads fewer cache lines than after inserts one at a time
+    /// in an order that has nothing to do with place: load a world in one batch.
+    pub fn insert_spheres(&mut self, spheres: &[(Vec3, f32)]) -> Result<Vec<ProxyKey>, BatchError> {
+        for (index, &(center, radius)) in spheres.iter().enumerate() {
+            check_sphere(center, radius).map_err(|error| BatchError { index, error })?;
+        }
+        let room = MAX_PROXIES
+            .saturating_sub(self.store.len())
+            .min(self.store.available());
+        if spheres.len() > room {
+            return Err(BatchError {
+                index: room,
+                error: Error::Full,
+            });
+        }
+        self.reserve(spheres.len(), 0);
+        let mut keys = vec![ProxyKey::default(); spheres.len()];
+        for i in crate::octree::curve_order(spheres.iter().map(|s| s.0)) {
+            let (center, radius) = spheres[i as usize];
+            let inserted = self.insert(Shape::Sphere { center, radius }, CollisionGroups::ALL);
+            debug_assert!(inserted.is_ok(), "the batch's room was checked");
+            if let Ok(key) = inserted {
+                keys[i as usize] = key;
+            }
+        }
+        Ok(keys)
+    }
+
     /// [`BroadPhase::insert_sphere`] with collision `groups`: the same checks and errors (on
     /// `Err` nothing changes), and the same as inserting then calling
     /// [`BroadPhase::set_groups`], in one call.

@@ -92,6 +92,12 @@ impl Store {
         self.live
     }
 
+    /// How many more slots [`Store::alloc`] can give before the next step frees more: the
+    /// free ones and those never used.
+    pub(super) fn available(&self) -> usize {
+        self.free.len() + (MAX_SLOTS as usize).saturating_sub(self.version.len())
+    }
+
     /// Slot count (live and free): the bound of every per-slot array.
     pub(super) fn slots(&self) -> usize {
         self.version.len()

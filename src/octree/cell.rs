@@ -74,6 +74,33 @@ pub(super) fn unmorton(code: u32) -> [u32; 3] {
     [compact3(code), compact3(code >> 1), compact3(code >> 2)]
 }
 
+/// The indices of `points` in the order of the Morton curve through them: each point's cell
+/// of the 1024³ lattice over their bounding box, ties in index order. Points near each other
+/// mostly come near each other in this order. The points are finite; at most `u32::MAX`.
+pub(crate) fn curve_order(points: impl Iterator<Item = glam::Vec3> + Clone) -> Vec<u32> {
+    let (lo, hi) = points.clone().fold(
+        (glam::DVec3::INFINITY, glam::DVec3::NEG_INFINITY),
+        |(lo, hi), p| (lo.min(p.as_dvec3()), hi.max(p.as_dvec3())),
+    );
+    // In `f64`, so that no extent of finite `f32` points overflows; a flat axis maps to 0.
+    let extent = hi - lo;
+    let scale = glam::DVec3::select(
+        extent.cmpgt(glam::DVec3::ZERO),
+        1023.0 / extent,
+        glam::DVec3::ZERO,
+    );
+    let mut keyed: Vec<u64> = points
+        .enumerate()
+        .map(|(i, p)| {
+            // The float-to-int cast saturates: the far corner lands in cell 1023.
+            let c = ((p.as_dvec3() - lo) * scale).to_array().map(|x| x as u32);
+            (u64::from(morton(c)) << 32) | i as u64
+        })
+        .collect();
+    keyed.sort_unstable();
+    keyed.into_iter().map(|k| k as u32).collect()
+}
+
 /// `spread3` of every 10-bit value: a placement does three lookups instead of three bit
 /// spreads. 4 KB.
 static SPREAD3: [u32; 1024] = {

@@ -76,6 +76,7 @@ mod walk;
 
 #[cfg(feature = "parallel")]
 pub(crate) use batch::Moves;
+pub(crate) use cell::curve_order;
 pub use placement::{depth_for, depth_for_loose};
 
 use crate::error::Error;
