@@ -223,30 +223,115 @@ pub(crate) fn part_of(splitters: &[u64], key: u64) -> usize {
     splitters.iter().map(|&s| usize::from(s <= key)).sum()
 }
 
+/// One producer's keys for [`sort_parts`]: each pushed with its part as it is found, then
+/// grouped by part. One list per producer, whatever the cut: where the keys follow place (a
+/// world inserted in one batch) a producer's keys fall mostly in one part, and which one
+/// shifts as its objects move, so a list per part would keep growing to new peaks.
+#[cfg(feature = "parallel")]
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Parted {
+    /// The keys as found.
+    keys: Vec<u64>,
+    /// Each key's part.
+    parts: Vec<u8>,
+    /// Per part: how many keys it got; after [`Parted::group`], where its run in `grouped`
+    /// ends.
+    ends: Vec<usize>,
+    /// The keys grouped by part, in the order found within each.
+    grouped: Vec<u64>,
+}
+
+#[cfg(feature = "parallel")]
+impl Parted {
+    /// Empties the lists for a cut into `parts` parts (at most 256).
+    pub(crate) fn reset(&mut self, parts: usize) {
+        debug_assert!(parts <= 256, "a part is a byte");
+        self.keys.clear();
+        self.parts.clear();
+        self.ends.clear();
+        self.ends.resize(parts, 0);
+    }
+
+    /// Adds `key` of part `part`.
+    #[inline]
+    pub(crate) fn push(&mut self, part: usize, key: u64) {
+        self.keys.push(key);
+        self.parts.push(part as u8);
+        self.ends[part] += 1;
+    }
+
+    /// Groups the keys by part.
+    fn group(&mut self) {
+        let mut at = 0;
+        for end in &mut self.ends {
+            (*end, at) = (at, at + *end);
+        }
+        // `ends` holds each part's start here, and its end once its keys are written.
+        self.grouped.resize(self.keys.len(), 0);
+        for (&key, &part) in self.keys.iter().zip(&self.parts) {
+            let to = &mut self.ends[usize::from(part)];
+            self.grouped[*to] = key;
+            *to += 1;
+        }
+    }
+
+    /// The keys of part `p`, once grouped.
+    fn part(&self, p: usize) -> &[u64] {
+        let start = if p == 0 { 0 } else { self.ends[p - 1] };
+        &self.grouped[start..self.ends[p]]
+    }
+
+    /// Heap bytes held (capacities).
+    pub(crate) fn heap_bytes(&self) -> usize {
+        (self.keys.capacity() + self.grouped.capacity() + self.ends.capacity()) * 8
+            + self.parts.capacity()
+    }
+
+    /// [`ahead`] on the lists that grow with the keys.
+    pub(crate) fn ahead(&mut self) {
+        ahead(&mut self.keys);
+        ahead(&mut self.parts);
+        ahead(&mut self.grouped);
+    }
+
+    /// Applies `trim` (a caller's policy for giving back room) to the key lists, and cuts the
+    /// parts' list to the keys' room.
+    pub(crate) fn trim(&mut self, trim: fn(&mut Vec<u64>, usize)) {
+        trim(&mut self.keys, 0);
+        trim(&mut self.grouped, 0);
+        if self.parts.capacity() > self.keys.capacity() {
+            self.parts.shrink_to(self.keys.capacity());
+        }
+    }
+}
+
 /// Sorts keys that their producers have already cut into `parts` parts into `out`, over
-/// rayon's current pool: `buckets[i][p]` holds producer `i`'s keys of part `p`. Each part is
-/// copied into its stretch of `out` and radix sorted there by its own task, with the same stretch
-/// of `tmp` as its second buffer; `bounds` gets the parts' first positions and the key count last. The
-/// keys (distinct packed pairs of slots below `layout`'s bound) end sorted whatever the cut.
+/// rayon's current pool: `producers[i]` holds producer `i`'s keys with their parts. Each
+/// producer groups its keys by part, then each part is copied into its stretch of `out` and
+/// radix sorted there by its own task, with the same stretch of `tmp` as its second buffer;
+/// `bounds` gets the parts' first positions and the key count last. The keys (distinct
+/// packed pairs of slots below `layout`'s bound) end sorted whatever the cut.
 #[cfg(feature = "parallel")]
 pub(crate) fn sort_parts(
-    buckets: &[Vec<Vec<u64>>],
+    producers: &mut [Parted],
     parts: usize,
     out: &mut Vec<u64>,
     tmp: &mut Vec<u64>,
     bounds: &mut Vec<usize>,
     layout: PairBits,
 ) {
+    use rayon::prelude::*;
+    producers.par_iter_mut().for_each(Parted::group);
     bounds.clear();
     bounds.push(0);
     for p in 0..parts {
-        let len: usize = buckets.iter().map(|b| b[p].len()).sum();
+        let len: usize = producers.iter().map(|b| b.part(p).len()).sum();
         bounds.push(bounds[p] + len);
     }
     out.resize(bounds[parts], 0);
     tmp.resize(bounds[parts], 0);
     let job = Gather {
-        buckets,
+        producers,
         bounds,
         layout,
     };
@@ -256,7 +341,7 @@ pub(crate) fn sort_parts(
 /// What every part of [`sort_parts`] reads.
 #[cfg(feature = "parallel")]
 struct Gather<'a> {
-    buckets: &'a [Vec<Vec<u64>>],
+    producers: &'a [Parted],
     bounds: &'a [usize],
     layout: PairBits,
 }
@@ -269,8 +354,8 @@ impl Gather<'_> {
     fn fill(&self, first: usize, parts: usize, tmp: &mut [u64], out: &mut [u64]) {
         if parts == 1 {
             let mut at = 0;
-            for b in self.buckets {
-                let keys = &b[first];
+            for b in self.producers {
+                let keys = b.part(first);
                 out[at..at + keys.len()].copy_from_slice(keys);
                 at += keys.len();
             }
@@ -943,15 +1028,18 @@ mod tests {
                     }
                     split_points(by, |&k| k, parts, &mut splitters);
                     let np = splitters.len() + 1;
-                    let mut buckets = vec![vec![Vec::new(); np]; producers];
+                    let mut buckets = vec![Parted::default(); producers];
+                    for b in &mut buckets {
+                        b.reset(np);
+                    }
                     for &k in &all {
                         let i = (next() % producers as u64) as usize;
-                        buckets[i][part_of(&splitters, k)].push(k);
+                        buckets[i].push(part_of(&splitters, k), k);
                     }
                     let mut out = vec![7; 3];
                     pool.install(|| {
                         let layout = PairBits::for_slots(slots as usize);
-                        sort_parts(&buckets, np, &mut out, &mut tmp, &mut bounds, layout);
+                        sort_parts(&mut buckets, np, &mut out, &mut tmp, &mut bounds, layout);
                     });
                     assert_eq!(out, all, "n {n} parts {parts} threads {threads}");
                 }

@@ -61,9 +61,9 @@ const MAX_TASKS: usize = 64;
 pub(super) struct Parallel {
     /// The first keys of the pair sort's parts (see [`radix::split_points`]).
     splitters: Vec<u64>,
-    /// Pairs found, packed, per producer and per part of the sort: one producer per chunk of
+    /// Pairs found, packed, per producer with their parts of the sort: one producer per chunk of
     /// the octree's pass, one per task of the BVH passes, then the sphere × body queries.
-    found: Vec<Vec<Vec<u64>>>,
+    found: Vec<radix::Parted>,
     /// The split BVH passes' items and per-task stacks.
     split: crate::bvh::SplitScratch,
     /// The pair sort's parts' bounds (its second buffer is the serial sort's, see
@@ -84,13 +84,17 @@ impl Parallel {
     pub(super) fn heap_bytes(&self) -> usize {
         let lists = |v: &[Vec<u64>]| v.iter().map(Vec::capacity).sum::<usize>();
         (self.splitters.capacity()
-            + self.found.iter().map(|f| lists(f)).sum::<usize>()
             + self.sort_bounds.capacity()
             + self.diff.iter().map(|d| lists(d)).sum::<usize>()
             + self.cur_at.capacity()
             + self.prev_at.capacity())
             * 8
             + self.split.heap_bytes()
+            + self
+                .found
+                .iter()
+                .map(radix::Parted::heap_bytes)
+                .sum::<usize>()
             + self
                 .moves
                 .iter()
@@ -102,10 +106,10 @@ impl Parallel {
 #[cfg(feature = "parallel")]
 impl Parallel {
     /// Applies `trim` (the broadphase's event-list policy) to the lists a burst of pairs
-    /// leaves oversized: the producers' parts and the diff's parts.
+    /// leaves oversized: the producers' and the diff's parts.
     pub(super) fn trim(&mut self, trim: fn(&mut Vec<u64>, usize)) {
-        for list in self.found.iter_mut().flatten() {
-            trim(list, 0);
+        for producer in &mut self.found {
+            producer.trim(trim);
         }
         for list in self.diff.iter_mut().flatten() {
             trim(list, 0);
@@ -360,21 +364,16 @@ impl BroadPhase {
         let parts = par.splitters.len() + 1;
         let producers = 2 * tasks + 1;
         if par.found.len() < producers {
-            par.found.resize_with(producers, Vec::new);
+            par.found.resize_with(producers, Default::default);
         }
         for found in &mut par.found[..producers] {
-            if found.len() < parts {
-                found.resize_with(parts, Vec::new);
-            }
-            for part in &mut found[..parts] {
-                part.clear();
-            }
+            found.reset(parts);
         }
         let (store, groups, splitters) = (&self.store, self.any_groups, &par.splitters[..]);
-        let emit = |found: &mut Vec<Vec<u64>>, a: ProxyKey, b: ProxyKey| {
+        let emit = |found: &mut radix::Parted, a: ProxyKey, b: ProxyKey| {
             let (a, b) = (crate::pair::slot(a), crate::pair::slot(b));
             if let Some(p) = pack_allowed(store, groups, a, b) {
-                found[radix::part_of(splitters, p)].push(p);
+                found.push(radix::part_of(splitters, p), p);
             }
         };
         let (chunks, rest) = par.found[..producers].split_at_mut(tasks);
@@ -392,15 +391,15 @@ impl BroadPhase {
         });
         let scratch = sort_scratch(&mut self.octree, &mut self.sort_buf);
         radix::sort_parts(
-            &par.found[..producers],
+            &mut par.found[..producers],
             parts,
             &mut self.fresh,
             scratch,
             &mut par.sort_bounds,
             layout,
         );
-        for list in par.found[..producers].iter_mut().flatten() {
-            ahead(list);
+        for found in &mut par.found[..producers] {
+            found.ahead();
         }
     }
 
