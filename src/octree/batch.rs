@@ -62,12 +62,19 @@ impl Octree {
     /// kept. Nothing may be deferred before (a step's apply starts with none).
     pub(crate) fn take_moves(&mut self, moves: &mut [Moves]) {
         debug_assert!(self.deferred.is_empty(), "moves taken after a deferral");
+        // Every task keeps room for twice the busiest one's moves, grown to that once they
+        // fill two thirds of it: a task's share follows its slots, which, numbered by
+        // place (a world inserted in one batch), cover one part of the world, and which part
+        // is busiest shifts from step to step.
+        let most = moves.iter().map(|m| m.deferred.len()).max().unwrap_or(0);
         for m in moves {
             self.deferred.extend_from_slice(&m.deferred);
             for (count, delta) in self.per_level.iter_mut().zip(m.per_level) {
                 *count = count.wrapping_add_signed(delta);
             }
-            crate::radix::ahead(&mut m.deferred);
+            if m.deferred.capacity() < most + most / 2 {
+                crate::radix::grow_to(&mut m.deferred, 2 * most);
+            }
             m.deferred.clear();
             m.per_level = [0; MAX_DEPTH as usize + 1];
         }
