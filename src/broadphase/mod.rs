@@ -518,10 +518,10 @@ impl BroadPhase {
     /// body's key) nothing is applied and the error names the entry. A key given twice is
     /// fine: the last entry wins.
     pub fn update_spheres(&mut self, updates: &[(ProxyKey, Vec3, f32)]) -> Result<(), BatchError> {
-        for (index, &(key, center, radius)) in updates.iter().enumerate() {
-            self.check_sphere_update(key, center, radius)
-                .map_err(|error| BatchError { index, error })?;
-        }
+        self.first_refused(updates.len(), |bp, i| {
+            let (key, center, radius) = updates[i];
+            bp.check_sphere_update(key, center, radius)
+        })?;
         self.store_spheres(updates.iter().map(|&(k, c, r)| (k, c, Some(r))));
         Ok(())
     }
@@ -571,11 +571,10 @@ impl BroadPhase {
                 },
             });
         }
-        for (index, (&key, &center)) in keys.iter().zip(centers).enumerate() {
-            // A radius of 0 always passes: only the centre is checked.
-            self.check_sphere_update(key, center, 0.0)
-                .map_err(|error| BatchError { index, error })?;
-        }
+        // A radius of 0 always passes: only the centre is checked.
+        self.first_refused(keys.len(), |bp, i| {
+            bp.check_sphere_update(keys[i], centers[i], 0.0)
+        })?;
         self.store_spheres(keys.iter().zip(centers).map(|(&k, &c)| (k, c, None)));
         Ok(())
     }
@@ -585,14 +584,62 @@ impl BroadPhase {
     /// nothing is applied and the error names the entry. A key given twice is fine: the last
     /// entry wins.
     pub fn update_bodies(&mut self, updates: &[(ProxyKey, Aabb)]) -> Result<(), BatchError> {
-        for (index, (key, aabb)) in updates.iter().enumerate() {
-            self.check_body_update(*key, aabb)
-                .map_err(|error| BatchError { index, error })?;
-        }
+        self.first_refused(updates.len(), |bp, i| {
+            let (key, aabb) = &updates[i];
+            bp.check_body_update(*key, aabb)
+        })?;
         for (key, aabb) in updates {
             self.set_body(crate::pair::slot(*key), aabb);
         }
         Ok(())
+    }
+
+    /// The first of a batch's `len` entries that `check` refuses, as the batch's error. A
+    /// large batch is checked in parts over rayon's current pool (feature `parallel`, more
+    /// than one thread), which finds the same entry: the parts are read-only, and the earlier
+    /// part's error wins. A worker asleep since the last step also wakes here, where the
+    /// caller checks whatever it has not taken, rather than in the step.
+    fn first_refused<T>(
+        &self,
+        len: usize,
+        check: impl Fn(&Self, usize) -> Result<T, Error> + Sync,
+    ) -> Result<(), BatchError> {
+        #[cfg(feature = "parallel")]
+        if len >= PARALLEL_MIN_BATCH && rayon::current_num_threads() >= 2 {
+            return self.first_refused_par(0..len, &check);
+        }
+        self.first_refused_in(0..len, &check)
+    }
+
+    /// [`BroadPhase::first_refused`] over the entries `range`, in order.
+    fn first_refused_in<T>(
+        &self,
+        range: core::ops::Range<usize>,
+        check: &impl Fn(&Self, usize) -> Result<T, Error>,
+    ) -> Result<(), BatchError> {
+        for index in range {
+            check(self, index).map_err(|error| BatchError { index, error })?;
+        }
+        Ok(())
+    }
+
+    /// [`BroadPhase::first_refused_in`] split in halves by `rayon::join` down to parts of at
+    /// most [`BATCH_PART`] entries.
+    #[cfg(feature = "parallel")]
+    fn first_refused_par<T>(
+        &self,
+        range: core::ops::Range<usize>,
+        check: &(impl Fn(&Self, usize) -> Result<T, Error> + Sync),
+    ) -> Result<(), BatchError> {
+        if range.len() <= BATCH_PART {
+            return self.first_refused_in(range, check);
+        }
+        let mid = range.start + range.len() / 2;
+        let (low, high) = rayon::join(
+            || self.first_refused_par(range.start..mid, check),
+            || self.first_refused_par(mid..range.end, check),
+        );
+        low.and(high)
     }
 
     /// The slot of a live sphere, or what [`BroadPhase::update_sphere`] refuses.
@@ -800,3 +847,11 @@ const TRIM_FLOOR: usize = 256;
 
 /// The most live proxies: the structures index their entries with `u32`.
 const MAX_PROXIES: usize = (u32::MAX - 2) as usize;
+
+/// Update batches of at least this many entries are checked in parts over rayon's pool.
+#[cfg(feature = "parallel")]
+const PARALLEL_MIN_BATCH: usize = 16_384;
+/// The most entries of a part of a batch checked over the pool: a smaller part costs about
+/// as much to hand out as to check.
+#[cfg(feature = "parallel")]
+const BATCH_PART: usize = 4096;
