@@ -104,6 +104,8 @@ pub enum Op {
     /// `update_centers` with the first `n % (MAX_BATCH + 1)` keys and, one time in four, a
     /// different number of centres (`m / 4 % (MAX_BATCH + 1)`, for `m % 4 == 0`).
     UpdateCenters(u8, u8, [(u8, [F; 3]); MAX_BATCH]),
+    /// `insert_spheres` with the first `n % (MAX_BATCH + 1)` entries.
+    InsertSpheres(u8, [([F; 3], F); MAX_BATCH]),
     /// A box query, with a visitor that stops after this many matches if given.
     QueryAabb([F; 3], [F; 3], Filter, Option<u8>),
     QuerySphere([F; 3], F, Filter, Option<u8>),
@@ -627,6 +629,30 @@ fn apply(bp: &mut BroadPhase, m: &mut Model, op: &Op, passes: Passes) {
             }
         }
         Op::UpdateCenters(n, centers, entries) => update_centers(bp, m, *n, *centers, entries),
+        Op::InsertSpheres(n, entries) => {
+            let batch: Vec<(Vec3, f32)> = entries
+                .iter()
+                .take(usize::from(*n) % (MAX_BATCH + 1))
+                .map(|&(c, r)| (v(c), r.get()))
+                .collect();
+            let first_bad = batch.iter().position(|&(c, r)| !sphere_ok(c, r));
+            let len = bp.len();
+            match (bp.insert_spheres(&batch), first_bad) {
+                (Ok(keys), None) => {
+                    assert_eq!(keys.len(), batch.len(), "a key per entry");
+                    for (&k, &(center, radius)) in keys.iter().zip(&batch) {
+                        m.add(k, Shape::Sphere { center, radius }, CollisionGroups::ALL);
+                    }
+                }
+                (Err(BatchError { index, .. }), Some(i)) => {
+                    assert_eq!(index, i, "the first bad entry");
+                    assert_eq!(bp.len(), len, "a refused batch inserted");
+                }
+                (got, want) => {
+                    panic!("insert_spheres: {got:?}, expected the first bad at {want:?}")
+                }
+            }
+        }
         Op::UpdateBodies(n, entries) => {
             let batch: Vec<(ProxyKey, Aabb)> = entries
                 .iter()
