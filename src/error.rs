@@ -100,7 +100,8 @@ impl std::error::Error for Error {}
 
 /// A refused batch ([`BroadPhase::update_spheres`](crate::BroadPhase::update_spheres),
 /// [`BroadPhase::update_centers`](crate::BroadPhase::update_centers),
-/// [`BroadPhase::update_bodies`](crate::BroadPhase::update_bodies)): the first bad entry's
+/// [`BroadPhase::update_bodies`](crate::BroadPhase::update_bodies),
+/// [`BroadPhase::insert_spheres`](crate::BroadPhase::insert_spheres)): the first bad entry's
 /// index and why (for slices of different lengths, the first index only one of them has). When a batch is refused, nothing of it was applied.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BatchError {
