@@ -92,7 +92,7 @@ pub(crate) fn curve_order(points: impl Iterator<Item = glam::Vec3> + Clone) -> V
     let mut keyed: Vec<u64> = points
         .enumerate()
         .map(|(i, p)| {
-            // The float-to-int cast saturates: the far corner lands in cell 1023.
+            // Each coordinate is 0..=1023 up to rounding; `morton` reads its low 10 bits.
             let c = ((p.as_dvec3() - lo) * scale).to_array().map(|x| x as u32);
             (u64::from(morton(c)) << 32) | i as u64
         })
