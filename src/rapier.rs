@@ -122,6 +122,20 @@ pub struct Mirror {
     stamp: u64,
     /// Reused buffer of rapier's mapped pairs.
     rapier: Vec<Pair>,
+    /// Reused buffer of the new ball colliders of a `sync`, inserted as one batch.
+    new_balls: Vec<NewBall>,
+}
+
+/// A new ball collider of a [`Mirror::sync`], inserted with the others after its loop.
+#[derive(Clone, Copy, Debug)]
+struct NewBall {
+    /// The collider handle's arena index.
+    index: usize,
+    handle: ColliderHandle,
+    center: Vec3,
+    radius: f32,
+    groups: CollisionGroups,
+    or_mode: bool,
 }
 
 impl Mirror {
@@ -135,6 +149,7 @@ impl Mirror {
             handles: SecondaryMap::new(),
             stamp: 0,
             rapier: Vec::new(),
+            new_balls: Vec::new(),
         }
     }
 
@@ -143,10 +158,12 @@ impl Mirror {
     /// disabled ones. Each collider's
     /// pose is its parent's current pose × `position_wrt_parent` (its own pose without a
     /// parent): the pose the next `PhysicsPipeline::step` detects collisions at. Call it right
-    /// before that step (see the module docs).
+    /// before that step (see the module docs). The new ball colliders go in as one
+    /// [`BroadPhase::insert_spheres`] batch, numbered by place.
     pub fn sync(&mut self, bodies: &RigidBodySet, colliders: &ColliderSet) -> SyncReport {
         self.stamp += 1;
         let mut report = SyncReport::default();
+        self.new_balls.clear();
         for (handle, co) in colliders.iter() {
             if !co.is_enabled() {
                 continue;
@@ -188,37 +205,33 @@ impl Mirror {
                         report.regrouped += 1;
                     }
                 }
-                slot @ None => {
-                    let inserted = match shape {
-                        Shape::Sphere { center, radius } => {
-                            self.broadphase.insert_sphere(center, radius)
-                        }
-                        Shape::Body { aabb, kind } => self.broadphase.insert_body(aabb, kind),
-                    };
-                    match inserted {
-                        Ok(key) => {
-                            let set = self.broadphase.set_groups(key, groups);
-                            debug_assert!(set.is_ok(), "a key just inserted is live");
-                            *slot = Some(Entry {
+                None => match shape {
+                    Shape::Sphere { center, radius } => {
+                        if crate::geom::check_sphere(center, radius).is_ok() {
+                            self.new_balls.push(NewBall {
+                                index: i,
                                 handle,
-                                key,
-                                class: Class::of(&shape),
-                                shape,
+                                center,
+                                radius,
                                 groups,
-                                stamp: self.stamp,
+                                or_mode: co.collision_groups().test_mode == InteractionTestMode::Or,
                             });
-                            self.handles.insert(key, handle);
-                            report.inserted += 1;
+                        } else {
+                            report.skipped += 1;
                         }
-                        Err(_) => report.skipped += 1,
                     }
-                }
+                    Shape::Body { aabb, kind } => match self.broadphase.insert_body(aabb, kind) {
+                        Ok(key) => self.keep(i, handle, key, shape, groups, &mut report),
+                        Err(_) => report.skipped += 1,
+                    },
+                },
             }
             if self.slots[i].is_some() && co.collision_groups().test_mode == InteractionTestMode::Or
             {
                 report.or_mode += 1;
             }
         }
+        self.insert_new_balls(&mut report);
         // In index order, so the broadphase's key reuse (and so its pair order) is
         // deterministic.
         for i in 0..self.slots.len() {
@@ -228,6 +241,57 @@ impl Mirror {
             }
         }
         report
+    }
+
+    /// Inserts the new ball colliders `sync` listed (finite, checked) in one batch.
+    fn insert_new_balls(&mut self, report: &mut SyncReport) {
+        if self.new_balls.is_empty() {
+            return;
+        }
+        let batch: Vec<(Vec3, f32)> = self
+            .new_balls
+            .iter()
+            .map(|b| (b.center, b.radius))
+            .collect();
+        let Ok(keys) = self.broadphase.insert_spheres(&batch) else {
+            // Only a broadphase that is full refuses a checked batch.
+            report.skipped += batch.len();
+            return;
+        };
+        let balls = core::mem::take(&mut self.new_balls);
+        for (b, key) in balls.iter().zip(keys) {
+            let shape = Shape::Sphere {
+                center: b.center,
+                radius: b.radius,
+            };
+            self.keep(b.index, b.handle, key, shape, b.groups, report);
+            report.or_mode += usize::from(b.or_mode);
+        }
+        self.new_balls = balls;
+    }
+
+    /// Mirrors the collider `handle` (arena index `i`) just inserted as `key`.
+    fn keep(
+        &mut self,
+        i: usize,
+        handle: ColliderHandle,
+        key: ProxyKey,
+        shape: Shape,
+        groups: CollisionGroups,
+        report: &mut SyncReport,
+    ) {
+        let set = self.broadphase.set_groups(key, groups);
+        debug_assert!(set.is_ok(), "a key just inserted is live");
+        self.slots[i] = Some(Entry {
+            handle,
+            key,
+            class: Class::of(&shape),
+            shape,
+            groups,
+            stamp: self.stamp,
+        });
+        self.handles.insert(key, handle);
+        report.inserted += 1;
     }
 
     fn drop_slot(&mut self, i: usize) {
@@ -539,6 +603,47 @@ fn intersect(a: &[Pair], b: &[Pair], out: &mut Vec<Pair>) {
 mod tests {
     use super::*;
     use slotmap::SlotMap;
+
+    /// A sync's new balls go in as one batch, numbered along the curve through their centres;
+    /// a ball at a NaN position is skipped alone; a later sync inserts only what is new.
+    #[test]
+    fn new_balls_are_inserted_as_one_batch() {
+        use rapier3d::geometry::ColliderBuilder;
+        let bodies = RigidBodySet::new();
+        let mut colliders = ColliderSet::new();
+        let mut rng = crate::rng::Rng::new(3);
+        let mut centers = Vec::new();
+        for _ in 0..300 {
+            let c = rng.vec3_in(Vec3::splat(-20.0), Vec3::splat(20.0));
+            centers.push(c);
+            colliders.insert(ColliderBuilder::ball(0.5).translation(c).build());
+        }
+        colliders.insert(ColliderBuilder::ball(0.5).translation(Vec3::NAN).build());
+        colliders.insert(ColliderBuilder::cuboid(1.0, 1.0, 1.0).build());
+        let mut mirror = Mirror::new(Config::default());
+        let report = mirror.sync(&bodies, &colliders);
+        assert_eq!((report.inserted, report.skipped), (301, 1), "{report:?}");
+        // The balls' slots, in slot order, follow the curve through the centres in the
+        // order the set gave them.
+        let mut balls: Vec<(u32, Vec3)> = mirror
+            .slots
+            .iter()
+            .flatten()
+            .filter_map(|e| match e.shape {
+                Shape::Sphere { center, .. } => Some((pair::slot(e.key), center)),
+                Shape::Body { .. } => None,
+            })
+            .collect();
+        balls.sort_unstable_by_key(|b| b.0);
+        let order = crate::octree::curve_order(centers.iter().copied());
+        let along: Vec<Vec3> = order.iter().map(|&i| centers[i as usize]).collect();
+        let got: Vec<Vec3> = balls.iter().map(|b| b.1).collect();
+        assert_eq!(got, along);
+        assert_eq!(mirror.sync(&bodies, &colliders).inserted, 0);
+        colliders.insert(ColliderBuilder::ball(0.5).translation(Vec3::ZERO).build());
+        let report = mirror.sync(&bodies, &colliders);
+        assert_eq!((report.inserted, report.skipped), (1, 1), "{report:?}");
+    }
 
     #[test]
     fn comparison_counts_each_set_difference() {
