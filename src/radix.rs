@@ -223,10 +223,10 @@ pub(crate) fn part_of(splitters: &[u64], key: u64) -> usize {
     splitters.iter().map(|&s| usize::from(s <= key)).sum()
 }
 
-/// One producer's keys for [`sort_parts`]: each pushed with its part as it is found, then
-/// grouped by part. One list per producer, whatever the cut: where the keys follow place (a
-/// world inserted in one batch) a producer's keys fall mostly in one part, and which one
-/// shifts as its objects move, so a list per part would keep growing to new peaks.
+/// One producer's keys for [`sort_parts`], each pushed with its part as it is found. One list
+/// per producer, whatever the cut: where the keys follow place (a world inserted in one
+/// batch) a producer's keys fall mostly in one part, and which one shifts as its objects
+/// move, so a list per part would keep growing to new peaks.
 #[cfg(feature = "parallel")]
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Parted {
@@ -234,11 +234,8 @@ pub(crate) struct Parted {
     keys: Vec<u64>,
     /// Each key's part.
     parts: Vec<u8>,
-    /// Per part: how many keys it got; after [`Parted::group`], where its run in `grouped`
-    /// ends.
-    ends: Vec<usize>,
-    /// The keys grouped by part, in the order found within each.
-    grouped: Vec<u64>,
+    /// Per part: how many keys it got.
+    counts: Vec<usize>,
 }
 
 #[cfg(feature = "parallel")]
@@ -248,8 +245,8 @@ impl Parted {
         debug_assert!(parts <= 256, "a part is a byte");
         self.keys.clear();
         self.parts.clear();
-        self.ends.clear();
-        self.ends.resize(parts, 0);
+        self.counts.clear();
+        self.counts.resize(parts, 0);
     }
 
     /// Adds `key` of part `part`.
@@ -257,120 +254,132 @@ impl Parted {
     pub(crate) fn push(&mut self, part: usize, key: u64) {
         self.keys.push(key);
         self.parts.push(part as u8);
-        self.ends[part] += 1;
+        self.counts[part] += 1;
     }
 
-    /// Groups the keys by part.
-    fn group(&mut self) {
-        let mut at = 0;
-        for end in &mut self.ends {
-            (*end, at) = (at, at + *end);
-        }
-        // `ends` holds each part's start here, and its end once its keys are written.
-        self.grouped.resize(self.keys.len(), 0);
+    /// Writes the keys, in the order found, to the front of their part's stretch in `row`
+    /// (one stretch per part, each as long as the part's count).
+    fn scatter(&self, row: &mut [&mut [u64]]) {
         for (&key, &part) in self.keys.iter().zip(&self.parts) {
-            let to = &mut self.ends[usize::from(part)];
-            self.grouped[*to] = key;
-            *to += 1;
+            let to = &mut row[usize::from(part)];
+            if let Some((first, rest)) = core::mem::take(to).split_first_mut() {
+                *first = key;
+                *to = rest;
+            }
         }
-    }
-
-    /// The keys of part `p`, once grouped.
-    fn part(&self, p: usize) -> &[u64] {
-        let start = if p == 0 { 0 } else { self.ends[p - 1] };
-        &self.grouped[start..self.ends[p]]
     }
 
     /// Heap bytes held (capacities).
     pub(crate) fn heap_bytes(&self) -> usize {
-        (self.keys.capacity() + self.grouped.capacity() + self.ends.capacity()) * 8
-            + self.parts.capacity()
+        (self.keys.capacity() + self.counts.capacity()) * 8 + self.parts.capacity()
     }
 
     /// [`ahead`] on the lists that grow with the keys.
     pub(crate) fn ahead(&mut self) {
         ahead(&mut self.keys);
         ahead(&mut self.parts);
-        ahead(&mut self.grouped);
     }
 
-    /// Applies `trim` (a caller's policy for giving back room) to the key lists, and cuts the
+    /// Applies `trim` (a caller's policy for giving back room) to the keys, and cuts the
     /// parts' list to the keys' room.
     pub(crate) fn trim(&mut self, trim: fn(&mut Vec<u64>, usize)) {
         trim(&mut self.keys, 0);
-        trim(&mut self.grouped, 0);
         if self.parts.capacity() > self.keys.capacity() {
             self.parts.shrink_to(self.keys.capacity());
         }
     }
 }
 
+/// The allocation of a table of destination stretches: empty between uses, and lent to each
+/// (see [`recycle`]). A clone is empty.
+#[cfg(feature = "parallel")]
+#[derive(Debug, Default)]
+pub(crate) struct Stretches(Vec<&'static mut [u64]>);
+
+#[cfg(feature = "parallel")]
+impl Clone for Stretches {
+    fn clone(&self) -> Self {
+        Stretches::default()
+    }
+}
+
+#[cfg(feature = "parallel")]
+impl Stretches {
+    /// Bytes held on the heap.
+    pub(crate) fn heap_bytes(&self) -> usize {
+        self.0.capacity() * size_of::<&mut [u64]>()
+    }
+}
+
 /// Sorts keys that their producers have already cut into `parts` parts into `out`, over
-/// rayon's current pool: `producers[i]` holds producer `i`'s keys with their parts. Each
-/// producer groups its keys by part, then each part is copied into its stretch of `out` and
-/// radix sorted there by its own task, with the same stretch of `tmp` as its second buffer;
-/// `bounds` gets the parts' first positions and the key count last. The keys (distinct
-/// packed pairs of slots below `layout`'s bound) end sorted whatever the cut.
+/// rayon's current pool: `producers[i]` holds producer `i`'s keys with their parts. `out` is
+/// cut into the (part, producer) stretches, part-major, and each producer writes its keys
+/// into its own (one `split_at_mut` walk hands them out; `stretches` lends the table's
+/// allocation); then each part's stretch of `out` is radix sorted by its own task, with the
+/// same stretch of `tmp` as its second buffer. `bounds` gets the parts' first positions and
+/// the key count last. The keys (distinct packed pairs of slots below `layout`'s bound) end
+/// sorted whatever the cut.
 #[cfg(feature = "parallel")]
 pub(crate) fn sort_parts(
-    producers: &mut [Parted],
+    producers: &[Parted],
     parts: usize,
     out: &mut Vec<u64>,
     tmp: &mut Vec<u64>,
-    bounds: &mut Vec<usize>,
+    (bounds, stretches): (&mut Vec<usize>, &mut Stretches),
     layout: PairBits,
 ) {
-    use rayon::prelude::*;
-    producers.par_iter_mut().for_each(Parted::group);
     bounds.clear();
     bounds.push(0);
     for p in 0..parts {
-        let len: usize = producers.iter().map(|b| b.part(p).len()).sum();
+        let len: usize = producers.iter().map(|b| b.counts[p]).sum();
         bounds.push(bounds[p] + len);
     }
     out.resize(bounds[parts], 0);
     tmp.resize(bounds[parts], 0);
-    let job = Gather {
-        producers,
-        bounds,
-        layout,
-    };
-    job.fill(0, parts, tmp, out);
-}
-
-/// What every part of [`sort_parts`] reads.
-#[cfg(feature = "parallel")]
-struct Gather<'a> {
-    producers: &'a [Parted],
-    bounds: &'a [usize],
-    layout: PairBits,
-}
-
-#[cfg(feature = "parallel")]
-impl Gather<'_> {
-    /// Sorts parts `first..first + parts` into `out`, their stretch of the output, with
-    /// `tmp`, the same stretch of the second buffer, halving the parts between two tasks
-    /// until one is left.
-    fn fill(&self, first: usize, parts: usize, tmp: &mut [u64], out: &mut [u64]) {
-        if parts == 1 {
-            let mut at = 0;
-            for b in self.producers {
-                let keys = b.part(first);
-                out[at..at + keys.len()].copy_from_slice(keys);
-                at += keys.len();
-            }
-            sort_slice(out, tmp, self.layout);
-            return;
+    let mut table: Vec<&mut [u64]> = core::mem::take(&mut stretches.0);
+    table.resize_with(producers.len() * parts, Default::default);
+    let mut rest = &mut out[..];
+    for p in 0..parts {
+        for (i, producer) in producers.iter().enumerate() {
+            // Clamped, though the counts tile `out` exactly: a miscount loses keys, not the
+            // step.
+            let len = producer.counts[p].min(rest.len());
+            let (head, tail) = core::mem::take(&mut rest).split_at_mut(len);
+            table[i * parts + p] = head;
+            rest = tail;
         }
-        let mid = parts / 2;
-        let at = self.bounds[first + mid] - self.bounds[first];
-        let (ta, tb) = tmp.split_at_mut(at);
-        let (oa, ob) = out.split_at_mut(at);
-        rayon::join(
-            || self.fill(first, mid, ta, oa),
-            || self.fill(first + mid, parts - mid, tb, ob),
-        );
     }
+    table
+        .par_chunks_mut(parts.max(1))
+        .zip(producers.par_iter())
+        .for_each(|(row, producer)| producer.scatter(row));
+    stretches.0 = recycle(table);
+    sort_each_part(bounds, 0, parts, out, tmp, layout);
+}
+
+/// Sorts parts `first..first + parts` of [`sort_parts`]'s output in place, `out` and `tmp`
+/// their stretches, halving the parts between two tasks until one is left.
+#[cfg(feature = "parallel")]
+fn sort_each_part(
+    bounds: &[usize],
+    first: usize,
+    parts: usize,
+    out: &mut [u64],
+    tmp: &mut [u64],
+    layout: PairBits,
+) {
+    if parts <= 1 {
+        sort_slice(out, tmp, layout);
+        return;
+    }
+    let mid = parts / 2;
+    let at = bounds[first + mid] - bounds[first];
+    let (ta, tb) = tmp.split_at_mut(at);
+    let (oa, ob) = out.split_at_mut(at);
+    rayon::join(
+        || sort_each_part(bounds, first, mid, oa, ta, layout),
+        || sort_each_part(bounds, first + mid, parts - mid, ob, tb, layout),
+    );
 }
 
 /// [`sort_u64`] that leaves the keys in their own buffer (copied back if they end in the
@@ -561,33 +570,20 @@ const RADIX: usize = 1 << MAX_DIGIT_BITS;
 
 /// Buffers of [`sort_bits_par`], reused by every sort; they never shrink.
 #[cfg(feature = "parallel")]
-#[derive(Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub(crate) struct ParScatter {
     /// Per task and digit, task `t`'s at `t · RADIX + digit`: how many of the task's keys
     /// have the digit in the current pass, the length of its stretch of the destination.
     counts: Vec<u32>,
-    /// The allocation of the table of destination stretches, laid out as `counts`: empty
-    /// between passes, and reused by each (see [`recycle`]).
-    stretches: Vec<&'static mut [u64]>,
-}
-
-#[cfg(feature = "parallel")]
-impl Clone for ParScatter {
-    /// The counts; the table of stretches is empty between sorts and holds no data.
-    fn clone(&self) -> Self {
-        ParScatter {
-            counts: self.counts.clone(),
-            stretches: Vec::new(),
-        }
-    }
+    /// The table of destination stretches, laid out as `counts`.
+    stretches: Stretches,
 }
 
 #[cfg(feature = "parallel")]
 impl ParScatter {
     /// Bytes held on the heap.
     pub(crate) fn heap_bytes(&self) -> usize {
-        self.counts.capacity() * size_of::<u32>()
-            + self.stretches.capacity() * size_of::<&mut [u64]>()
+        self.counts.capacity() * size_of::<u32>() + self.stretches.heap_bytes()
     }
 }
 
@@ -701,13 +697,13 @@ fn count_row(row: &mut [u32], shift: u32, keys: impl Iterator<Item = u64>) {
 #[cfg(feature = "parallel")]
 fn scatter_by_task<I: Iterator<Item = u64>>(
     counts: &[u32],
-    stretches: &mut Vec<&'static mut [u64]>,
+    stretches: &mut Stretches,
     dst: &mut [u64],
     shift: u32,
     keys: impl Fn(usize) -> I + Sync,
 ) {
     let tasks = counts.len() / RADIX;
-    let mut table: Vec<&mut [u64]> = core::mem::take(stretches);
+    let mut table: Vec<&mut [u64]> = core::mem::take(&mut stretches.0);
     table.resize_with(counts.len(), Default::default);
     let mut rest = dst;
     for d in 0..RADIX {
@@ -727,7 +723,7 @@ fn scatter_by_task<I: Iterator<Item = u64>>(
         .enumerate()
         .for_each(|(t, row)| scatter_row(row, shift, keys(t)));
     table.clear();
-    *stretches = recycle(table);
+    stretches.0 = recycle(table);
 }
 
 /// One task of [`scatter_by_task`]: writes each key to the front of its digit's stretch in
@@ -1039,7 +1035,8 @@ mod tests {
                     let mut out = vec![7; 3];
                     pool.install(|| {
                         let layout = PairBits::for_slots(slots as usize);
-                        sort_parts(&mut buckets, np, &mut out, &mut tmp, &mut bounds, layout);
+                        let lent = (&mut bounds, &mut Stretches::default());
+                        sort_parts(&buckets, np, &mut out, &mut tmp, lent, layout);
                     });
                     assert_eq!(out, all, "n {n} parts {parts} threads {threads}");
                 }

@@ -67,8 +67,9 @@ pub(super) struct Parallel {
     /// The split BVH passes' items and per-task stacks.
     split: crate::bvh::SplitScratch,
     /// The pair sort's parts' bounds (its second buffer is the serial sort's, see
-    /// [`sort_scratch`]).
+    /// [`sort_scratch`]), and the table of its producers' stretches.
     sort_bounds: Vec<usize>,
+    stretches: radix::Stretches,
     /// Per part of the event diff: its `added` and `removed`.
     diff: Vec<[Vec<u64>; 2]>,
     /// The diff's parts' first positions in the current and the previous pair lists.
@@ -95,6 +96,7 @@ impl Parallel {
                 .iter()
                 .map(radix::Parted::heap_bytes)
                 .sum::<usize>()
+            + self.stretches.heap_bytes()
             + self
                 .moves
                 .iter()
@@ -391,11 +393,11 @@ impl BroadPhase {
         });
         let scratch = sort_scratch(&mut self.octree, &mut self.sort_buf);
         radix::sort_parts(
-            &mut par.found[..producers],
+            &par.found[..producers],
             parts,
             &mut self.fresh,
             scratch,
-            &mut par.sort_bounds,
+            (&mut par.sort_bounds, &mut par.stretches),
             layout,
         );
         for found in &mut par.found[..producers] {
