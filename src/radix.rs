@@ -261,11 +261,7 @@ impl Parted {
     /// (one stretch per part, each as long as the part's count).
     fn scatter(&self, row: &mut [&mut [u64]]) {
         for (&key, &part) in self.keys.iter().zip(&self.parts) {
-            let to = &mut row[usize::from(part)];
-            if let Some((first, rest)) = core::mem::take(to).split_first_mut() {
-                *first = key;
-                *to = rest;
-            }
+            put_front(row, usize::from(part), key);
         }
     }
 
@@ -309,6 +305,49 @@ impl Stretches {
     pub(crate) fn heap_bytes(&self) -> usize {
         self.0.capacity() * size_of::<&mut [u64]>()
     }
+
+    /// Cuts `dst` into `rows × cols` stretches, column-major (every row's stretch of column
+    /// 0, then of column 1, …), stretch `(r, c)` `len(r, c)` long, by one `split_at_mut`
+    /// walk, then runs `write(r, row)` for each row over rayon's current pool, `row` holding
+    /// its `cols` stretches in column order. The table of stretches borrows this one's
+    /// allocation and gives it back.
+    fn scatter(
+        &mut self,
+        dst: &mut [u64],
+        (rows, cols): (usize, usize),
+        len: impl Fn(usize, usize) -> usize,
+        write: impl Fn(usize, &mut [&mut [u64]]) + Sync,
+    ) {
+        let mut table: Vec<&mut [u64]> = core::mem::take(&mut self.0);
+        table.resize_with(rows * cols, Default::default);
+        let mut rest = dst;
+        for c in 0..cols {
+            for r in 0..rows {
+                // Clamped, though the lengths tile `dst` exactly: a miscount loses keys, not
+                // the step.
+                let n = len(r, c).min(rest.len());
+                let (head, tail) = core::mem::take(&mut rest).split_at_mut(n);
+                table[r * cols + c] = head;
+                rest = tail;
+            }
+        }
+        debug_assert!(rest.is_empty());
+        table
+            .par_chunks_mut(cols.max(1))
+            .enumerate()
+            .for_each(|(r, row)| write(r, row));
+        self.0 = recycle(table);
+    }
+}
+
+/// Writes `key` to the front of stretch `at` of `row`, which then starts past it.
+#[cfg(feature = "parallel")]
+#[inline]
+fn put_front(row: &mut [&mut [u64]], at: usize, key: u64) {
+    if let Some((first, rest)) = core::mem::take(&mut row[at]).split_first_mut() {
+        *first = key;
+        row[at] = rest;
+    }
 }
 
 /// Sorts keys that their producers have already cut into `parts` parts into `out`, over
@@ -336,24 +375,12 @@ pub(crate) fn sort_parts(
     }
     out.resize(bounds[parts], 0);
     tmp.resize(bounds[parts], 0);
-    let mut table: Vec<&mut [u64]> = core::mem::take(&mut stretches.0);
-    table.resize_with(producers.len() * parts, Default::default);
-    let mut rest = &mut out[..];
-    for p in 0..parts {
-        for (i, producer) in producers.iter().enumerate() {
-            // Clamped, though the counts tile `out` exactly: a miscount loses keys, not the
-            // step.
-            let len = producer.counts[p].min(rest.len());
-            let (head, tail) = core::mem::take(&mut rest).split_at_mut(len);
-            table[i * parts + p] = head;
-            rest = tail;
-        }
-    }
-    table
-        .par_chunks_mut(parts.max(1))
-        .zip(producers.par_iter())
-        .for_each(|(row, producer)| producer.scatter(row));
-    stretches.0 = recycle(table);
+    stretches.scatter(
+        out,
+        (producers.len(), parts),
+        |i, p| producers[i].counts[p],
+        |i, row| producers[i].scatter(row),
+    );
     sort_each_part(bounds, 0, parts, out, tmp, layout);
 }
 
@@ -702,28 +729,12 @@ fn scatter_by_task<I: Iterator<Item = u64>>(
     shift: u32,
     keys: impl Fn(usize) -> I + Sync,
 ) {
-    let tasks = counts.len() / RADIX;
-    let mut table: Vec<&mut [u64]> = core::mem::take(&mut stretches.0);
-    table.resize_with(counts.len(), Default::default);
-    let mut rest = dst;
-    for d in 0..RADIX {
-        for t in 0..tasks {
-            let at = t * RADIX + d;
-            // Clamped, though the counts tile `dst` exactly: a miscount loses keys, not
-            // the step.
-            let len = (counts[at] as usize).min(rest.len());
-            let (head, tail) = core::mem::take(&mut rest).split_at_mut(len);
-            table[at] = head;
-            rest = tail;
-        }
-    }
-    debug_assert!(rest.is_empty());
-    table
-        .par_chunks_mut(RADIX)
-        .enumerate()
-        .for_each(|(t, row)| scatter_row(row, shift, keys(t)));
-    table.clear();
-    stretches.0 = recycle(table);
+    stretches.scatter(
+        dst,
+        (counts.len() / RADIX, RADIX),
+        |t, d| counts[t * RADIX + d] as usize,
+        |t, row| scatter_row(row, shift, keys(t)),
+    );
 }
 
 /// One task of [`scatter_by_task`]: writes each key to the front of its digit's stretch in
@@ -735,11 +746,7 @@ fn scatter_row(row: &mut [&mut [u64]], shift: u32, keys: impl Iterator<Item = u6
         return;
     };
     for k in keys {
-        let d = digit(k, shift);
-        if let Some((first, rest)) = core::mem::take(&mut row[d]).split_first_mut() {
-            *first = k;
-            row[d] = rest;
-        }
+        put_front(row, digit(k, shift), k);
     }
 }
 
