@@ -24,6 +24,10 @@ const MASKED_CELLS: u64 = 32;
 /// `Octree::candidates`).
 const ROW: u32 = 4;
 
+/// Room for the list heads a direct query gathers: one per reaching cell and the root's,
+/// and the reads past a short row's end, which are written but not kept.
+const HEADS: usize = DIRECT_CELLS as usize + 1 + ROW as usize;
+
 /// The per-sphere reads of the queries, in one place: what they need of a sphere's record
 /// and of its node's list, whatever the layout of those.
 impl Octree {
@@ -112,16 +116,18 @@ impl Octree {
         if cells > DIRECT_CELLS {
             return self.traverse(|cell| self.lattice.reaches(cell, qlo, qhi), visit);
         }
-        let mut list = |head: u32| {
-            let mut i = head;
-            while i != NONE {
-                visit(i)?;
-                i = self.next_in_list(i);
-            }
-            ControlFlow::Continue(())
+        // The heads of the reaching cells' lists are gathered first and their first spheres'
+        // records read together (independent loads, which the core overlaps), then the lists
+        // are walked in the same order: a walk's loads depend on each other, and the records
+        // of a large world's neighbouring cells are rarely in the cache.
+        let mut heads = [NONE; HEADS];
+        let mut n = 0;
+        let mut keep = |head: u32| {
+            heads[n] = head;
+            n += usize::from(head != NONE);
         };
         if self.per_level[0] > 0 {
-            list(self.nodes.head(0))?;
+            keep(self.nodes.head(0));
         }
         for level in 1..=self.lattice.depth {
             if self.per_level[level as usize] == 0 {
@@ -133,48 +139,49 @@ impl Octree {
                 .map(|i| u64::from((b[i] + 1).saturating_sub(a[i])))
                 .product::<u64>();
             if cells > MASKED_CELLS {
-                self.masked_cells(level, a, b, &mut list)?;
+                self.masked_cells(level, a, b, &mut keep);
                 continue;
             }
             for z in a[2]..=b[2] {
                 for y in a[1]..=b[1] {
+                    // A short row is read with no branch on its length or on which cells
+                    // hold spheres (a coin toss each): each of its `ROW` reads is kept only
+                    // if it is a cell of the row with a list.
                     if len > ROW {
                         for x in a[0]..=b[0] {
-                            list(self.nodes.head(Cell::at(level, [x, y, z]).node()))?;
+                            keep(self.nodes.head(Cell::at(level, [x, y, z]).node()));
                         }
                         continue;
                     }
-                    // A short row is read with no branch on its length or on which cells
-                    // hold spheres (a coin toss each): the heads of its cells are kept,
-                    // passing over the empty ones, then their lists are read.
-                    let mut heads = [NONE; ROW as usize];
-                    let mut n = 0;
                     for k in 0..ROW {
                         let x = a[0] + k.min(len - 1);
                         let head = self.nodes.head(Cell::at(level, [x, y, z]).node());
-                        heads[n] = head;
-                        n += usize::from(k < len && head != NONE);
-                    }
-                    for &head in &heads[..n] {
-                        list(head)?;
+                        keep(if k < len { head } else { NONE });
                     }
                 }
+            }
+        }
+        let heads = &heads[..n];
+        let touched = heads.iter().fold(0u32, |t, &h| {
+            t ^ self.links[h as usize].next ^ self.objs[h as usize].radius.to_bits()
+        });
+        core::hint::black_box(touched);
+        for &head in heads {
+            let mut i = head;
+            while i != NONE {
+                visit(i)?;
+                i = self.next_in_list(i);
             }
         }
         ControlFlow::Continue(())
     }
 
-    /// Reads the lists of the cells `a ..= b` of `level` (at least 1) that hold a sphere,
-    /// found through their parents' child masks: one mask per parent cell instead of one list
-    /// head per cell, most of which are empty in a sparse level. A mask bit says the child's
-    /// subtree holds a sphere, which its own list may not: such a child's empty list is read.
-    fn masked_cells(
-        &self,
-        level: u32,
-        a: [u32; 3],
-        b: [u32; 3],
-        list: &mut impl FnMut(u32) -> ControlFlow<()>,
-    ) -> ControlFlow<()> {
+    /// Gives `keep` the list heads of the cells `a ..= b` of `level` (at least 1) that hold a
+    /// sphere, found through their parents' child masks: one mask per parent cell instead of
+    /// one list head per cell, most of which are empty in a sparse level. A mask bit says the
+    /// child's subtree holds a sphere, which its own list may not: such a child's empty head
+    /// is read too.
+    fn masked_cells(&self, level: u32, a: [u32; 3], b: [u32; 3], keep: &mut impl FnMut(u32)) {
         // The octants of a parent at `p` (on one axis) whose child lies in `a ..= b`: `low`
         // are the octants of the lower child on that axis, `high` those of the upper one.
         let side = |p: u32, a: u32, b: u32, low: u8, high: u8| {
@@ -192,12 +199,11 @@ impl Octree {
                     while bits != 0 {
                         let child = parent.child(bits.trailing_zeros());
                         bits &= bits - 1;
-                        list(self.nodes.head(child.node()))?;
+                        keep(self.nodes.head(child.node()));
                     }
                 }
             }
         }
-        ControlFlow::Continue(())
     }
 
     /// Calls `f` with the key of every sphere whose AABB overlaps `aabb` (closed), once each,

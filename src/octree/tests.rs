@@ -656,3 +656,56 @@ fn deferred_relinks_leave_the_lists_as_immediate_ones() {
         }
     }
 }
+
+/// A direct box query gathers the list heads of every cell it reaches on every occupied
+/// level before it walks them: with every cell of levels 0 to 4 holding a sphere, queries
+/// that reach up to the most cells read directly (and just past that, where the walk takes
+/// over) find exactly the spheres brute force finds.
+#[test]
+fn direct_queries_over_full_levels_find_what_brute_force_finds() {
+    for p in BOTH {
+        let mut t = Octree::with_placement(unit(), 4, p).unwrap();
+        for level in 0..=4u32 {
+            let side = 1u32 << level;
+            let cell = 2.0 / side as f32;
+            // Small enough for `level` under both placements, too large for the next one.
+            let radius = cell * 0.2;
+            for z in 0..side {
+                for y in 0..side {
+                    for x in 0..side {
+                        let at = |i: u32| -1.0 + (i as f32 + 0.5) * cell;
+                        t.insert(Vec3::new(at(x), at(y), at(z)), radius).unwrap();
+                    }
+                }
+            }
+        }
+        t.validate();
+        let all = proxies(&t);
+        let mut rng = crate::rng::Rng::new(7);
+        for q in 0..4000 {
+            // Half-widths from a sliver to a third of the region: the reaching cells run from
+            // a few to past the direct queries' limit.
+            let half = Vec3::new(
+                rng.range(0.01, 0.35),
+                rng.range(0.01, 0.35),
+                rng.range(0.01, 0.35),
+            );
+            let center = Vec3::new(
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+            );
+            let bx = Aabb::new(center - half, center + half);
+            let mut got = Vec::new();
+            t.query_aabb(&bx, |k| got.push(k));
+            got.sort_unstable();
+            let mut want: Vec<_> = all
+                .iter()
+                .filter(|x| x.aabb.overlaps(&bx))
+                .map(|x| x.key)
+                .collect();
+            want.sort_unstable();
+            assert_eq!(got, want, "{p:?}, query {q}: {bx:?}");
+        }
+    }
+}
