@@ -143,8 +143,11 @@ fn fit(hint: &mut Vec<u32>, slots: usize) {
 /// `list.partition_point(below)` (`below` true on a prefix of `list`), found by galloping
 /// outward from `hint`: O(log d) probes for an answer `d` entries away, the first of them
 /// next to each other.
+///
+/// Sorted keys looked up in turn, each from the last one's answer, cost a few probes near it
+/// each ([`seek_sorted`]) where a binary search costs a cache miss at each of its last levels.
 #[inline]
-fn seek(list: &[u64], hint: usize, below: impl Fn(u64) -> bool) -> usize {
+fn seek<T: Copy>(list: &[T], hint: usize, below: impl Fn(T) -> bool) -> usize {
     let n = list.len();
     let h = hint.min(n);
     if h < n && below(list[h]) {
@@ -175,6 +178,22 @@ fn seek(list: &[u64], hint: usize, below: impl Fn(u64) -> bool) -> usize {
         hi = probe;
         step *= 2;
     }
+}
+
+/// For each of `keys`, in turn, the position `at(list, key)` = `list.partition_point(|e| below(e,
+/// key))`, pushed to `out`; each is sought from the last answer (see [`seek`]), so keys in
+/// ascending order cost a few probes each.
+fn seek_sorted<T: Copy>(
+    list: &[T],
+    keys: &[u64],
+    below: impl Fn(T, u64) -> bool,
+    out: &mut Vec<u32>,
+) {
+    let mut at = 0;
+    out.extend(keys.iter().map(|&k| {
+        at = seek(list, at, |e| below(e, k));
+        at as u32
+    }));
 }
 
 /// The reverse index entry of the candidate `(a, b)`, `a < b`: `b` in the high half.
@@ -475,17 +494,13 @@ impl BroadPhase {
             let rev = &mut r.rev;
             let layout = PairBits::for_slots(self.store.slots());
             sort_keys(&mut p.rev_keys, &mut p.keys_tmp, layout);
-            for &e in &p.rev_keys {
-                p.rev_gone.push(rev.partition_point(|&r| r < e) as u32);
-            }
+            seek_sorted(rev, &p.rev_keys, |r, e| r < e, &mut p.rev_gone);
             for &c in &p.cand_new {
                 let (a, b) = unpack(c & !HIT);
                 p.rev_new.push(reverse(a, b));
             }
             sort_keys(&mut p.rev_new, &mut p.keys_tmp, layout);
-            for &e in &p.rev_new {
-                p.rev_at.push(rev.partition_point(|&r| r < e) as u32);
-            }
+            seek_sorted(rev, &p.rev_new, |r, e| r < e, &mut p.rev_at);
             rev.patch(&p.rev_gone, &p.rev_at, &p.rev_new, &mut p.scratch);
         } else {
             r.rev_stale = true;
@@ -495,10 +510,9 @@ impl BroadPhase {
 
         // The key pairs: the changed pairs' places in the old list, which is in the packed
         // pairs' order.
-        let pairs = &self.pairs;
-        let at = |k: u64| pairs.partition_point(|q| pack_pair(q) < k) as u32;
-        p.pairs_gone.extend(removed.iter().map(|&k| at(k)));
-        p.pairs_at.extend(added.iter().map(|&k| at(k)));
+        let below = |q: crate::pair::Pair, k: u64| pack_pair(&q) < k;
+        seek_sorted(&self.pairs[..], removed, below, &mut p.pairs_gone);
+        seek_sorted(&self.pairs[..], added, below, &mut p.pairs_at);
         keys_into(&self.store, &self.added_packed, &mut self.added);
         keys_into(&self.store, &self.removed_packed, &mut self.removed);
         self.pairs
@@ -674,6 +688,31 @@ mod tests {
                     "{list:?} {key} {hint}"
                 );
             }
+        }
+    }
+
+    /// `seek_sorted` gives each key its `partition_point`, for keys in ascending order (as
+    /// the patches give them, repeats included) and in any order.
+    #[test]
+    fn seek_sorted_is_the_partition_point_of_each_key() {
+        let mut rng = crate::rng::Rng::new(6);
+        for round in 0..1000 {
+            let n = rng.below(90) as usize;
+            let mut list: Vec<u64> = (0..n).map(|_| u64::from(rng.below(60))).collect();
+            list.sort_unstable();
+            let mut keys: Vec<u64> = (0..rng.below(30))
+                .map(|_| u64::from(rng.below(64)))
+                .collect();
+            if round % 2 == 0 {
+                keys.sort_unstable();
+            }
+            let mut got = Vec::new();
+            seek_sorted(&list, &keys, |e, k| e < k, &mut got);
+            let want: Vec<u32> = keys
+                .iter()
+                .map(|&k| list.partition_point(|&e| e < k) as u32)
+                .collect();
+            assert_eq!(got, want, "{list:?} {keys:?}");
         }
     }
 }
