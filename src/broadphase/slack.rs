@@ -670,15 +670,22 @@ mod tests {
         assert!(within(&a, &a, f32::MIN_POSITIVE));
     }
 
+    /// A sorted list of fewer than `len` values below `values`, with repeats.
+    fn sorted_list(rng: &mut crate::rng::Rng, len: u32, values: u32) -> Vec<u64> {
+        let n = rng.below(len);
+        let mut list: Vec<u64> = (0..n).map(|_| u64::from(rng.below(values))).collect();
+        list.sort_unstable();
+        list
+    }
+
     /// `seek` from any hint, in or out of range, is `partition_point`, on sorted lists with
     /// repeats, at every split point including both ends.
     #[test]
     fn seek_from_any_hint_is_the_partition_point() {
         let mut rng = crate::rng::Rng::new(5);
         for _ in 0..2000 {
-            let n = rng.below(70) as usize;
-            let mut list: Vec<u64> = (0..n).map(|_| u64::from(rng.below(40))).collect();
-            list.sort_unstable();
+            let list = sorted_list(&mut rng, 70, 40);
+            let n = list.len();
             for key in 0..42u64 {
                 let want = list.partition_point(|&e| e < key);
                 let hint = rng.below(n as u32 + 5) as usize;
@@ -697,9 +704,7 @@ mod tests {
     fn seek_sorted_is_the_partition_point_of_each_key() {
         let mut rng = crate::rng::Rng::new(6);
         for round in 0..1000 {
-            let n = rng.below(90) as usize;
-            let mut list: Vec<u64> = (0..n).map(|_| u64::from(rng.below(60))).collect();
-            list.sort_unstable();
+            let list = sorted_list(&mut rng, 90, 60);
             let mut keys: Vec<u64> = (0..rng.below(30))
                 .map(|_| u64::from(rng.below(64)))
                 .collect();

@@ -26,6 +26,14 @@ fn proxies(t: &Octree) -> Vec<Proxy> {
     out
 }
 
+/// The keys `t.query_aabb(q)` finds, sorted.
+fn queried(t: &Octree, q: &Aabb) -> Vec<ProxyKey> {
+    let mut got = Vec::new();
+    t.query_aabb(q, |k| got.push(k));
+    got.sort_unstable();
+    got
+}
+
 #[test]
 fn rtcd_example_straddler_stays_at_root() {
     let mut t = Octree::new(unit(), 1).unwrap();
@@ -642,15 +650,7 @@ fn deferred_relinks_leave_the_lists_as_immediate_ones() {
                 let want = brute::pairs(&proxies(&later));
                 assert_eq!(sorted_pairs(&mut later), want, "{p:?} {catch_up} {round}");
                 let q = Aabb::new(Vec3::splat(-0.4), Vec3::splat(0.5));
-                let mut got = Vec::new();
-                later.query_aabb(&q, |k| got.push(k));
-                got.sort_unstable();
-                let mut want: Vec<ProxyKey> = proxies(&later)
-                    .iter()
-                    .filter(|x| x.aabb.overlaps(&q))
-                    .map(|x| x.key)
-                    .collect();
-                want.sort_unstable();
+                let (got, want) = (queried(&later, &q), brute::query_aabb(&proxies(&later), &q));
                 assert_eq!(got, want, "{p:?} {catch_up} {round}: query");
             }
         }
@@ -696,15 +696,7 @@ fn direct_queries_over_full_levels_find_what_brute_force_finds() {
                 rng.range(-1.0, 1.0),
             );
             let bx = Aabb::new(center - half, center + half);
-            let mut got = Vec::new();
-            t.query_aabb(&bx, |k| got.push(k));
-            got.sort_unstable();
-            let mut want: Vec<_> = all
-                .iter()
-                .filter(|x| x.aabb.overlaps(&bx))
-                .map(|x| x.key)
-                .collect();
-            want.sort_unstable();
+            let (got, want) = (queried(&t, &bx), brute::query_aabb(&all, &bx));
             assert_eq!(got, want, "{p:?}, query {q}: {bx:?}");
         }
     }
