@@ -144,15 +144,15 @@ impl Octree {
             }
             for z in a[2]..=b[2] {
                 for y in a[1]..=b[1] {
-                    // A short row is read with no branch on its length or on which cells
-                    // hold spheres (a coin toss each): each of its `ROW` reads is kept only
-                    // if it is a cell of the row with a list.
                     if len > ROW {
                         for x in a[0]..=b[0] {
                             keep(self.nodes.head(Cell::at(level, [x, y, z]).node()));
                         }
                         continue;
                     }
+                    // A short row is read with no branch on its length or on which cells
+                    // hold spheres (a coin toss each): each of its `ROW` reads is kept only
+                    // if it is a cell of the row with a list.
                     for k in 0..ROW {
                         let x = a[0] + k.min(len - 1);
                         let head = self.nodes.head(Cell::at(level, [x, y, z]).node());
