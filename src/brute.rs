@@ -116,7 +116,8 @@ pub fn cast_ray_spheres(
     )
 }
 
-fn closest(hits: impl Iterator<Item = (ProxyKey, f32)>) -> Option<(ProxyKey, f32)> {
+/// The hit with the least `t`; ties go to the smaller key.
+pub(crate) fn closest(hits: impl Iterator<Item = (ProxyKey, f32)>) -> Option<(ProxyKey, f32)> {
     hits.min_by(|x, y| x.1.total_cmp(&y.1).then(x.0.cmp(&y.0)))
 }
 

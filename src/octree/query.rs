@@ -50,6 +50,17 @@ impl Octree {
         self.objs[id as usize].node == 0
     }
 
+    /// Reads the first record of each of the lists `heads` (all non-empty): independent
+    /// loads, which the core overlaps, where a walk's each wait for the visit before. The
+    /// gathered walks (box queries, ray pieces) call it before walking the lists.
+    #[inline(always)]
+    pub(super) fn touch_first(&self, heads: &[u32]) {
+        let touched = heads.iter().fold(0u32, |t, &h| {
+            t ^ self.links[h as usize].next ^ self.objs[h as usize].radius.to_bits()
+        });
+        core::hint::black_box(touched);
+    }
+
     /// The sphere after `i` in its node's list, `NONE` at the end.
     #[inline(always)]
     pub(super) fn next_in_list(&self, i: u32) -> u32 {
@@ -162,10 +173,7 @@ impl Octree {
             }
         }
         let heads = &heads[..n];
-        let touched = heads.iter().fold(0u32, |t, &h| {
-            t ^ self.links[h as usize].next ^ self.objs[h as usize].radius.to_bits()
-        });
-        core::hint::black_box(touched);
+        self.touch_first(heads);
         for &head in heads {
             let mut i = head;
             while i != NONE {

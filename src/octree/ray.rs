@@ -196,6 +196,25 @@ impl Octree {
         RayPlan::Pieces(RayPieces { t0, t1, dt, slack })
     }
 
+    /// Walks the non-empty lists `heads` in order, their first records read first (see
+    /// [`Octree::touch_first`]); returns `best` shrunk to what `visit` returns.
+    fn walk_gathered(
+        &self,
+        heads: &[u32],
+        mut best: f32,
+        visit: &mut impl FnMut(u32, f32) -> f32,
+    ) -> f32 {
+        self.touch_first(heads);
+        for &head in heads {
+            let mut i = head;
+            while i != NONE {
+                best = best.min(visit(i, best));
+                i = self.next_in_list(i);
+            }
+        }
+        best
+    }
+
     /// The spheres below the root along the ray, piece by piece (see [`RayPlan::Pieces`]),
     /// `best` shrinking to what `visit` returns.
     fn ray_ids_pieces(
@@ -226,6 +245,9 @@ impl Octree {
                 occupied += 1;
             }
         }
+        // A piece's list heads are gathered (see [`Gathered`]) and walked before the next
+        // piece, whose start is checked against the best hit so far.
+        let mut gathered = Gathered::default();
         let mut k = 0u32;
         loop {
             let ta = t0 + dt * k as f32;
@@ -247,10 +269,9 @@ impl Octree {
                 let mut row = |y: u32, z: u32, x0: u32, x1: u32| {
                     let yz = morton([0, y, z]);
                     for x in x0..x1 + 1 {
-                        let mut i = self.nodes.head(first + (yz | morton([x, 0, 0])));
-                        while i != NONE {
-                            best = best.min(visit(i, best));
-                            i = self.next_in_list(i);
+                        let head = self.nodes.head(first + (yz | morton([x, 0, 0])));
+                        if gathered.keep(head) {
+                            best = gathered.walk(self, best, &mut visit);
                         }
                     }
                 };
@@ -273,6 +294,7 @@ impl Octree {
                     }
                 }
             }
+            best = gathered.walk(self, best, &mut visit);
             if tb >= t1 {
                 break;
             }
@@ -360,5 +382,41 @@ impl Octree {
             hit.offer(self.key_of(id), t)
         });
         hit.best()
+    }
+}
+
+/// Room for the list heads a ray piece gathers before it walks them (a full gather is walked
+/// at once, so a piece may read any number of cells).
+const RAY_HEADS: usize = 64;
+
+/// The non-empty list heads a ray piece has read and not yet walked, in the order read.
+struct Gathered {
+    heads: [u32; RAY_HEADS],
+    len: usize,
+}
+
+impl Default for Gathered {
+    fn default() -> Self {
+        Gathered {
+            heads: [NONE; RAY_HEADS],
+            len: 0,
+        }
+    }
+}
+
+impl Gathered {
+    /// Keeps `head` if its list is not empty (with no branch on it); true once full.
+    #[inline]
+    fn keep(&mut self, head: u32) -> bool {
+        self.heads[self.len] = head;
+        self.len += usize::from(head != NONE);
+        self.len == RAY_HEADS
+    }
+
+    /// Walks the kept lists ([`Octree::walk_gathered`]) and empties the gather.
+    #[inline]
+    fn walk(&mut self, tree: &Octree, best: f32, visit: &mut impl FnMut(u32, f32) -> f32) -> f32 {
+        let len = core::mem::take(&mut self.len);
+        tree.walk_gathered(&self.heads[..len], best, visit)
     }
 }

@@ -657,6 +657,71 @@ fn deferred_relinks_leave_the_lists_as_immediate_ones() {
     }
 }
 
+/// A tree of depth 4 over `unit()` with a sphere in every cell of levels 0 to 4, and the
+/// spheres as `(key, center, radius)`.
+fn full_levels(p: Placement) -> (Octree, Vec<(ProxyKey, Vec3, f32)>) {
+    let mut t = Octree::with_placement(unit(), 4, p).unwrap();
+    let mut spheres = Vec::new();
+    for level in 0..=4u32 {
+        let side = 1u32 << level;
+        let cell = 2.0 / side as f32;
+        // Small enough for `level` under both placements, too large for the next one.
+        let radius = cell * 0.2;
+        for z in 0..side {
+            for y in 0..side {
+                for x in 0..side {
+                    let at = |i: u32| -1.0 + (i as f32 + 0.5) * cell;
+                    let c = Vec3::new(at(x), at(y), at(z));
+                    spheres.push((t.insert(c, radius).unwrap(), c, radius));
+                }
+            }
+        }
+    }
+    t.validate();
+    (t, spheres)
+}
+
+/// A ray or sphere cast gathers each piece's list heads before it walks them, walking a full
+/// gather at once: in a tree with every cell of levels 0 to 4 occupied, casts whose pieces
+/// reach from a few cells to hundreds find what brute force finds.
+#[test]
+fn casts_over_full_levels_find_what_brute_force_finds() {
+    for p in BOTH {
+        let (t, spheres) = full_levels(p);
+        let mut rng = crate::rng::Rng::new(8);
+        for q in 0..600 {
+            let o = Vec3::new(
+                rng.range(-1.5, 1.5),
+                rng.range(-1.5, 1.5),
+                rng.range(-1.5, 1.5),
+            );
+            let d = (Vec3::new(
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+            ) + Vec3::splat(1e-3))
+            .normalize();
+            let max_t = rng.range(0.0, 4.0);
+            let want = brute::cast_ray_spheres(&spheres, o, d, max_t);
+            assert_eq!(
+                t.cast_ray(o, d, max_t),
+                want,
+                "{p:?} ray {q}: {o} {d} {max_t}"
+            );
+            // Radii up to half the region: a piece then reaches hundreds of cells.
+            let radius = [0.0, 0.05, 0.3, 1.0][q % 4];
+            let want = brute::closest(spheres.iter().filter_map(|&(k, c, r)| {
+                crate::geom::sphere_cast_sphere(o, radius, d, max_t, c, r).map(|t| (k, t))
+            }));
+            assert_eq!(
+                t.cast_sphere(o, radius, d, max_t),
+                want,
+                "{p:?} cast {q}: {o} {radius} {d} {max_t}"
+            );
+        }
+    }
+}
+
 /// A direct box query gathers the list heads of every cell it reaches on every occupied
 /// level before it walks them: with every cell of levels 0 to 4 holding a sphere, queries
 /// that reach up to the most cells read directly (and just past that, where the walk takes
@@ -664,22 +729,7 @@ fn deferred_relinks_leave_the_lists_as_immediate_ones() {
 #[test]
 fn direct_queries_over_full_levels_find_what_brute_force_finds() {
     for p in BOTH {
-        let mut t = Octree::with_placement(unit(), 4, p).unwrap();
-        for level in 0..=4u32 {
-            let side = 1u32 << level;
-            let cell = 2.0 / side as f32;
-            // Small enough for `level` under both placements, too large for the next one.
-            let radius = cell * 0.2;
-            for z in 0..side {
-                for y in 0..side {
-                    for x in 0..side {
-                        let at = |i: u32| -1.0 + (i as f32 + 0.5) * cell;
-                        t.insert(Vec3::new(at(x), at(y), at(z)), radius).unwrap();
-                    }
-                }
-            }
-        }
-        t.validate();
+        let (t, _) = full_levels(p);
         let all = proxies(&t);
         let mut rng = crate::rng::Rng::new(7);
         for q in 0..4000 {
