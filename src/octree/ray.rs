@@ -196,25 +196,6 @@ impl Octree {
         RayPlan::Pieces(RayPieces { t0, t1, dt, slack })
     }
 
-    /// Walks the non-empty lists `heads` in order, their first records read first (see
-    /// [`Octree::touch_first`]); returns `best` shrunk to what `visit` returns.
-    fn walk_gathered(
-        &self,
-        heads: &[u32],
-        mut best: f32,
-        visit: &mut impl FnMut(u32, f32) -> f32,
-    ) -> f32 {
-        self.touch_first(heads);
-        for &head in heads {
-            let mut i = head;
-            while i != NONE {
-                best = best.min(visit(i, best));
-                i = self.next_in_list(i);
-            }
-        }
-        best
-    }
-
     /// The spheres below the root along the ray, piece by piece (see [`RayPlan::Pieces`]),
     /// `best` shrinking to what `visit` returns.
     fn ray_ids_pieces(
@@ -413,10 +394,25 @@ impl Gathered {
         self.len == RAY_HEADS
     }
 
-    /// Walks the kept lists ([`Octree::walk_gathered`]) and empties the gather.
+    /// Walks the kept lists in order, their first records read first (see
+    /// [`Octree::touch_first`]), and empties the gather; returns `best` shrunk to what
+    /// `visit` returns.
     #[inline]
-    fn walk(&mut self, tree: &Octree, best: f32, visit: &mut impl FnMut(u32, f32) -> f32) -> f32 {
-        let len = core::mem::take(&mut self.len);
-        tree.walk_gathered(&self.heads[..len], best, visit)
+    fn walk(
+        &mut self,
+        tree: &Octree,
+        mut best: f32,
+        visit: &mut impl FnMut(u32, f32) -> f32,
+    ) -> f32 {
+        let heads = &self.heads[..core::mem::take(&mut self.len)];
+        tree.touch_first(heads);
+        for &head in heads {
+            let mut i = head;
+            while i != NONE {
+                best = best.min(visit(i, best));
+                i = tree.next_in_list(i);
+            }
+        }
+        best
     }
 }
