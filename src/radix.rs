@@ -26,6 +26,9 @@ use rayon::prelude::*;
 mod plan {
     /// Two passes of up to 14 bits: up to 2¹⁴ slots (128 KiB of counters).
     pub(super) const TWO: (usize, usize) = (1 << 14, 2);
+    /// [`TWO`] for up to 2¹² slots (32 KiB): a small world's sort zeroes no more counters
+    /// than its digits use.
+    pub(super) const TWO_SMALL: (usize, usize) = (1 << 12, 2);
     /// Three passes of up to 12 bits: up to 2¹⁸ slots (48 KiB).
     pub(super) const THREE: (usize, usize) = (1 << 12, 3);
     /// Any key: passes of up to [`super::MAX_DIGIT_BITS`] bits, enough for two 32-bit slot
@@ -123,7 +126,11 @@ pub(crate) fn sort_u64(keys: &mut Vec<u64>, scratch: &mut Vec<u64>, layout: Pair
 fn sort_in(keys: &mut [u64], tmp: &mut [u64], layout: PairBits) -> bool {
     let n = keys.len();
     if let Some(two) = layout.in_plan(plan::TWO, n) {
-        sort_halves::<{ plan::TWO.0 }>(keys, tmp, two)
+        if 1 << two.digit_bits <= plan::TWO_SMALL.0 {
+            sort_halves::<{ plan::TWO_SMALL.0 }>(keys, tmp, two)
+        } else {
+            sort_halves::<{ plan::TWO.0 }>(keys, tmp, two)
+        }
     } else if let Some(three) = layout.in_plan(plan::THREE, n) {
         sort_planned::<{ plan::THREE.0 }, { plan::THREE.1 }>(keys, tmp, three)
     } else if layout.passes == 2 {
@@ -842,7 +849,19 @@ mod tests {
     fn sorts_like_sort_unstable() {
         let mut next = xorshift(0x9E37_79B9_7F4A_7C15);
         for n in [0, 1, 5, 63, 64, 65, 1000, 5000, 20_000] {
-            for slots in [2, 3, 100, 2048, 2049, 10_000, 70_000, 1 << 22, 1 << 31] {
+            for slots in [
+                2,
+                3,
+                100,
+                2048,
+                2049,
+                4096,
+                4097,
+                10_000,
+                70_000,
+                1 << 22,
+                1 << 31,
+            ] {
                 let mut keys: Vec<u64> = (0..n).map(|_| random_pair(&mut next, slots)).collect();
                 // Repeats too: the sort is stable and keeps them.
                 if n > 10 {
