@@ -31,6 +31,9 @@ pub(super) struct Patch {
     /// The radix sort's second buffer for `touched`, and its counters.
     pub(super) touched_tmp: Vec<u32>,
     pub(super) counts: Vec<u32>,
+    /// A bit per candidate position, clear between steps: `touched` is put in order through
+    /// it when it is long (see `slack::order_touched`).
+    pub(super) touched_bits: Vec<u64>,
     /// Indices of the candidates dropped, ascending.
     pub(super) cand_gone: Vec<u32>,
     /// The new candidates, each with the index of the old list it goes before.
@@ -112,7 +115,8 @@ impl Patch {
             + (self.cand_new.capacity()
                 + self.rev_keys.capacity()
                 + self.rev_new.capacity()
-                + self.keys_tmp.capacity())
+                + self.keys_tmp.capacity()
+                + self.touched_bits.capacity())
                 * 8
             + self.scratch.heap_bytes()
     }

@@ -54,6 +54,12 @@ pub(super) const CANDIDATES_PER_LOOKUP: usize = 300;
 /// higher, but which has no fixed cost).
 const RADIX_FROM: usize = 2048;
 
+/// The touched candidates are put in order through a bit map of every candidate position
+/// (`Patch::touched_bits`) while there are at most this many candidates per touched one: the
+/// map's words then cost at most 8 reads per touched candidate, a sort of 64 or more about
+/// as many steps.
+const CANDIDATES_PER_TOUCHED: usize = 512;
+
 /// `1 + 2⁻²²`: a product with it rounds a positive normal `f32` up by at least one ulp.
 const ROUND_UP: f32 = 1.0 + 1.0 / (1u32 << 22) as f32;
 /// `1 − 2⁻²²`: a product with it rounds a positive normal `f32` down by at least one ulp.
@@ -347,20 +353,7 @@ impl BroadPhase {
             }
         }
         // A pair of two loud sides is listed twice.
-        if p.touched.len() < RADIX_FROM {
-            p.touched.sort_unstable();
-        } else {
-            let bits = u32::BITS - (cand.len() as u32).leading_zeros();
-            sort_bits_by(
-                &mut p.touched,
-                &mut p.touched_tmp,
-                &mut p.counts,
-                |&i| u64::from(i),
-                0,
-                bits,
-            );
-        }
-        p.touched.dedup();
+        order_touched(p, cand.len());
     }
 
     /// [`BroadPhase::touched_by_lookup`] by one scan of every candidate.
@@ -560,6 +553,47 @@ impl BroadPhase {
     }
 }
 
+/// Puts `p.touched` (indices below `cands`) in ascending order, each once. Through the bit map
+/// while the candidates are at most [`CANDIDATES_PER_TOUCHED`] per touched one (its words then
+/// cost less than a sort), else by the standard library's sort below [`RADIX_FROM`] and the
+/// radix sort from there.
+fn order_touched(p: &mut Patch, cands: usize) {
+    if cands <= p.touched.len() * CANDIDATES_PER_TOUCHED {
+        let words = cands.div_ceil(64);
+        if p.touched_bits.len() < words {
+            p.touched_bits.resize(words, 0);
+        }
+        let map = &mut p.touched_bits[..words];
+        for &i in &p.touched {
+            map[i as usize / 64] |= 1 << (i % 64);
+        }
+        p.touched.clear();
+        // Each word is cleared as it is read: the map is empty again for the next step.
+        for (k, word) in map.iter_mut().enumerate() {
+            let mut bits = core::mem::take(word);
+            while bits != 0 {
+                p.touched.push((k * 64) as u32 + bits.trailing_zeros());
+                bits &= bits - 1;
+            }
+        }
+        return;
+    }
+    if p.touched.len() < RADIX_FROM {
+        p.touched.sort_unstable();
+    } else {
+        let bits = u32::BITS - (cands as u32).leading_zeros();
+        sort_bits_by(
+            &mut p.touched,
+            &mut p.touched_tmp,
+            &mut p.counts,
+            |&i| u64::from(i),
+            0,
+            bits,
+        );
+    }
+    p.touched.dedup();
+}
+
 /// Sorts packed pairs: by the standard library's sort below [`RADIX_FROM`], by the radix
 /// sort from there (`tmp` its second buffer, which may trade places with `keys`).
 fn sort_keys(keys: &mut Vec<u64>, tmp: &mut Vec<u64>, layout: PairBits) {
@@ -695,6 +729,35 @@ mod tests {
                     "{list:?} {key} {hint}"
                 );
             }
+        }
+    }
+
+    /// `order_touched` leaves the indices ascending and each once, through the bit map (many
+    /// touched among few candidates) and through the sorts (few among many, and past
+    /// `RADIX_FROM`), and leaves the map clear for the next step.
+    #[test]
+    fn touched_candidates_come_out_ascending_and_once() {
+        let mut rng = crate::rng::Rng::new(7);
+        let mut p = Patch::default();
+        for round in 0..3000 {
+            let cands = 1 + rng.below(if round % 10 == 0 { 3_000_000 } else { 5000 }) as usize;
+            let n = match round % 3 {
+                0 => rng.below(8),
+                1 => rng.below(200),
+                _ => rng.below(5000),
+            };
+            let mut touched: Vec<u32> = (0..n).map(|_| rng.below(cands as u32)).collect();
+            if round % 2 == 0 {
+                // A pair of two loud sides is listed twice.
+                touched.extend_from_within(..touched.len() / 2);
+            }
+            let mut want = touched.clone();
+            want.sort_unstable();
+            want.dedup();
+            p.touched.clone_from(&touched);
+            order_touched(&mut p, cands);
+            assert_eq!(p.touched, want, "round {round}: {cands} candidates");
+            assert!(p.touched_bits.iter().all(|&w| w == 0), "round {round}");
         }
     }
 
