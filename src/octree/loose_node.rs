@@ -53,6 +53,7 @@ pub(super) struct Pass<'a, F, K> {
     near: [u32; NEAR_CAP],
 }
 
+/// Tests every sphere of `own` against the spheres at the walk positions `listed` of `boxes`
 /// and `ids`.
 #[inline]
 fn test_listed<F: FnMut(ProxyKey, ProxyKey)>(
