@@ -534,6 +534,18 @@ pub(crate) fn sort_bits_by<T: Copy + Default>(
     }
 }
 
+/// Sorts `u32` values, every one below `bound`, ascending: [`sort_bits_by`] on the values'
+/// own bits (a list of slots or of list positions).
+pub(crate) fn sort_u32_below(
+    items: &mut Vec<u32>,
+    tmp: &mut Vec<u32>,
+    counts: &mut Vec<u32>,
+    bound: usize,
+) {
+    let bits = u32::BITS - (bound as u32).leading_zeros();
+    sort_bits_by(items, tmp, counts, |&v| u64::from(v), 0, bits);
+}
+
 /// [`sort_bits_by`] of `u64` keys in a slice with a second buffer of the same length, for a
 /// caller that keeps its buffers where they are (parts of one buffer, or a lent one): returns
 /// true if the sorted items ended in `tmp` (an odd number of passes moved them), false if in

@@ -32,7 +32,7 @@
 use super::regime::Incremental;
 use super::store::flag;
 use super::{BroadPhase, Shape, fat, slack};
-use crate::radix::sort_bits_by;
+use crate::radix::sort_u32_below;
 
 /// The stale slots are applied by walking every slot's flags once at least one slot in this
 /// many is stale, and by sorting the mover list below that.
@@ -77,14 +77,11 @@ impl BroadPhase {
             }
         } else {
             if !self.movers.is_sorted() {
-                let bits = u32::BITS - (slots as u32).leading_zeros();
-                sort_bits_by(
+                sort_u32_below(
                     &mut self.movers,
                     &mut self.movers_tmp,
                     &mut self.movers_counts,
-                    |&s| u64::from(s),
-                    0,
-                    bits,
+                    slots,
                 );
             }
             if self.apply_spheres_fat(false) == Some(0) {

@@ -39,7 +39,7 @@ use super::patch::Patch;
 use super::regime::Incremental;
 use super::store::flag;
 use crate::geom::SimdBox;
-use crate::radix::{PairBits, sort_bits_by, sort_u64, sort_u64_kept};
+use crate::radix::{PairBits, sort_u32_below, sort_u64, sort_u64_kept};
 use glam::Vec3A;
 
 /// Finding one proxy's candidates through the sorted list and the reverse index (a galloping
@@ -581,15 +581,7 @@ fn order_touched(p: &mut Patch, cands: usize) {
     if p.touched.len() < RADIX_FROM {
         p.touched.sort_unstable();
     } else {
-        let bits = u32::BITS - (cands as u32).leading_zeros();
-        sort_bits_by(
-            &mut p.touched,
-            &mut p.touched_tmp,
-            &mut p.counts,
-            |&i| u64::from(i),
-            0,
-            bits,
-        );
+        sort_u32_below(&mut p.touched, &mut p.touched_tmp, &mut p.counts, cands);
     }
     p.touched.dedup();
 }
