@@ -66,6 +66,10 @@
 //! still see every latest shape: the structures skip the proxies updated since the last step
 //! and the query tests those proxies' new shapes one by one, so it costs one test per proxy
 //! updated since then (nothing once the step has run). Query after the step where you can.
+//! One kind of update is applied at once: in the incremental regime (see [`BroadPhase`]), a
+//! proxy that stays in its fat box and moves too little to change any pair (a resting ball
+//! sent again) needs nothing of the step, and its update applies it; queries see it as they
+//! see any applied proxy.
 //! [`Octree`] and [`Bvh`] have the stopping form too, without a filter (`query_aabb_with`,
 //! `query_sphere_with`).
 //! ```

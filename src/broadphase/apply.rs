@@ -1,9 +1,9 @@
-//! An update is a store; the step applies it.
+//! An update is a store; the step applies it (but for nudges, below).
 //!
 //! [`BroadPhase::update_sphere`] and [`BroadPhase::update_body`] (and their batches) check
 //! their input, write the new shape into the slot's entry of the dense shape array, and mark
 //! the slot `MOVED | STALE` (listing it in `movers` once, however often it is updated). Nothing
-//! else happens at the call: the exact box, the motion record and the structure's box are the
+//! else happens at the call (a nudge excepted): the exact box, the motion record and the structure's box are the
 //! last step's until the next [`BroadPhase::step`], whose first act is
 //! [`BroadPhase::apply_updates`]: one pass over the stale slots in slot order (a walk over every
 //! slot's flags when many are stale, else the mover list, radix-sorted by slot when the
@@ -21,6 +21,13 @@
 //! Slot order makes the pass stream through every per-slot array and the octree's records,
 //! whatever order the caller updated in (a churn's reused keys come in none).
 //!
+//! **Nudges.** In the incremental regime an update whose new exact box still lies in the fat
+//! box its structure holds, and which drifted under half its slack from its anchor (see
+//! [`super::slack`]), changes no pair and nothing its structure holds: all the step would do
+//! with it is store its exact box and flag it drifted. The update does that itself ([`nudge`])
+//! and leaves the slot applied, not stale, so the step never visits it. A settling pile, sent
+//! whole every frame, is mostly such updates.
+//!
 //! **Between an update and the next step** the structures hold the stale slots at their last
 //! applied boxes, so the queries (`BroadPhase::query_aabb` and the rest) skip a stale slot where a structure
 //! reports it and test every stale slot's latest shape after the structures' walk instead: a
@@ -32,6 +39,7 @@
 use super::regime::Incremental;
 use super::store::flag;
 use super::{BroadPhase, Shape, fat, slack};
+use crate::geom::SimdBox;
 use crate::radix::sort_u32_below;
 
 /// The stale slots are applied by walking every slot's flags once at least one slot in this
@@ -298,6 +306,44 @@ impl BroadPhase {
     }
 }
 
+/// Applies at once, in the incremental regime `r`, the update of the live slot `s` (its
+/// new shape already stored) to the exact box `new`, if all the step would do with it is store
+/// that box (see the module docs): the slot is neither stale nor escaped (inserted or regrouped
+/// since the last step), `new` lies in its fat box, and it stays quiet. Returns whether it
+/// did; `nudged` counts the slots nudged since the last step, each once, and gives one back when
+/// a nudged slot is marked stale after all.
+#[inline(always)]
+pub(super) fn nudge(
+    r: &mut Incremental,
+    (flags, stamp): (&mut [u8], &mut [u32]),
+    s: usize,
+    new: SimdBox,
+    now: u32,
+    nudged: &mut usize,
+) -> bool {
+    let f = flags[s];
+    let applied = f & (flag::STALE | flag::ESCAPED) == 0;
+    let again = was_nudged(f, stamp[s], now);
+    if applied && r.held[s].contains(&new) && slack::stays_quiet(&new, &r.anchor[s], r.slack[s]) {
+        (r.exact[s], stamp[s]) = (new, now);
+        flags[s] = f | flag::DRIFTED;
+        *nudged += usize::from(!again);
+        true
+    } else {
+        // Nudged before since the last step: counted among the movers from now on.
+        *nudged -= usize::from(again);
+        false
+    }
+}
+
+/// In the incremental regime, true if the live slot of flags `f` and stamp `stamp` was nudged
+/// since the last step (see [`nudge`]): a nudge stamps the slot with the coming step, an
+/// applied slot's stamp is an earlier step's, and an inserted slot is escaped.
+#[inline(always)]
+pub(super) fn was_nudged(f: u8, stamp: u32, now: u32) -> bool {
+    f & (flag::STALE | flag::ESCAPED) == 0 && stamp == now
+}
+
 /// [`BroadPhase::apply_spheres_fat`]'s walk over `slots`: returns how many it left for
 /// [`BroadPhase::apply`]. Inlined into each caller, so that the dense walk over `0..slots`
 /// needs no bounds checks on the cut slices.
@@ -350,4 +396,72 @@ fn fat_walk(
         }
     }
     rest
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::broadphase::{BroadPhase, Config, Pass, Shape};
+    use crate::brute::{self, Proxy};
+    use crate::{Aabb, BodyKind, Vec3};
+
+    /// In the incremental regime, jitters under half the slack are nudges: applied by the
+    /// update calls (batch, single and body), so the step finds nothing stale and no movers;
+    /// a move out of reach after a nudge makes the slot a mover after all, counted once.
+    #[test]
+    fn jitters_in_the_regime_are_applied_by_the_update() {
+        let mut bp = BroadPhase::new(Config::default());
+        let at = |i: usize| Vec3::new((i % 10) as f32, (i / 10) as f32, 0.0) * 0.95;
+        let spheres: Vec<_> = (0..100)
+            .map(|i| bp.insert_sphere(at(i), 0.5).unwrap())
+            .collect();
+        let body_box = |dx: f32| Aabb {
+            min: Vec3::new(dx, -3.0, 0.0),
+            max: Vec3::new(dx + 1.0, -2.0, 1.0),
+        };
+        let body = bp.insert_body(body_box(0.0), BodyKind::Dynamic).unwrap();
+        let send = |bp: &mut BroadPhase, d: f32| {
+            let batch: Vec<_> = (0..99)
+                .map(|i| (spheres[i], at(i) + Vec3::new(d, 0.0, 0.0), 0.5))
+                .collect();
+            bp.update_spheres(&batch).unwrap();
+            bp.update_sphere(spheres[99], at(99) + Vec3::new(d, 0.0, 0.0), 0.5)
+                .unwrap();
+            bp.update_body(body, body_box(d)).unwrap();
+        };
+        for _ in 0..4 {
+            send(&mut bp, 0.0);
+            bp.step();
+        }
+        assert_eq!(bp.stats().pass, Pass::Incremental);
+        send(&mut bp, 0.0001);
+        assert_eq!((bp.stale, bp.movers.len(), bp.nudged), (0, 0, 101));
+        bp.validate();
+        // One sphere again, far: it leaves the nudged count for the movers.
+        bp.update_sphere(spheres[0], at(0) + Vec3::splat(0.4), 0.5)
+            .unwrap();
+        assert_eq!((bp.stale, bp.movers.len(), bp.nudged), (1, 1, 100));
+        bp.step();
+        bp.validate();
+        assert_eq!(bp.stats().pass, Pass::Incremental);
+        assert_eq!(bp.stats().updated, 101);
+        // Nudged only: an incremental step with the same pairs.
+        send(&mut bp, 0.0002);
+        bp.update_sphere(spheres[0], at(0) + Vec3::splat(0.4), 0.5)
+            .unwrap();
+        bp.step();
+        bp.validate();
+        assert_eq!(bp.stats().pass, Pass::Incremental);
+        assert_eq!(bp.stats().updated, 101);
+        let margin = bp.config().margin;
+        let proxies: Vec<Proxy> = bp
+            .iter()
+            .map(|(k, shape)| match shape {
+                Shape::Sphere { center, radius } => {
+                    Proxy::new(k, Aabb::from_center_radius(center, radius + margin))
+                }
+                Shape::Body { aabb, .. } => Proxy::new(k, aabb.grown(margin)),
+            })
+            .collect();
+        assert_eq!(bp.pairs(), brute::pairs(&proxies));
+    }
 }

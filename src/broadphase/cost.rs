@@ -157,7 +157,7 @@ impl BroadPhase {
     /// Chooses the pass from the work at hand.
     pub(super) fn plan(&mut self) -> Pass {
         let movers = self.movers.len();
-        if movers == 0 && self.removals == 0 {
+        if movers == 0 && self.removals == 0 && self.nudged == 0 {
             return Pass::Unchanged;
         }
         match self.config.passes {

@@ -110,6 +110,9 @@ pub struct StepStats {
 ///    a proxy that moved by half the least slack of its candidates (the least distance by
 ///    which any of its candidates' overlap outcomes could change) and keeping the others' last outcome, and patches the lists in place with what changed.
 ///
+/// A proxy that moved less than that and stayed in its fat box changes nothing of this: its
+/// update call applies it at once (a *nudge*, see `apply`), and the step never visits it.
+///
 /// Its cost follows what moved. While the structures hold fat boxes and the candidates are
 /// kept, the broadphase is in the *incremental regime*; a full pass over fat boxes enters it
 /// and a full pass over exact boxes leaves it. The regime is one value that exists only while
@@ -165,6 +168,9 @@ pub struct BroadPhase {
     pending: Vec<u32>,
     /// Proxies removed since the last step.
     removals: usize,
+    /// Proxies updated since the last step whose updates applied themselves, each once (see
+    /// [`apply::nudge`]): they are in no list, and count in the step's `updated`.
+    nudged: usize,
     /// The motion of the proxies applied this step, for the pass estimate.
     motion: fat::Motion,
     /// Scratch of the passes: new candidates or pairs (a full pass's sorted pairs until they
@@ -249,6 +255,7 @@ impl BroadPhase {
             loud: Vec::new(),
             pending: Vec::new(),
             removals: 0,
+            nudged: 0,
             motion: fat::Motion::default(),
             fresh: Vec::new(),
             sort_buf: Vec::new(),
@@ -496,11 +503,11 @@ impl BroadPhase {
     /// Moves or resizes a sphere. `Err(UnknownProxy)` for a stale key, `Err(WrongKind)` for a
     /// body's key, or a geometry error; on `Err` nothing changes. Only the shape is stored
     /// here: the next [`BroadPhase::step`] moves it in the octree, and queries see it at once
-    /// (see the crate docs' "Queries").
+    /// (see the crate docs' "Queries", which also say which updates apply themselves).
     #[inline]
     pub fn update_sphere(&mut self, key: ProxyKey, center: Vec3, radius: f32) -> Result<(), Error> {
-        let slot = self.check_sphere_update(key, center, radius)?;
-        self.set_sphere(slot, center, radius);
+        self.check_sphere_update(key, center, radius)?;
+        self.store_spheres(core::iter::once((key, center, Some(radius))));
         Ok(())
     }
 
@@ -526,18 +533,24 @@ impl BroadPhase {
         Ok(())
     }
 
-    /// `set_sphere`'s stores for a checked batch of live spheres, with the arrays borrowed
-    /// once: each entry's centre, and its radius where it gives one (else the sphere keeps
-    /// its own).
+    /// The stores of a checked batch of live spheres, with the arrays borrowed once: each
+    /// entry's centre, and its radius where it gives one (else the sphere keeps its own). In
+    /// the incremental regime an update that needs nothing of the step is applied here (see
+    /// [`apply::nudge`]); every other one marks its slot stale.
     #[inline]
     fn store_spheres(&mut self, entries: impl Iterator<Item = (ProxyKey, Vec3, Option<f32>)>) {
-        let (st, movers) = (&mut self.store, &mut self.movers);
-        let (shape, flags) = (&mut st.shape[..], &mut st.flags[..]);
-        let mut newly_stale = 0;
+        let (st, movers, margin, now) = (
+            &mut self.store,
+            &mut self.movers,
+            self.config.margin,
+            self.now,
+        );
+        let (shape, flags, stamp) = (&mut st.shape[..], &mut st.flags[..], &mut st.stamp[..]);
+        let (mut newly_stale, mut nudged) = (0, self.nudged);
         for (key, center, radius) in entries {
             let slot = crate::pair::slot(key);
-            let s = &mut shape[slot as usize];
-            let radius = match (radius, *s) {
+            let s = slot as usize;
+            let radius = match (radius, shape[s]) {
                 (Some(r), _) => r,
                 (None, Shape::Sphere { radius, .. }) => radius,
                 (None, Shape::Body { .. }) => {
@@ -545,10 +558,17 @@ impl BroadPhase {
                     continue;
                 }
             };
-            write_sphere(s, center, radius);
+            write_sphere(&mut shape[s], center, radius);
+            if let Some(r) = &mut self.regime {
+                let new = fat::grown_sphere(center, radius, margin).aabb;
+                if apply::nudge(r, (flags, stamp), s, new, now, &mut nudged) {
+                    continue;
+                }
+            }
             newly_stale += usize::from(mark_stale_in(flags, movers, slot));
         }
         self.stale += newly_stale;
+        self.nudged = nudged;
     }
 
     /// Moves many spheres at once, keeping their radii: `centers[i]` is the new centre of
@@ -664,19 +684,28 @@ impl BroadPhase {
         }
     }
 
-    /// Stores a checked update of the live sphere in `slot`: the new shape, written once, and
-    /// the slot marked stale; the next step applies it (see [`apply`]).
-    #[inline]
-    fn set_sphere(&mut self, slot: u32, center: Vec3, radius: f32) {
-        write_sphere(&mut self.store.shape[slot as usize], center, radius);
-        self.mark_stale(slot);
-    }
-
-    /// [`BroadPhase::set_sphere`] for a body with its new box (its kind stays).
+    /// Stores a checked body update: its new box (its kind stays), applied at once where that
+    /// is all the step would do ([`apply::nudge`]), else marked stale.
     #[inline]
     fn set_body(&mut self, slot: u32, aabb: &Aabb) {
-        if let Shape::Body { aabb: a, .. } = &mut self.store.shape[slot as usize] {
+        let s = slot as usize;
+        let shape = &mut self.store.shape[s];
+        if let Shape::Body { aabb: a, .. } = shape {
             *a = *aabb;
+        }
+        if let Some(r) = &mut self.regime {
+            let new = fat::grown(*shape, self.config.margin).aabb;
+            let st = &mut self.store;
+            if apply::nudge(
+                r,
+                (&mut st.flags, &mut st.stamp),
+                s,
+                new,
+                self.now,
+                &mut self.nudged,
+            ) {
+                return;
+            }
         }
         self.mark_stale(slot);
     }
@@ -696,8 +725,16 @@ impl BroadPhase {
             Shape::Body { kind, .. } => self.tree_mut(kind).remove(key),
         };
         debug_assert!(removed.is_ok(), "a live proxy missing from its structure");
-        if self.store.flags[slot as usize] & flag::STALE != 0 {
+        let (f, stamp) = (
+            self.store.flags[slot as usize],
+            self.store.stamp[slot as usize],
+        );
+        if f & flag::STALE != 0 {
             self.stale -= 1;
+        }
+        if self.regime.is_some() && apply::was_nudged(f, stamp, self.now) {
+            // Counted once in the step's `updated`, as removed.
+            self.nudged -= 1;
         }
         self.store.free(slot);
         self.removals += 1;

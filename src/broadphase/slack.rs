@@ -303,7 +303,7 @@ impl BroadPhase {
         let visits = self.loud.len() + self.store.freed().len();
         let lookup = visits * CANDIDATES_PER_LOOKUP < r.cand.len();
         r.patch.clear();
-        if lookup && r.rev_stale {
+        if lookup && r.rev_stale && visits > 0 {
             self.rebuild_rev();
         }
         if lookup {

@@ -131,7 +131,7 @@ const REFIT_FRACTION: f64 = 0.125;
 impl BroadPhase {
     /// Runs `pass`, then clears the step's marks.
     pub(super) fn run(&mut self, pass: Pass) {
-        let updated = self.movers.len() + self.removals;
+        let updated = self.movers.len() + self.removals + core::mem::take(&mut self.nudged);
         let escaped = self.escaped.len();
         self.stats = StepStats {
             pass,
@@ -156,9 +156,14 @@ impl BroadPhase {
         self.stats.dynamic_rebuilds = d.1;
         self.stats.static_rebuilds = st.1;
         self.stats.candidates = self.regime.as_ref().map_or(0, |r| r.cand.len());
+        let mut removed_movers = 0;
         for &s in &self.movers {
-            self.store.flags[s as usize] &= !(flag::MOVED | flag::ESCAPED);
+            let f = &mut self.store.flags[s as usize];
+            // A proxy updated and then removed counts once in `updated`, as removed.
+            removed_movers += usize::from(*f & flag::GONE != 0);
+            *f &= !(flag::MOVED | flag::ESCAPED);
         }
+        self.stats.updated -= removed_movers;
         for &s in &self.loud {
             self.store.flags[s as usize] &= !flag::LOUD;
         }
