@@ -24,7 +24,7 @@
 //! **Nudges.** In the incremental regime an update whose new exact box still lies in the fat
 //! box its structure holds, and which drifted under half its slack from its anchor (see
 //! [`super::slack`]), changes no pair and nothing its structure holds: all the step would do
-//! with it is store its exact box and flag it drifted. The update does that itself ([`nudge`])
+//! with it is store its exact box and flag it drifted. The update does that itself ([`Nudger::nudge`])
 //! and leaves the slot applied, not stale, so the step never visits it. A settling pile, sent
 //! whole every frame, is mostly such updates.
 //!
@@ -306,38 +306,62 @@ impl BroadPhase {
     }
 }
 
-/// Applies at once, in the incremental regime `r`, the update of the live slot `s` (its
-/// new shape already stored) to the exact box `new`, if all the step would do with it is store
-/// that box (see the module docs): the slot is neither stale nor escaped (inserted or regrouped
-/// since the last step), `new` lies in its fat box, and it stays quiet. Returns whether it
-/// did; `nudged` counts the slots nudged since the last step, each once, and gives one back when
-/// a nudged slot is marked stale after all.
-#[inline(always)]
-pub(super) fn nudge(
-    r: &mut Incremental,
-    (flags, stamp): (&mut [u8], &mut [u32]),
-    s: usize,
-    new: SimdBox,
-    now: u32,
-    nudged: &mut usize,
-) -> bool {
-    let f = flags[s];
-    let applied = f & (flag::STALE | flag::ESCAPED) == 0;
-    let again = was_nudged(f, stamp[s], now);
-    if applied && r.held[s].contains(&new) && slack::stays_quiet(&new, &r.anchor[s], r.slack[s]) {
-        (r.exact[s], stamp[s]) = (new, now);
-        flags[s] = f | flag::DRIFTED;
-        *nudged += usize::from(!again);
-        true
-    } else {
-        // Nudged before since the last step: counted among the movers from now on.
-        *nudged -= usize::from(again);
-        false
+/// The regime's per-slot arrays a nudge reads and writes, cut to the slot count (one bound for
+/// the compiler to check).
+pub(super) struct Nudger<'a> {
+    exact: &'a mut [SimdBox],
+    held: &'a [SimdBox],
+    anchor: &'a [SimdBox],
+    slack: &'a [f32],
+}
+
+impl<'a> Nudger<'a> {
+    /// The nudges of the regime `r` over its first `slots` slots.
+    #[inline(always)]
+    pub(super) fn new(r: &'a mut Incremental, slots: usize) -> Self {
+        Nudger {
+            exact: &mut r.exact[..slots],
+            held: &r.held[..slots],
+            anchor: &r.anchor[..slots],
+            slack: &r.slack[..slots],
+        }
+    }
+
+    /// Applies at once the update of the live slot `s` (its new shape already stored) to the
+    /// exact box `new`, if all the step would do with it is store that box (see the module
+    /// docs): the slot is neither stale nor escaped (inserted or regrouped since the last
+    /// step), `new` lies in its fat box, and it stays quiet. Returns whether it did; `nudged`
+    /// counts the slots nudged since the last step, each once, and gives one back when a
+    /// nudged slot is marked stale after all.
+    #[inline(always)]
+    pub(super) fn nudge(
+        &mut self,
+        (flags, stamp): (&mut [u8], &mut [u32]),
+        s: usize,
+        new: SimdBox,
+        now: u32,
+        nudged: &mut usize,
+    ) -> bool {
+        let f = flags[s];
+        let again = was_nudged(f, stamp[s], now);
+        if f & (flag::STALE | flag::ESCAPED) == 0
+            && self.held[s].contains(&new)
+            && slack::stays_quiet(&new, &self.anchor[s], self.slack[s])
+        {
+            (self.exact[s], stamp[s]) = (new, now);
+            flags[s] = f | flag::DRIFTED;
+            *nudged += usize::from(!again);
+            true
+        } else {
+            // Nudged before since the last step: counted among the movers from now on.
+            *nudged -= usize::from(again);
+            false
+        }
     }
 }
 
 /// In the incremental regime, true if the live slot of flags `f` and stamp `stamp` was nudged
-/// since the last step (see [`nudge`]): a nudge stamps the slot with the coming step, an
+/// since the last step (see [`Nudger::nudge`]): a nudge stamps the slot with the coming step, an
 /// applied slot's stamp is an earlier step's, and an inserted slot is escaped.
 #[inline(always)]
 pub(super) fn was_nudged(f: u8, stamp: u32, now: u32) -> bool {

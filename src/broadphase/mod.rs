@@ -169,7 +169,7 @@ pub struct BroadPhase {
     /// Proxies removed since the last step.
     removals: usize,
     /// Proxies updated since the last step whose updates applied themselves, each once (see
-    /// [`apply::nudge`]): they are in no list, and count in the step's `updated`.
+    /// [`apply::Nudger::nudge`]): they are in no list, and count in the step's `updated`.
     nudged: usize,
     /// The motion of the proxies applied this step, for the pass estimate.
     motion: fat::Motion,
@@ -536,7 +536,7 @@ impl BroadPhase {
     /// The stores of a checked batch of live spheres, with the arrays borrowed once: each
     /// entry's centre, and its radius where it gives one (else the sphere keeps its own). In
     /// the incremental regime an update that needs nothing of the step is applied here (see
-    /// [`apply::nudge`]); every other one marks its slot stale.
+    /// [`apply::Nudger::nudge`]); every other one marks its slot stale.
     #[inline]
     fn store_spheres(&mut self, entries: impl Iterator<Item = (ProxyKey, Vec3, Option<f32>)>) {
         let (st, movers, margin, now) = (
@@ -545,7 +545,9 @@ impl BroadPhase {
             self.config.margin,
             self.now,
         );
-        let (shape, flags, stamp) = (&mut st.shape[..], &mut st.flags[..], &mut st.stamp[..]);
+        let n = st.slots();
+        let (shape, flags, stamp) = (&mut st.shape[..n], &mut st.flags[..n], &mut st.stamp[..n]);
+        let mut fat = self.regime.as_mut().map(|r| apply::Nudger::new(r, n));
         let (mut newly_stale, mut nudged) = (0, self.nudged);
         for (key, center, radius) in entries {
             let slot = crate::pair::slot(key);
@@ -559,9 +561,9 @@ impl BroadPhase {
                 }
             };
             write_sphere(&mut shape[s], center, radius);
-            if let Some(r) = &mut self.regime {
+            if let Some(fat) = &mut fat {
                 let new = fat::grown_sphere(center, radius, margin).aabb;
-                if apply::nudge(r, (flags, stamp), s, new, now, &mut nudged) {
+                if fat.nudge((flags, stamp), s, new, now, &mut nudged) {
                     continue;
                 }
             }
@@ -685,7 +687,7 @@ impl BroadPhase {
     }
 
     /// Stores a checked body update: its new box (its kind stays), applied at once where that
-    /// is all the step would do ([`apply::nudge`]), else marked stale.
+    /// is all the step would do ([`apply::Nudger::nudge`]), else marked stale.
     #[inline]
     fn set_body(&mut self, slot: u32, aabb: &Aabb) {
         let s = slot as usize;
@@ -696,8 +698,7 @@ impl BroadPhase {
         if let Some(r) = &mut self.regime {
             let new = fat::grown(*shape, self.config.margin).aabb;
             let st = &mut self.store;
-            if apply::nudge(
-                r,
+            if apply::Nudger::new(r, st.slots()).nudge(
                 (&mut st.flags, &mut st.stamp),
                 s,
                 new,
