@@ -1,8 +1,9 @@
 //! Nudges: in the incremental regime, an update whose proxy stays in its fat box and drifts
 //! under half its slack is applied by the update call itself (see the crate docs' "Queries").
-//! Here a pile of spheres and a few dynamic bodies rest in the regime and are sent every step:
-//! most updates are jitters (nudges), some proxies are sent twice (nudged twice, nudged then
-//! moved out of reach, moved then jittered), some are inserted or removed. Between the
+//! Here a pile of spheres and a few dynamic bodies rest in the regime and are sent every step
+//! in slot order: most updates are jitters (nudges), some proxies are sent twice (jittered
+//! twice, nudged then moved out of reach, moved then jittered; a second update is out of slot
+//! order, which ends the nudges until the step), some are inserted or removed. Between the
 //! updates and the step, `validate()` holds and box queries equal the test's own brute force
 //! over its copy of the shapes. After every step the three lists equal the brute force,
 //! `stats().updated` counts each updated, inserted or removed proxy once, and a step whose
@@ -92,7 +93,7 @@ fn run(seed: u64) {
                 continue;
             }
             match rng.below(40) {
-                // Nudged twice.
+                // Jittered twice.
                 0 => model.update(&mut bp, k, jitter.moved(rng.offset(0.0002))),
                 // Nudged, then moved out of its fat box.
                 1 => model.update(&mut bp, k, jitter.moved(rng.offset(0.8))),

@@ -171,6 +171,10 @@ pub struct BroadPhase {
     /// Proxies updated since the last step whose updates applied themselves, each once (see
     /// [`apply::Nudger::nudge`]): they are in no list, and count in the step's `updated`.
     nudged: usize,
+    /// The lowest slot the next update may nudge: one past the last updated slot while the
+    /// updates since the last step came in ascending slot order, `u32::MAX` once one did not
+    /// (see [`apply::Nudger::nudge`]).
+    nudge_from: u32,
     /// The motion of the proxies applied this step, for the pass estimate.
     motion: fat::Motion,
     /// Scratch of the passes: new candidates or pairs (a full pass's sorted pairs until they
@@ -256,6 +260,7 @@ impl BroadPhase {
             pending: Vec::new(),
             removals: 0,
             nudged: 0,
+            nudge_from: 0,
             motion: fat::Motion::default(),
             fresh: Vec::new(),
             sort_buf: Vec::new(),
@@ -538,7 +543,12 @@ impl BroadPhase {
     /// the incremental regime an update that needs nothing of the step is applied here (see
     /// [`apply::Nudger::nudge`]); every other one marks its slot stale.
     #[inline]
-    fn store_spheres(&mut self, entries: impl Iterator<Item = (ProxyKey, Vec3, Option<f32>)>) {
+    fn store_spheres(
+        &mut self,
+        entries: impl Iterator<Item = (ProxyKey, Vec3, Option<f32>)> + Clone,
+    ) {
+        let (nudging, recount) =
+            self.nudge_plan(entries.clone().map(|(k, ..)| crate::pair::slot(k)));
         let (st, movers, margin, now) = (
             &mut self.store,
             &mut self.movers,
@@ -547,7 +557,10 @@ impl BroadPhase {
         );
         let n = st.slots();
         let (shape, flags, stamp) = (&mut st.shape[..n], &mut st.flags[..n], &mut st.stamp[..n]);
-        let mut fat = self.regime.as_mut().map(|r| apply::Nudger::new(r, n));
+        let mut fat = match &mut self.regime {
+            Some(r) if nudging => Some(apply::Nudger::new(r, n, now)),
+            _ => None,
+        };
         let (mut newly_stale, mut nudged) = (0, self.nudged);
         for (key, center, radius) in entries {
             let slot = crate::pair::slot(key);
@@ -562,15 +575,32 @@ impl BroadPhase {
             };
             write_sphere(&mut shape[s], center, radius);
             if let Some(fat) = &mut fat {
-                let new = fat::grown_sphere(center, radius, margin).aabb;
-                if fat.nudge((flags, stamp), s, new, now, &mut nudged) {
+                let new = || fat::grown_sphere(center, radius, margin).aabb;
+                if fat.nudge((flags, stamp), s, new) {
+                    nudged += 1;
                     continue;
                 }
+            } else if recount && apply::was_nudged(flags[s], stamp[s], now) {
+                // Nudged by an earlier call since the last step: a mover from now on.
+                nudged -= 1;
             }
             newly_stale += usize::from(mark_stale_in(flags, movers, slot));
         }
         self.stale += newly_stale;
         self.nudged = nudged;
+    }
+
+    /// Whether the updates of the slots `slots` (in the caller's order) are nudged (see
+    /// [`apply::Nudger::nudge`]): in the incremental regime, while they come in slot order
+    /// ([`apply::in_order`]); and if not, whether an earlier call since the last step nudged
+    /// some slot they may name again.
+    #[inline]
+    fn nudge_plan(&mut self, slots: impl Iterator<Item = u32>) -> (bool, bool) {
+        if self.regime.is_none() {
+            return (false, false);
+        }
+        let ordered = apply::in_order(&mut self.nudge_from, slots);
+        (ordered, !ordered && self.nudged > 0)
     }
 
     /// Moves many spheres at once, keeping their radii: `centers[i]` is the new centre of
@@ -695,18 +725,21 @@ impl BroadPhase {
         if let Shape::Body { aabb: a, .. } = shape {
             *a = *aabb;
         }
-        if let Some(r) = &mut self.regime {
-            let new = fat::grown(*shape, self.config.margin).aabb;
-            let st = &mut self.store;
-            if apply::Nudger::new(r, st.slots()).nudge(
-                (&mut st.flags, &mut st.stamp),
-                s,
-                new,
-                self.now,
-                &mut self.nudged,
-            ) {
+        let shape = *shape;
+        let (nudging, recount) = self.nudge_plan(core::iter::once(slot));
+        let (st, now) = (&mut self.store, self.now);
+        if let Some(r) = &mut self.regime
+            && nudging
+        {
+            let new = || fat::grown(shape, self.config.margin).aabb;
+            let mut fat = apply::Nudger::new(r, st.slots(), now);
+            if fat.nudge((&mut st.flags, &mut st.stamp), s, new) {
+                self.nudged += 1;
                 return;
             }
+        } else if recount && apply::was_nudged(st.flags[s], st.stamp[s], now) {
+            // Nudged by an earlier call since the last step: a mover from now on.
+            self.nudged -= 1;
         }
         self.mark_stale(slot);
     }

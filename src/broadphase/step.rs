@@ -132,6 +132,7 @@ impl BroadPhase {
     /// Runs `pass`, then clears the step's marks.
     pub(super) fn run(&mut self, pass: Pass) {
         let updated = self.movers.len() + self.removals + core::mem::take(&mut self.nudged);
+        self.nudge_from = 0;
         let escaped = self.escaped.len();
         self.stats = StepStats {
             pass,
