@@ -68,8 +68,11 @@
 //! updated since then (nothing once the step has run). Query after the step where you can.
 //! One kind of update is applied at once: in the incremental regime (see [`BroadPhase`]), a
 //! proxy that stays in its fat box and moves too little to change any pair (a resting ball
-//! sent again) needs nothing of the step, and its update applies it; queries see it as they
-//! see any applied proxy.
+//! sent again) needs nothing of the step, and its update applies it, while the updates since
+//! the last step come in ascending key order (the order `ProxyKey`s sort in; in another
+//! order the step applies them in slot order, which costs less than the scattered reads the
+//! calls would make); queries see it as they see any applied proxy. An engine that sends a
+//! settling world every frame gains by sending its batch sorted by key.
 //! [`Octree`] and [`Bvh`] have the stopping form too, without a filter (`query_aabb_with`,
 //! `query_sphere_with`).
 //! ```
