@@ -439,7 +439,7 @@ fn fat_walk(
 
 #[cfg(test)]
 mod tests {
-    use crate::broadphase::{BroadPhase, Config, Pass, Shape};
+    use crate::broadphase::{BroadPhase, Config, Pass};
     use crate::brute::{self, Proxy};
     use crate::{Aabb, BodyKind, Vec3};
 
@@ -451,9 +451,11 @@ mod tests {
     fn jitters_in_the_regime_are_applied_by_the_update() {
         let mut bp = BroadPhase::new(Config::default());
         let at = |i: usize| Vec3::new((i % 10) as f32, (i / 10) as f32, 0.0) * 0.95;
-        let spheres: Vec<_> = (0..100)
-            .map(|i| bp.insert_sphere(at(i), 0.5).unwrap())
-            .collect();
+        // One at a time, so that the slots follow `i`.
+        let mut spheres = Vec::new();
+        for i in 0..100 {
+            spheres.push(bp.insert_sphere(at(i), 0.5).unwrap());
+        }
         let body_box = |dx: f32| Aabb {
             min: Vec3::new(dx, -3.0, 0.0),
             max: Vec3::new(dx + 1.0, -2.0, 1.0),
@@ -502,16 +504,21 @@ mod tests {
         bp.validate();
         assert_eq!(bp.stats().pass, Pass::Incremental);
         assert_eq!(bp.stats().updated, 101);
-        let margin = bp.config().margin;
-        let proxies: Vec<Proxy> = bp
-            .iter()
-            .map(|(k, shape)| match shape {
-                Shape::Sphere { center, radius } => {
-                    Proxy::new(k, Aabb::from_center_radius(center, radius + margin))
-                }
-                Shape::Body { aabb, .. } => Proxy::new(k, aabb.grown(margin)),
+        // The pairs, from the test's own boxes: each sphere where it was sent last, the body at
+        // its last box.
+        let grown = 0.5 + bp.config().margin;
+        let mut proxies: Vec<Proxy> = (0..100)
+            .map(|i| {
+                let d = if i == 0 {
+                    Vec3::splat(0.4)
+                } else {
+                    Vec3::X * 0.0002
+                };
+                Proxy::new(spheres[i], Aabb::from_center_radius(at(i) + d, grown))
             })
             .collect();
+        let body_grown = body_box(0.0002).grown(bp.config().margin);
+        proxies.push(Proxy::new(body, body_grown));
         assert_eq!(bp.pairs(), brute::pairs(&proxies));
     }
 }
