@@ -3,8 +3,8 @@
 //! [`BroadPhase::update_sphere`] and [`BroadPhase::update_body`] (and their batches) check
 //! their input, write the new shape into the slot's entry of the dense shape array, and mark
 //! the slot `MOVED | STALE` (listing it in `movers` once, however often it is updated). Nothing
-//! else happens at the call (a nudge excepted): the exact box, the motion record and the structure's box are the
-//! last step's until the next [`BroadPhase::step`], whose first act is
+//! else happens at the call (a nudge excepted): the exact box, the motion record and the
+//! structure's box are the last step's until the next [`BroadPhase::step`], whose first act is
 //! [`BroadPhase::apply_updates`]: one pass over the stale slots in slot order (a walk over every
 //! slot's flags when many are stale, else the mover list, radix-sorted by slot when the
 //! caller's order was another), each given
@@ -24,11 +24,11 @@
 //! **Nudges.** In the incremental regime an update whose new exact box still lies in the fat
 //! box its structure holds, and which drifted under half its slack from its anchor (see
 //! [`super::slack`]), changes no pair and nothing its structure holds: all the step would do
-//! with it is store its exact box and flag it drifted. The update does that itself ([`Nudger::nudge`])
-//! and leaves the slot applied, not stale, so the step never visits it. A settling pile, sent
-//! whole every frame, is mostly such updates. Only updates in ascending slot order are nudged
-//! ([`in_order`]): in another order the step's walk in slot order costs less than the
-//! scattered reads of the regime's arrays at the calls.
+//! with it is store its exact box and flag it drifted. The update does that itself
+//! ([`Nudger::nudge`]) and leaves the slot applied, not stale, so the step never visits it. A
+//! settling pile, sent whole every frame, is mostly such updates. Only updates in ascending
+//! slot order are nudged ([`in_order`]): in another order the step's walk in slot order costs
+//! less than the scattered reads of the regime's arrays at the calls.
 //!
 //! **Between an update and the next step** the structures hold the stale slots at their last
 //! applied boxes, so the queries (`BroadPhase::query_aabb` and the rest) skip a stale slot where a structure
