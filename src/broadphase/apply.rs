@@ -310,7 +310,7 @@ impl BroadPhase {
 
 /// The regime's per-slot arrays a nudge reads and writes (see the module docs), cut to the
 /// slot count: one bound for the compiler to check.
-pub(super) struct Nudger<'a> {
+struct Nudger<'a> {
     exact: &'a mut [SimdBox],
     held: &'a [SimdBox],
     anchor: &'a [SimdBox],
@@ -321,7 +321,7 @@ pub(super) struct Nudger<'a> {
 impl<'a> Nudger<'a> {
     /// The nudges of the regime `r` over its first `slots` slots, at step `now`.
     #[inline(always)]
-    pub(super) fn new(r: &'a mut Incremental, slots: usize, now: u32) -> Self {
+    fn new(r: &'a mut Incremental, slots: usize, now: u32) -> Self {
         Nudger {
             exact: &mut r.exact[..slots],
             held: &r.held[..slots],
@@ -337,7 +337,7 @@ impl<'a> Nudger<'a> {
     /// (inserted or regrouped since the last step), `new()` lies in its fat box, and it stays
     /// quiet. Returns whether it did; otherwise the caller marks the slot stale.
     #[inline(always)]
-    pub(super) fn nudge(
+    fn nudge(
         &mut self,
         (flags, stamp): (&mut [u8], &mut [u32]),
         s: usize,
@@ -358,13 +358,76 @@ impl<'a> Nudger<'a> {
     }
 }
 
+/// How one update call stores its updates in the incremental regime: it nudges them while the
+/// updates since the last step come in slot order, else leaves them to the step, giving back
+/// the count of a slot an earlier call nudged.
+pub(super) struct Nudges<'a> {
+    /// The regime's arrays, while this call nudges.
+    fat: Option<Nudger<'a>>,
+    /// Outside slot order, some earlier call since the last step nudged a slot.
+    recount: bool,
+    now: u32,
+}
+
+impl<'a> Nudges<'a> {
+    /// The plan of a call that updates the slots `slots` (in the caller's order; the
+    /// broadphase's first `n` slots), with the broadphase's `regime`, order of updates `from`
+    /// ([`in_order`]) and count of nudged slots, at step `now`.
+    #[inline(always)]
+    pub(super) fn plan(
+        regime: &'a mut Option<Incremental>,
+        (from, nudged): (&mut u32, usize),
+        slots: impl Iterator<Item = u32>,
+        n: usize,
+        now: u32,
+    ) -> Self {
+        let Some(r) = regime else {
+            return Nudges {
+                fat: None,
+                recount: false,
+                now,
+            };
+        };
+        let ordered = in_order(from, slots);
+        Nudges {
+            fat: ordered.then(|| Nudger::new(r, n, now)),
+            recount: !ordered && nudged > 0,
+            now,
+        }
+    }
+
+    /// For the live slot `s`, its new shape stored and its exact box `new()`: true if the
+    /// update was nudged (counted in `nudged`); else the caller marks the slot stale, and a
+    /// nudge of it by an earlier call is taken back from `nudged`.
+    #[inline(always)]
+    pub(super) fn take(
+        &mut self,
+        (flags, stamp): (&mut [u8], &mut [u32]),
+        s: usize,
+        new: impl FnOnce() -> SimdBox,
+        nudged: &mut usize,
+    ) -> bool {
+        if let Some(fat) = &mut self.fat {
+            let done = fat.nudge((flags, stamp), s, new);
+            *nudged += usize::from(done);
+            done
+        } else {
+            if self.recount && was_nudged(flags[s], stamp[s], self.now) {
+                // Nudged by an earlier call since the last step: a mover from now on.
+                *nudged -= 1;
+            }
+            false
+        }
+    }
+}
+
 /// True if a batch of updates to the slots `slots` (in the caller's order) may be nudged:
 /// they ascend, from `from` (one past the slot of the last update since the last step), so
 /// nudges stream through the per-slot arrays as the step's walk would. Moves `from` past the
 /// batch; once a batch is out of order, it stays `u32::MAX` until the next step, and the
 /// step's walk applies every update in slot order instead of the calls' scattered reads.
 #[inline(always)]
-pub(super) fn in_order(from: &mut u32, slots: impl Iterator<Item = u32>) -> bool {
+fn in_order(from: &mut u32, slots: impl Iterator<Item = u32>) -> bool {
     let mut next = *from;
     let ordered = slots.into_iter().all(|s| {
         let ascends = s >= next;

@@ -169,11 +169,11 @@ pub struct BroadPhase {
     /// Proxies removed since the last step.
     removals: usize,
     /// Proxies updated since the last step whose updates applied themselves, each once (see
-    /// [`apply::Nudger::nudge`]): they are in no list, and count in the step's `updated`.
+    /// [`apply::Nudges`]): they are in no list, and count in the step's `updated`.
     nudged: usize,
     /// The lowest slot the next update may nudge: one past the last updated slot while the
     /// updates since the last step came in ascending slot order, `u32::MAX` once one did not
-    /// (see [`apply::Nudger::nudge`]).
+    /// (see `apply::in_order`).
     nudge_from: u32,
     /// The motion of the proxies applied this step, for the pass estimate.
     motion: fat::Motion,
@@ -541,14 +541,12 @@ impl BroadPhase {
     /// The stores of a checked batch of live spheres, with the arrays borrowed once: each
     /// entry's centre, and its radius where it gives one (else the sphere keeps its own). In
     /// the incremental regime an update that needs nothing of the step is applied here (see
-    /// [`apply::Nudger::nudge`]); every other one marks its slot stale.
+    /// [`apply::Nudges`]); every other one marks its slot stale.
     #[inline]
     fn store_spheres(
         &mut self,
         entries: impl Iterator<Item = (ProxyKey, Vec3, Option<f32>)> + Clone,
     ) {
-        let (nudging, recount) =
-            self.nudge_plan(entries.clone().map(|(k, ..)| crate::pair::slot(k)));
         let (st, movers, margin, now) = (
             &mut self.store,
             &mut self.movers,
@@ -556,11 +554,10 @@ impl BroadPhase {
             self.now,
         );
         let n = st.slots();
+        let slots = entries.clone().map(|(k, ..)| crate::pair::slot(k));
+        let order = (&mut self.nudge_from, self.nudged);
+        let mut nudges = apply::Nudges::plan(&mut self.regime, order, slots, n, now);
         let (shape, flags, stamp) = (&mut st.shape[..n], &mut st.flags[..n], &mut st.stamp[..n]);
-        let mut fat = match &mut self.regime {
-            Some(r) if nudging => Some(apply::Nudger::new(r, n, now)),
-            _ => None,
-        };
         let (mut newly_stale, mut nudged) = (0, self.nudged);
         for (key, center, radius) in entries {
             let slot = crate::pair::slot(key);
@@ -574,33 +571,14 @@ impl BroadPhase {
                 }
             };
             write_sphere(&mut shape[s], center, radius);
-            if let Some(fat) = &mut fat {
-                let new = || fat::grown_sphere(center, radius, margin).aabb;
-                if fat.nudge((flags, stamp), s, new) {
-                    nudged += 1;
-                    continue;
-                }
-            } else if recount && apply::was_nudged(flags[s], stamp[s], now) {
-                // Nudged by an earlier call since the last step: a mover from now on.
-                nudged -= 1;
+            let new = || fat::grown_sphere(center, radius, margin).aabb;
+            if nudges.take((flags, stamp), s, new, &mut nudged) {
+                continue;
             }
             newly_stale += usize::from(mark_stale_in(flags, movers, slot));
         }
         self.stale += newly_stale;
         self.nudged = nudged;
-    }
-
-    /// Whether the updates of the slots `slots` (in the caller's order) are nudged (see
-    /// [`apply::Nudger::nudge`]): in the incremental regime, while they come in slot order
-    /// ([`apply::in_order`]); and if not, whether an earlier call since the last step nudged
-    /// some slot they may name again.
-    #[inline]
-    fn nudge_plan(&mut self, slots: impl Iterator<Item = u32>) -> (bool, bool) {
-        if self.regime.is_none() {
-            return (false, false);
-        }
-        let ordered = apply::in_order(&mut self.nudge_from, slots);
-        (ordered, !ordered && self.nudged > 0)
     }
 
     /// Moves many spheres at once, keeping their radii: `centers[i]` is the new centre of
@@ -717,7 +695,7 @@ impl BroadPhase {
     }
 
     /// Stores a checked body update: its new box (its kind stays), applied at once where that
-    /// is all the step would do ([`apply::Nudger::nudge`]), else marked stale.
+    /// is all the step would do ([`apply::Nudges`]), else marked stale.
     #[inline]
     fn set_body(&mut self, slot: u32, aabb: &Aabb) {
         let s = slot as usize;
@@ -725,21 +703,13 @@ impl BroadPhase {
         if let Shape::Body { aabb: a, .. } = shape {
             *a = *aabb;
         }
-        let shape = *shape;
-        let (nudging, recount) = self.nudge_plan(core::iter::once(slot));
-        let (st, now) = (&mut self.store, self.now);
-        if let Some(r) = &mut self.regime
-            && nudging
-        {
-            let new = || fat::grown(shape, self.config.margin).aabb;
-            let mut fat = apply::Nudger::new(r, st.slots(), now);
-            if fat.nudge((&mut st.flags, &mut st.stamp), s, new) {
-                self.nudged += 1;
-                return;
-            }
-        } else if recount && apply::was_nudged(st.flags[s], st.stamp[s], now) {
-            // Nudged by an earlier call since the last step: a mover from now on.
-            self.nudged -= 1;
+        let (shape, st, margin) = (*shape, &mut self.store, self.config.margin);
+        let order = (&mut self.nudge_from, self.nudged);
+        let once = core::iter::once(slot);
+        let mut nudges = apply::Nudges::plan(&mut self.regime, order, once, st.slots(), self.now);
+        let new = || fat::grown(shape, margin).aabb;
+        if nudges.take((&mut st.flags, &mut st.stamp), s, new, &mut self.nudged) {
+            return;
         }
         self.mark_stale(slot);
     }
